@@ -1,0 +1,91 @@
+"""Batched forward kinematics of the body model, numpy only."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.core.body import BodyModel
+
+
+def forward_kinematics(
+    local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Global joint rotations and positions.
+
+    Args:
+        local_rot: ``(..., 24, 3, 3)`` joint rotations relative to the parent frame; row 0 is the
+            root's global rotation.
+        root_pos: ``(..., 3)`` pelvis joint position, world frame, m.
+        offsets: ``(24, 3)`` rest offsets from :class:`BodyModel` (row 0 is ignored).
+
+    Returns:
+        ``global_rot (..., 24, 3, 3)`` and ``joint_pos (..., 24, 3)`` in the world frame.
+    """
+    local_rot = np.asarray(local_rot, dtype=np.float64)
+    root_pos = np.asarray(root_pos, dtype=np.float64)
+    if local_rot.shape[-3:] != (sk.N_JOINTS, 3, 3):
+        raise ValueError(f"local_rot must have shape (..., 24, 3, 3), got {local_rot.shape}")
+    if root_pos.shape != local_rot.shape[:-3] + (3,):
+        raise ValueError(
+            f"root_pos shape {root_pos.shape} does not match local_rot {local_rot.shape}"
+        )
+    g_rot = np.empty_like(local_rot)
+    g_pos = np.empty(local_rot.shape[:-2] + (3,), dtype=np.float64)
+    g_rot[..., 0, :, :] = local_rot[..., 0, :, :]
+    g_pos[..., 0, :] = root_pos
+    for j in range(1, sk.N_JOINTS):
+        p = sk.PARENTS[j]
+        g_rot[..., j, :, :] = g_rot[..., p, :, :] @ local_rot[..., j, :, :]
+        g_pos[..., j, :] = g_pos[..., p, :] + g_rot[..., p, :, :] @ offsets[j]
+    return g_rot, g_pos
+
+
+def body_points(
+    global_rot: np.ndarray, joint_pos: np.ndarray, bodies: np.ndarray, local_pos: np.ndarray
+) -> np.ndarray:
+    """World positions of points rigidly attached to bodies.
+
+    Args:
+        global_rot: ``(..., 24, 3, 3)`` from :func:`forward_kinematics`.
+        joint_pos: ``(..., 24, 3)``.
+        bodies: ``(P,)`` body index of each point.
+        local_pos: ``(P, 3)`` point in its body's frame, m.
+
+    Returns:
+        ``(..., P, 3)`` world positions, m.
+    """
+    r = global_rot[..., bodies, :, :]
+    return joint_pos[..., bodies, :] + np.einsum("...pij,pj->...pi", r, local_pos)
+
+
+def segment_com(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel) -> np.ndarray:
+    """``(..., 24, 3)`` world centre of mass of every segment, m."""
+    return body_points(global_rot, joint_pos, np.arange(sk.N_JOINTS), body.com_local)
+
+
+def center_of_mass(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel) -> np.ndarray:
+    """``(..., 3)`` whole-body centre of mass, m."""
+    c = segment_com(global_rot, joint_pos, body)
+    return np.einsum("...jk,j->...k", c, body.masses) / body.masses.sum()
+
+
+def sole_points(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel) -> np.ndarray:
+    """``(..., 2, 6, 3)`` world positions of the sole corner points of both feet (L, R), m."""
+    pts = body_points(global_rot, joint_pos, body.sole_points_body.reshape(-1),
+                      body.sole_points_pos.reshape(-1, 3))  # fmt: skip
+    return pts.reshape(*pts.shape[:-2], 2, 6, 3)
+
+
+def rest_pose(n_frames: int = 1, world: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Identity local rotations; with ``world`` the root stands upright facing +y.
+
+    Returns:
+        ``local_rot (T, 24, 3, 3)`` and a zero ``root_pos (T, 3)`` (callers set the height).
+    """
+    from grip.core.body import CANONICAL_TO_WORLD
+
+    rot = np.broadcast_to(np.eye(3), (n_frames, sk.N_JOINTS, 3, 3)).copy()
+    if world:
+        rot[:, 0] = CANONICAL_TO_WORLD
+    return rot, np.zeros((n_frames, 3))

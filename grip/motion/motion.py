@@ -1,0 +1,165 @@
+"""The ``Motion`` type: a clip on the project's body model, z-up world, metres."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.core.body import BodyModel, BodyParams, build_body
+from grip.core.fk import forward_kinematics
+from grip.core.rotations import quat_normalize, quat_to_matrix
+
+_FORMAT_VERSION = 1
+
+
+class MotionError(ValueError):
+    """A motion file or array is malformed; the message names the file/key and the problem."""
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A motion on the body model.
+
+    Attributes:
+        fps: Frame rate, Hz (100 after retargeting).
+        root_pos: ``(T, 3)`` pelvis joint position, world frame (z up, floor z = 0), m.
+        local_quat: ``(T, 24, 4)`` joint rotations relative to the parent (w, x, y, z); row 0 is
+            the pelvis' global rotation. Rest pose = SMPL-canonical T-pose (see grip.core.body).
+        body: Subject parameters of the body model the motion lives on.
+        name: Clip id, e.g. ``"cmu/02_01"``.
+        category: Motion category, e.g. ``"walk"``.
+        meta: Free-form JSON-serialisable provenance (source file, licence, retarget settings).
+    """
+
+    fps: float
+    root_pos: np.ndarray
+    local_quat: np.ndarray
+    body: BodyParams = field(default_factory=BodyParams)
+    name: str = "motion"
+    category: str = "unknown"
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_motion_arrays(self.fps, self.root_pos, self.local_quat, where=self.name)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.root_pos.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames / self.fps
+
+    def local_rot(self) -> np.ndarray:
+        """``(T, 24, 3, 3)`` local rotation matrices."""
+        return quat_to_matrix(self.local_quat)
+
+    def body_model(self) -> BodyModel:
+        return build_body(self.body)
+
+    def fk(self, body: BodyModel | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Global rotations ``(T, 24, 3, 3)`` and joint positions ``(T, 24, 3)``."""
+        b = body or self.body_model()
+        return forward_kinematics(self.local_rot(), self.root_pos, b.offsets)
+
+    def slice(self, start: int, stop: int) -> Motion:
+        """Frames ``[start, stop)`` as a new motion."""
+        return replace(self, root_pos=self.root_pos[start:stop].copy(),
+                       local_quat=self.local_quat[start:stop].copy())  # fmt: skip
+
+    # ------------------------------------------------------------------ I/O
+    def save(self, path: str | os.PathLike) -> None:
+        """Write an npz atomically (temp file + rename; an existing file survives a failure)."""
+        path = Path(path)
+        meta = {
+            "format_version": _FORMAT_VERSION,
+            "name": self.name,
+            "category": self.category,
+            "meta": self.meta,
+        }
+        arrays = {
+            "fps": np.array(self.fps, dtype=np.float64),
+            "root_pos": self.root_pos.astype(np.float64),
+            "local_quat": self.local_quat.astype(np.float64),
+            "body": self.body.to_array(),
+            "meta_json": np.array(json.dumps(meta)),
+        }
+        atomic_save_npz(path, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Motion:
+        """Read a motion written by :meth:`save` (``allow_pickle=False``)."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                missing = [k for k in ("fps", "root_pos", "local_quat", "body", "meta_json")
+                           if k not in z.files]  # fmt: skip
+                if missing:
+                    raise MotionError(f"{path}: missing key(s) {', '.join(missing)}")
+                meta = json.loads(str(z["meta_json"]))
+                fps = float(z["fps"])
+                root_pos = z["root_pos"]
+                local_quat = z["local_quat"]
+                body = BodyParams.from_array(z["body"])
+        except MotionError:
+            raise
+        except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError, KeyError) as e:
+            raise MotionError(f"{path}: cannot read motion npz ({e})") from e
+        try:
+            return cls(fps=fps, root_pos=root_pos, local_quat=local_quat, body=body,
+                       name=meta.get("name", path.stem), category=meta.get("category", "unknown"),
+                       meta=meta.get("meta", {}))  # fmt: skip
+        except MotionError as e:
+            raise MotionError(f"{path}: {e}") from e
+
+
+def check_motion_arrays(fps: float, root_pos: np.ndarray, local_quat: np.ndarray,
+                        where: str = "motion") -> None:  # fmt: skip
+    """Raise :class:`MotionError` naming ``where`` and the key if the arrays are malformed."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise MotionError(f"{where}: fps must be a positive number, got {fps!r}")
+    if root_pos.ndim != 2 or root_pos.shape[1] != 3:
+        raise MotionError(f"{where}: root_pos must have shape (T, 3), got {root_pos.shape}")
+    t = root_pos.shape[0]
+    if local_quat.shape != (t, sk.N_JOINTS, 4):
+        raise MotionError(
+            f"{where}: local_quat must have shape ({t}, 24, 4), got {local_quat.shape}"
+        )
+    if t < 1:
+        raise MotionError(f"{where}: motion has no frames")
+    for key, arr in (("root_pos", root_pos), ("local_quat", local_quat)):
+        if not np.all(np.isfinite(arr)):
+            bad = int(np.argwhere(~np.isfinite(arr))[0][0])
+            raise MotionError(f"{where}: {key} has NaN/inf values (first at frame {bad})")
+    norms = np.linalg.norm(local_quat, axis=-1)
+    if np.any(np.abs(norms - 1.0) > 1e-3):
+        raise MotionError(f"{where}: local_quat rows are not unit quaternions")
+
+
+def normalized_quats(q: np.ndarray) -> np.ndarray:
+    """Convenience re-export: unit quaternions with w >= 0."""
+    return quat_normalize(q)
+
+
+def atomic_save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write an uncompressed npz via a temp file in the same folder, then rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
