@@ -1,0 +1,172 @@
+"""``grip data``: build, summarise and plot PRISM-format datasets."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "data",
+        help="build, inspect and plot PRISM-format datasets",
+        description="Build PRISM-format recordings from motion clips, summarise a dataset "
+        "folder (ours or real PRISM pickles) and plot one recording.",
+    )
+    dsub = p.add_subparsers(dest="data_command", metavar="<action>")
+    dsub.required = True
+
+    b = dsub.add_parser(
+        "build",
+        help="convert motion clips into a PRISM-format dataset",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Import motion clips (BVH, ASF/AMC, DeepMimic JSON, AMASS npz), retarget them onto\n"
+            "the body model at 100 Hz, synthesise the 8 IMUs and both insoles by physics, add\n"
+            "sensor noise, chunk into <=1000-frame sequences and write a train/test split.\n"
+            "Parallel, resumable (finished clips are skipped), every file written atomically."
+        ),
+        epilog="example: grip data build --out data/prism_synth --workers 2\n"
+        "         grip data build --out data/small --motions ~/mocap/bvh --limit 20",
+    )
+    b.add_argument("--out", required=True, type=Path, help="dataset folder (created/resumed)")
+    b.add_argument("--motions", nargs="+", type=Path, default=None, metavar="DIR",
+                   help="folders of clips (default: ../shared/data/motions)")  # fmt: skip
+    b.add_argument("--limit", type=int, default=None, metavar="N",
+                   help="use only N clips, spread evenly over the sorted list")  # fmt: skip
+    b.add_argument("--workers", type=int, default=0, metavar="K",
+                   help="worker processes (default: one per core)")  # fmt: skip
+    b.add_argument("--noise-variants", type=int, default=1, metavar="N",
+                   help="noisy recordings per clip, each with its own noise draw (default 1)")
+    b.add_argument("--clean", action="store_true",
+                   help="also write a noise-free recording of every clip")  # fmt: skip
+    b.add_argument("--fixed-body", action="store_true",
+                   help="one body for all clips (--height/--mass) instead of a drawn subject "
+                   "per recording")  # fmt: skip
+    b.add_argument("--height", type=float, default=1.70, help="body height, m (--fixed-body)")
+    b.add_argument("--mass", type=float, default=70.0, help="body mass, kg (--fixed-body)")
+    b.add_argument("--seed", type=int, default=0, help="base seed of noise and subjects")
+    b.add_argument("--test-fraction", type=float, default=0.2,
+                   help="share of clips in the test split (default 0.2)")  # fmt: skip
+    b.set_defaults(func=cmd_build)
+
+    i = dsub.add_parser(
+        "info",
+        help="summarise a dataset folder",
+        description="Print recordings, frames, motion categories and per-category counts of a "
+        "dataset folder: one built by 'grip data build', or any folder of PRISM recordings "
+        "(*.pkl, *.npz), e.g. the real PRISM dataset.",
+        epilog="example: grip data info data/prism_synth --json info.json",
+    )
+    i.add_argument("dir", type=Path, help="dataset folder")
+    i.add_argument("--json", type=Path, default=None, metavar="PATH",
+                   help="also write the summary as JSON")  # fmt: skip
+    i.set_defaults(func=cmd_info)
+
+    pl = dsub.add_parser(
+        "plot",
+        help="plot one recording (sensors, insole pressure, skeleton)",
+        description="Draw the IMU streams, insole forces/contacts/pressure/CoP and the "
+        "ground-truth skeleton of one PRISM-format recording (.pkl or .npz) to a PNG.",
+        epilog="example: grip data plot data/prism_synth/sequences/cmu__02_01_v0_seq000.npz "
+        "--out walk.png",
+    )
+    pl.add_argument("file", type=Path, help="recording (.pkl or .npz)")
+    pl.add_argument("--out", required=True, type=Path, help="output PNG")
+    pl.set_defaults(func=cmd_plot)
+
+
+def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, str]]:
+    """``(path, clip_id, category)`` of the clips under ``roots`` (``limit``: evenly spread)."""
+    from grip.cli.main import CliError
+    from grip.motion.catalog import find_clips
+
+    clips = []
+    for root in roots:
+        if not root.is_dir():
+            raise CliError(f"--motions {root}: not a folder")
+        clips += [(str(c.path), c.clip_id, c.category) for c in find_clips(root)]
+    if not clips:
+        raise CliError(f"no supported clips (bvh, amc, DeepMimic json, npz) under {roots}")
+    if limit is not None and limit < len(clips):
+        if limit < 1:
+            raise CliError("--limit must be >= 1")
+        idx = sorted({int(round(k)) for k in
+                      [i * (len(clips) - 1) / max(limit - 1, 1) for i in range(limit)]})
+        clips = [clips[k] for k in idx]
+    return clips
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.paths import default_motions_dir
+    from grip.dataset.build import BuildConfig, build_dataset
+    from grip.dataset.info import dataset_summary, format_summary
+
+    roots = args.motions
+    if roots is None:
+        d = default_motions_dir()
+        if d is None:
+            raise CliError("no --motions given and ../shared/data/motions not found "
+                           "(set GRIP_MOTIONS_DIR or pass --motions DIR)")  # fmt: skip
+        roots = [d]
+    if args.noise_variants < 0 or (args.noise_variants == 0 and not args.clean):
+        raise CliError("--noise-variants must be >= 1 (or 0 together with --clean)")
+    if not 0.0 <= args.test_fraction < 1.0:
+        raise CliError("--test-fraction must be in [0, 1)")
+    cfg = BuildConfig(noise_variants=args.noise_variants, clean_variant=args.clean,
+                      vary_body=not args.fixed_body, height_m=args.height, mass_kg=args.mass,
+                      test_fraction=args.test_fraction, seed=args.seed)  # fmt: skip
+    clips = select_clips(roots, args.limit)
+    t0 = time.perf_counter()
+    with tqdm(total=len(clips), desc="clips", unit="clip") as bar:
+        try:
+            results = build_dataset(clips, args.out, cfg, workers=args.workers,
+                                    progress=bar.update)  # fmt: skip
+        except ValueError as e:
+            raise CliError(str(e)) from e
+    dt = time.perf_counter() - t0
+    built = [r for r in results if r.status == "done"]
+    failed = [r for r in results if r.status != "done"]
+    frames = sum(sum(r.sequence_frames) for r in built)
+    print(format_summary(dataset_summary(args.out)))
+    print(f"\nbuilt {len(built)}/{len(results)} clips in {dt:.1f} s "
+          f"({frames / max(dt, 1e-9):.0f} recording frames/s incl. resumed clips)")  # fmt: skip
+    for r in failed:
+        print(f"FAILED {r.clip_id}: {r.error}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from grip.dataset.build import atomic_write_text
+    from grip.dataset.info import dataset_summary, format_summary
+
+    try:
+        summary = dataset_summary(args.dir)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e)) from e
+    print(format_summary(summary))
+    if args.json:
+        atomic_write_text(args.json, json.dumps(summary, indent=1))
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from grip.dataset.plot import plot_recording
+    from prism_tools.io import load_recording
+
+    try:
+        rec = load_recording(args.file)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+    out = plot_recording(rec, args.out)
+    print(f"wrote {out}")
+    return 0

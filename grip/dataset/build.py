@@ -1,0 +1,280 @@
+"""Build a PRISM-format dataset from motion clips: import, retarget, synthesise, chunk, split.
+
+Layout of a dataset folder::
+
+    DIR/
+      manifest.json              build settings and one entry per clip (status, frames, files)
+      split.json                 train/test lists of sequence ids + statistics (PRISM's shape)
+      motions/<clip>.npz         retargeted ground-truth motion (grip.motion.Motion)
+      sequences/<clip>_v<k>_seq<nnn>.npz   PRISM-format recordings, <= 1000 frames each
+      done/<clip>.json           written last per clip: the clip is finished (resume marker)
+
+Every file is written atomically, a clip is complete only when its ``done`` marker exists, and a
+re-run skips complete clips, so an interrupted build resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import time
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+MANIFEST = "manifest.json"
+SPLIT = "split.json"
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Settings of one dataset build (stored in the manifest).
+
+    Attributes:
+        noise_variants: Recordings per clip with independent sensor-noise draws.
+        clean_variant: Also write a noise-free recording (variant ``c``).
+        vary_body: Draw a subject (height, mass) per variant instead of the default body.
+        height_m: Body height when ``vary_body`` is off, m.
+        mass_kg: Body mass when ``vary_body`` is off, kg.
+        chunk_frames: Sequence length (PRISM: 1000 frames = 10 s).
+        min_chunk_frames: Shortest tail (or whole short clip) kept as a sequence.
+        test_fraction: Share of clips in the test split (split by clip: all variants and
+            chunks of a clip land in the same split, so no motion leaks across).
+        split_seed: Seed of the split (PRISM used 42).
+        seed: Base seed of noise and body draws; each clip derives its own from its id.
+    """
+
+    noise_variants: int = 1
+    clean_variant: bool = False
+    vary_body: bool = True
+    height_m: float = 1.70
+    mass_kg: float = 70.0
+    chunk_frames: int = 1000
+    min_chunk_frames: int = 200
+    test_fraction: float = 0.2
+    split_seed: int = 42
+    seed: int = 0
+
+
+@dataclass
+class ClipResult:
+    """Outcome of one clip (JSON-serialisable)."""
+
+    clip_id: str
+    status: str  # "done" | "failed" | "skipped"
+    category: str = "unknown"
+    source: str = ""
+    frames: int = 0
+    sequences: list[str] = field(default_factory=list)
+    sequence_frames: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+    error: str = ""
+
+
+def clip_seed(clip_id: str, base: int) -> int:
+    """A stable per-clip seed from the clip id (independent of build order)."""
+    h = hashlib.sha256(f"{base}:{clip_id}".encode()).digest()
+    return int.from_bytes(h[:4], "little")
+
+
+def subject_for(clip_id: str, variant: int, cfg: BuildConfig):
+    """Body parameters of one recording: fixed, or drawn per (clip, variant) when ``vary_body``."""
+    from grip.core.body import BodyParams
+
+    if not cfg.vary_body:
+        return BodyParams(height_m=cfg.height_m, mass_kg=cfg.mass_kg)
+    rng = np.random.default_rng(clip_seed(f"{clip_id}/body/{variant}", cfg.seed))
+    height = float(np.clip(rng.normal(1.72, 0.08), 1.52, 1.95))
+    bmi = float(np.clip(rng.normal(23.5, 2.5), 18.5, 31.0))
+    return BodyParams(height_m=round(height, 3), mass_kg=round(bmi * height**2, 1))
+
+
+def _safe_name(clip_id: str) -> str:
+    return clip_id.replace("/", "__")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write text through a temp file in the same folder and ``os.replace`` it into place."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
+                 cfg: BuildConfig) -> ClipResult:  # fmt: skip
+    """Import, retarget, synthesise and chunk one clip; runs in a worker process."""
+    from grip.motion.catalog import load_clip
+    from grip.motion.retarget import retarget
+    from prism_tools.chunking import chunk_recording
+    from prism_tools.io import save_recording
+    from prism_tools.synth import SynthConfig, recording_from_motion
+
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    name = _safe_name(clip_id)
+    res = ClipResult(clip_id=clip_id, status="failed", category=category, source=clip_path)
+    try:
+        src = load_clip(clip_path)
+        variants: list[tuple[str, bool, int]] = [
+            (f"v{k}", True, k) for k in range(cfg.noise_variants)
+        ]
+        if cfg.clean_variant:
+            variants.append(("c", False, 0))
+        seed = clip_seed(clip_id, cfg.seed)
+        motions: dict[int, object] = {}
+        for tag, noisy, k in variants:
+            if k not in motions:
+                motion = retarget(src, subject_for(clip_id, k, cfg))
+                motions[k] = motion
+                if k == 0:
+                    motion.save(out / "motions" / f"{name}.npz")
+            motion = motions[k]
+            rec = recording_from_motion(motion, SynthConfig(), seed=seed + k, noise=noisy)
+            chunks = chunk_recording(rec, cfg.chunk_frames, min_length=cfg.min_chunk_frames)
+            for i, chunk in enumerate(chunks):
+                seq_id = f"{name}_{tag}_seq{i:03d}"
+                save_recording(chunk, out / "sequences" / f"{seq_id}.npz")
+                res.sequences.append(seq_id)
+                res.sequence_frames.append(int(chunk.n_frames))
+            res.frames = int(motion.n_frames)
+        res.status = "done"
+    except Exception as e:  # one bad clip must not stop the build
+        res.error = f"{type(e).__name__}: {e}"
+        if os.environ.get("GRIP_DEBUG"):
+            res.error += "\n" + traceback.format_exc()
+    res.seconds = time.perf_counter() - t0
+    if res.status == "done":
+        atomic_write_text(out / "done" / f"{name}.json", json.dumps(asdict(res), indent=1))
+    return res
+
+
+def _load_done(out: Path) -> dict[str, ClipResult]:
+    done: dict[str, ClipResult] = {}
+    for p in sorted((out / "done").glob("*.json")):
+        try:
+            d = json.loads(p.read_text())
+            done[d["clip_id"]] = ClipResult(**d)
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # a damaged marker means: build that clip again
+    return done
+
+
+def group_split(results: Sequence[ClipResult], test_fraction: float, seed: int) -> dict:
+    """Split clips (with all their sequences) into train/test, stratified by category.
+
+    Returns:
+        ``{"train": [seq ids], "test": [seq ids], "clips": {"train": [...], "test": [...]},
+        "stats": {...}}`` - the train/test lists in the shape of PRISM's statistics JSON.
+    """
+    rng = np.random.default_rng(seed)
+    by_cat: dict[str, list[ClipResult]] = {}
+    for r in sorted(results, key=lambda r: r.clip_id):
+        if r.status == "done" and r.sequences:
+            by_cat.setdefault(r.category, []).append(r)
+    clips: dict[str, list[str]] = {"train": [], "test": []}
+    seqs: dict[str, list[str]] = {"train": [], "test": []}
+    frames = {"train": 0, "test": 0}
+    per_cat: dict[str, dict[str, int]] = {"train": {}, "test": {}}
+    for cat, rs in sorted(by_cat.items()):
+        order = rng.permutation(len(rs))
+        n_test = int(round(test_fraction * len(rs))) if len(rs) >= 3 else 0
+        for rank, idx in enumerate(order):
+            r = rs[idx]
+            part = "test" if rank < n_test else "train"
+            clips[part].append(r.clip_id)
+            seqs[part].extend(r.sequences)
+            frames[part] += int(sum(r.sequence_frames))
+            per_cat[part][cat] = per_cat[part].get(cat, 0) + len(r.sequences)
+    for part in ("train", "test"):
+        seqs[part].sort()
+        clips[part].sort()
+    return {
+        "train": seqs["train"],
+        "test": seqs["test"],
+        "clips": clips,
+        "stats": {
+            part: {"sequences": len(seqs[part]), "clips": len(clips[part]),
+                   "frames": frames[part], "per_category": per_cat[part]}
+            for part in ("train", "test")
+        } | {"seed": seed, "test_fraction": test_fraction, "unit": "clip"},
+    }  # fmt: skip
+
+
+def build_dataset(
+    clips: Iterable[tuple[str, str, str]],
+    out_dir: str | os.PathLike,
+    cfg: BuildConfig = BuildConfig(),
+    workers: int = 0,
+    progress: Callable[[int], object] | None = None,
+) -> list[ClipResult]:
+    """Build (or resume) a dataset.
+
+    Args:
+        clips: ``(path, clip_id, category)`` triples.
+        out_dir: Dataset folder; created if missing.
+        cfg: Build settings. Resuming with different settings than the manifest is refused.
+        workers: Worker processes (0 = one per core).
+        progress: Optional callback ``progress(n)`` after each finished clip (tqdm.update).
+
+    Returns:
+        One :class:`ClipResult` per clip (resumed clips come back as ``done``).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest_path = out / MANIFEST
+    if manifest_path.exists():
+        try:
+            old = json.loads(manifest_path.read_text())
+        except ValueError as e:
+            raise ValueError(f"{manifest_path}: corrupt manifest ({e}); remove it to rebuild") from e
+        if old.get("config") != asdict(cfg):
+            raise ValueError(
+                f"{manifest_path}: this folder was built with different settings "
+                f"({old.get('config')}); use another --out or the same options"
+            )
+    clips = list(clips)
+    done = _load_done(out)
+    todo = [c for c in clips if c[1] not in done]
+    results: dict[str, ClipResult] = {c[1]: done[c[1]] for c in clips if c[1] in done}
+    if progress is not None and results:
+        progress(len(results))
+    n_workers = workers or os.cpu_count() or 1
+    if todo:
+        if n_workers == 1:
+            for path, cid, cat in todo:
+                results[cid] = process_clip(path, cid, cat, str(out), cfg)
+                if progress is not None:
+                    progress(1)
+        else:
+            with ProcessPoolExecutor(max_workers=n_workers) as pool:
+                futs = {pool.submit(process_clip, p, cid, cat, str(out), cfg): cid
+                        for p, cid, cat in todo}  # fmt: skip
+                for fut in as_completed(futs):
+                    results[futs[fut]] = fut.result()
+                    if progress is not None:
+                        progress(1)
+    ordered = [results[c[1]] for c in clips]
+    manifest = {
+        "format": "grip-prism-dataset/1",
+        "config": asdict(cfg),
+        "clips": [asdict(r) for r in ordered],
+    }
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
+    split = group_split(ordered, cfg.test_fraction, cfg.split_seed)
+    atomic_write_text(out / SPLIT, json.dumps(split, indent=1))
+    return ordered

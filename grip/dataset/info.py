@@ -1,0 +1,155 @@
+"""Summaries of a dataset folder: ours (with a manifest) or a folder of PRISM recordings."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+RECORDING_SUFFIXES = (".pkl", ".npz")
+
+
+def folder_size_bytes(root: Path) -> int:
+    """Total size of the files under ``root``, bytes."""
+    total = 0
+    for dirpath, _dirs, files in os.walk(root):
+        for f in files:
+            try:
+                total += os.path.getsize(os.path.join(dirpath, f))
+            except OSError:
+                pass
+    return total
+
+
+def dataset_summary(root: str | os.PathLike, scan_limit: int | None = None) -> dict:
+    """Counts of recordings, frames and categories.
+
+    With a ``manifest.json`` (built by ``grip data build``) the summary comes from it and the
+    split; otherwise every ``*.pkl``/``*.npz`` recording under ``root`` is loaded (safely) and
+    counted, which is how a folder of real PRISM takes is inspected.
+
+    Returns:
+        A JSON-ready dict: ``recordings``, ``frames``, ``hours``, ``fps``, ``categories``
+        (category -> {"recordings", "frames"}), ``splits`` (when known), ``clips_failed``,
+        ``size_bytes`` and ``source`` ("manifest" or "scan").
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such dataset folder")
+    manifest = root / "manifest.json"
+    if manifest.exists():
+        return _summary_from_manifest(root, manifest)
+    return _summary_from_scan(root, scan_limit)
+
+
+def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except ValueError as e:
+        raise ValueError(f"{manifest_path}: corrupt manifest ({e})") from e
+    cats: dict[str, dict[str, int]] = {}
+    n_rec = frames = 0
+    failed = []
+    clips_done = 0
+    for c in manifest.get("clips", []):
+        if c.get("status") != "done":
+            failed.append({"clip_id": c.get("clip_id"), "error": c.get("error", "")})
+            continue
+        clips_done += 1
+        entry = cats.setdefault(c.get("category", "unknown"), {"clips": 0, "recordings": 0,
+                                                                "frames": 0})  # fmt: skip
+        entry["clips"] += 1
+        entry["recordings"] += len(c.get("sequences", []))
+        entry["frames"] += int(sum(c.get("sequence_frames", [])))
+        n_rec += len(c.get("sequences", []))
+        frames += int(sum(c.get("sequence_frames", [])))
+    summary = {
+        "source": "manifest",
+        "root": str(root),
+        "clips": clips_done,
+        "recordings": n_rec,
+        "frames": frames,
+        "fps": 100.0,
+        "hours": frames / 100.0 / 3600.0,
+        "categories": dict(sorted(cats.items())),
+        "clips_failed": failed,
+        "config": manifest.get("config", {}),
+        "size_bytes": folder_size_bytes(root),
+    }
+    split_path = root / "split.json"
+    if split_path.exists():
+        try:
+            split = json.loads(split_path.read_text())
+            summary["splits"] = split.get("stats", {})
+        except ValueError:
+            summary["splits"] = {"error": f"{split_path}: unreadable"}
+    return summary
+
+
+def _summary_from_scan(root: Path, limit: int | None) -> dict:
+    from prism_tools.io import load_recording
+
+    files = sorted(p for p in root.rglob("*") if p.suffix in RECORDING_SUFFIXES and p.is_file())
+    if limit is not None:
+        files = files[:limit]
+    cats: dict[str, dict[str, int]] = {}
+    frames = 0
+    errors = []
+    fps_seen: set[float] = set()
+    for p in files:
+        try:
+            rec = load_recording(p)
+        except ValueError as e:
+            errors.append({"file": str(p), "error": str(e)})
+            continue
+        cat = rec.category or "unknown"
+        entry = cats.setdefault(cat, {"recordings": 0, "frames": 0})
+        entry["recordings"] += 1
+        entry["frames"] += rec.n_frames
+        frames += rec.n_frames
+        fps_seen.add(float(rec.fps))
+    n = sum(c["recordings"] for c in cats.values())
+    fps = fps_seen.pop() if len(fps_seen) == 1 else None
+    return {
+        "source": "scan",
+        "root": str(root),
+        "recordings": n,
+        "frames": frames,
+        "fps": fps,
+        "hours": frames / (fps or 100.0) / 3600.0,
+        "categories": dict(sorted(cats.items())),
+        "unreadable": errors,
+        "size_bytes": folder_size_bytes(root),
+    }
+
+
+def format_summary(s: dict) -> str:
+    """A human-readable Markdown rendering of :func:`dataset_summary`."""
+    lines = [f"# Dataset {s['root']}", ""]
+    if "clips" in s:
+        lines.append(f"- clips: {s['clips']}")
+    lines += [
+        f"- recordings: {s['recordings']}",
+        f"- frames: {s['frames']} ({s['hours']:.2f} h at {s['fps'] or '?'} Hz)",
+        f"- size on disk: {s['size_bytes'] / 1e6:.1f} MB",
+        "",
+        "| category | clips | recordings | frames |" if "clips" in s
+        else "| category | recordings | frames |",
+        "|---|---:|---:|---:|" if "clips" in s else "|---|---:|---:|",
+    ]  # fmt: skip
+    for cat, c in s["categories"].items():
+        if "clips" in s:
+            lines.append(f"| {cat} | {c['clips']} | {c['recordings']} | {c['frames']} |")
+        else:
+            lines.append(f"| {cat} | {c['recordings']} | {c['frames']} |")
+    splits = s.get("splits")
+    if splits and "train" in splits:
+        lines += ["", "| split | clips | sequences | frames |", "|---|---:|---:|---:|"]
+        for part in ("train", "test"):
+            p = splits[part]
+            lines.append(f"| {part} | {p['clips']} | {p['sequences']} | {p['frames']} |")
+    bad = s.get("clips_failed") or s.get("unreadable") or []
+    if bad:
+        lines += ["", f"{len(bad)} clip(s)/file(s) failed:"]
+        lines += [f"- {b.get('clip_id') or b.get('file')}: {b['error']}" for b in bad[:20]]
+    return "\n".join(lines)
