@@ -1,0 +1,283 @@
+"""Find motion clips in a folder tree, name them, categorise them, and load them.
+
+Supported clips: ``*.bvh``; ``*.amc`` (with their ASF, see
+:func:`grip.motion.asf_amc.find_asf_for_amc` or a ``clips.csv`` ``asf`` column); DeepMimic
+``*.txt``/``*.json`` files that are JSON objects with a ``"Frames"`` key (character files,
+sidecars, licences and READMEs are skipped); AMASS-style ``*.npz`` holding ``poses`` and ``trans``.
+
+Clip ids are ``"<top folder>/<stem>"``, the top folder being the first folder below the searched
+root (``cmu/02_01``, ``hdm05/HDM_bd_squat1Reps_001_120``,
+``bandai_namco/dataset-1_walk_normal_001``, ``deepmimic/walk`` - DeepMimic's ``humanoid3d_``
+prefix is dropped). Categories come from:
+
+* a ``clips.csv`` (columns ``file``, ``category``) in the clip's dataset folder or above: the
+  first item of ``category`` (text in parentheses removed, cut at ``;`` or ``/``), lower case,
+  spaces and dashes as ``_`` (``"jump_in_place; one_leg_balance"`` -> ``"jump_in_place"``);
+* a Bandai-Namco JSON sidecar ``{"content": id}`` indexing ``cfg/content_label.txt`` (searched
+  in the clip's folder and upwards), ``dataset-N_`` prefix removed (``"walk-back"``);
+* DeepMimic names: the first word of the name (``getup_faceup`` -> ``"getup"``);
+* otherwise ``"unknown"``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from grip.motion.amass import load_amass_npz
+from grip.motion.asf_amc import find_asf_for_amc, load_amc
+from grip.motion.bvh import load_bvh
+from grip.motion.deepmimic import SKELETON_FILE, load_deepmimic
+from grip.motion.source import MotionImportError, SourceMotion
+
+_DATASET_MARKERS = ("SOURCE_AND_LICENSE.md", "clips.csv")
+_DEEPMIMIC_PREFIX = "humanoid3d_"
+_BANDAI_PREFIX = re.compile(r"^dataset-\d+_")
+#: Read at most this much of a .txt/.json to decide whether it is a DeepMimic clip.
+_MAX_JSON_BYTES = 64 * 1024 * 1024
+
+
+@dataclass(frozen=True)
+class ClipRef:
+    """A motion clip found on disk.
+
+    Attributes:
+        clip_id: Stable id, ``"<top folder>/<stem>"``.
+        path: The clip's main file.
+        fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass"``.
+        category: Motion category or ``"unknown"``.
+        asf_path: The skeleton of an AMC clip (``None`` for other formats, or when it could not be
+            found; :func:`load_clip` then raises a clear error).
+    """
+
+    clip_id: str
+    path: Path
+    fmt: str
+    category: str = "unknown"
+    asf_path: Path | None = None
+
+
+def _norm_category(text: str) -> str:
+    text = re.sub(r"\([^)]*\)", " ", text)
+    first = re.split(r"[;/]", text)[0].strip().lower()
+    first = re.sub(r"[\s\-]+", "_", first).strip("_")
+    return first or "unknown"
+
+
+def _dataset_root(path: Path, stop: Path | None) -> Path | None:
+    """Nearest ancestor of ``path`` holding a dataset marker file, not above ``stop``."""
+    for folder in path.parents:
+        if any((folder / m).is_file() for m in _DATASET_MARKERS):
+            return folder
+        if stop is not None and folder == stop:
+            break
+    return None
+
+
+class _CsvIndex:
+    """Cached ``clips.csv`` look-ups: (resolved file path) -> row."""
+
+    def __init__(self) -> None:
+        self._tables: dict[Path, dict[Path, dict[str, str]]] = {}
+
+    def row(self, clip: Path, stop: Path | None) -> tuple[Path, dict[str, str]] | None:
+        for folder in clip.parents:
+            csv_path = folder / "clips.csv"
+            if csv_path.is_file():
+                table = self._load(csv_path)
+                hit = table.get(clip.resolve())
+                if hit is not None:
+                    return folder, hit
+            if stop is not None and folder == stop:
+                break
+        return None
+
+    def _load(self, csv_path: Path) -> dict[Path, dict[str, str]]:
+        if csv_path not in self._tables:
+            table: dict[Path, dict[str, str]] = {}
+            with csv_path.open(newline="", encoding="utf-8-sig") as fh:
+                for row in csv.DictReader(fh):
+                    if row.get("file"):
+                        table[(csv_path.parent / row["file"]).resolve()] = row
+            self._tables[csv_path] = table
+        return self._tables[csv_path]
+
+
+def _bandai_category(clip: Path, stop: Path | None) -> str | None:
+    sidecar = clip.with_suffix(".json")
+    if not sidecar.is_file():
+        return None
+    try:
+        content = json.loads(sidecar.read_text(encoding="utf-8-sig"))["content"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    for folder in [clip.parent, *clip.parent.parents]:
+        labels = folder / "cfg" / "content_label.txt"
+        if labels.is_file():
+            names = [ln.strip() for ln in labels.read_text(encoding="utf-8-sig").splitlines()]
+            names = [n for n in names if n]
+            if isinstance(content, int) and 0 <= content < len(names):
+                return _BANDAI_PREFIX.sub("", names[content]).lower()
+            return None
+        if stop is not None and folder == stop:
+            break
+    return None
+
+
+def _is_deepmimic_clip(path: Path) -> bool:
+    if path.name == SKELETON_FILE:
+        return False
+    try:
+        if path.stat().st_size > _MAX_JSON_BYTES:
+            return False
+        with path.open("rb") as fh:
+            head = fh.read(256).removeprefix(b"\xef\xbb\xbf").lstrip()
+        if not head.startswith(b"{"):
+            return False
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and "Frames" in data
+
+
+def _is_amass_npz(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {"poses", "trans"} <= set(npz.files)
+    except (OSError, ValueError):
+        return False
+
+
+def _detect_format(path: Path) -> str | None:
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        return "bvh"
+    if suffix == ".amc":
+        return "asf_amc"
+    if suffix in (".txt", ".json") and _is_deepmimic_clip(path):
+        return "deepmimic"
+    if suffix == ".npz" and _is_amass_npz(path):
+        return "amass"
+    return None
+
+
+def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex) -> ClipRef:
+    stem = path.stem
+    if fmt == "deepmimic":
+        stem = stem.removeprefix(_DEEPMIMIC_PREFIX)
+    clip_id = f"{top}/{stem}" if top else stem
+    category: str | None = None
+    asf_path: Path | None = None
+    hit = csvs.row(path, stop)
+    if hit is not None:
+        folder, row = hit
+        if row.get("category"):
+            category = _norm_category(row["category"])
+        if fmt == "asf_amc" and row.get("asf"):
+            cand = folder / row["asf"]
+            asf_path = cand if cand.is_file() else None
+    if fmt == "asf_amc" and asf_path is None:
+        try:
+            asf_path = find_asf_for_amc(path)
+        except MotionImportError:
+            asf_path = None
+    if category is None and fmt == "bvh":
+        category = _bandai_category(path, stop)
+    if category is None and fmt == "deepmimic":
+        category = _norm_category(stem.split("_")[0])
+    return ClipRef(
+        clip_id=clip_id, path=path, fmt=fmt, category=category or "unknown", asf_path=asf_path
+    )
+
+
+def find_clips(root: str | Path) -> list[ClipRef]:
+    """Every supported motion clip under ``root``, sorted by clip id.
+
+    Hidden files and folders are skipped. Where two files would get the same id, the ids of both
+    use their path relative to the top folder (without suffix) instead of the stem.
+
+    Args:
+        root: Folder to search recursively.
+
+    Returns:
+        The clips found (an empty list for an empty folder).
+
+    Raises:
+        FileNotFoundError: ``root`` is not a folder.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: not a folder")
+    csvs = _CsvIndex()
+    refs: list[ClipRef] = []
+    for path in sorted(root.rglob("*")):
+        rel = path.relative_to(root)
+        if any(part.startswith(".") for part in rel.parts) or not path.is_file():
+            continue
+        fmt = _detect_format(path)
+        if fmt is None:
+            continue
+        top = rel.parts[0] if len(rel.parts) > 1 else root.name
+        refs.append(_make_ref(path, fmt, top, root, csvs))
+    counts: dict[str, int] = {}
+    for ref in refs:
+        counts[ref.clip_id] = counts.get(ref.clip_id, 0) + 1
+    if any(c > 1 for c in counts.values()):
+        fixed = []
+        for ref in refs:
+            if counts[ref.clip_id] > 1:
+                rel = ref.path.relative_to(root)
+                inner = Path(*rel.parts[1:]) if len(rel.parts) > 1 else rel
+                new_id = f"{ref.clip_id.split('/')[0]}/{inner.with_suffix('').as_posix()}"
+                ref = ClipRef(new_id, ref.path, ref.fmt, ref.category, ref.asf_path)
+            fixed.append(ref)
+        refs = fixed
+    return sorted(refs, key=lambda r: (r.clip_id, str(r.path)))
+
+
+def clip_ref(path: str | Path) -> ClipRef:
+    """A :class:`ClipRef` for a single file, as :func:`find_clips` would name it.
+
+    The top folder is the dataset folder: the nearest ancestor holding ``SOURCE_AND_LICENSE.md``
+    or ``clips.csv``, else the file's own folder.
+
+    Raises:
+        MotionImportError: The file does not exist or is not a supported clip.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MotionImportError(path, "no such file")
+    fmt = _detect_format(path)
+    if fmt is None:
+        raise MotionImportError(
+            path, "not a supported clip (.bvh, .amc, DeepMimic JSON with 'Frames', AMASS .npz)"
+        )
+    dataset = _dataset_root(path, None)
+    top = dataset.name if dataset is not None else path.parent.name
+    return _make_ref(path, fmt, top, dataset, _CsvIndex())
+
+
+def load_clip(ref_or_path: ClipRef | str | Path) -> SourceMotion:
+    """Load a clip, dispatching on its format; name and category come from the :class:`ClipRef`.
+
+    Args:
+        ref_or_path: A :class:`ClipRef` from :func:`find_clips`, or a path (see :func:`clip_ref`).
+
+    Raises:
+        MotionImportError: The file is missing, unsupported or invalid.
+    """
+    ref = ref_or_path if isinstance(ref_or_path, ClipRef) else clip_ref(ref_or_path)
+    if ref.fmt == "bvh":
+        return load_bvh(ref.path, name=ref.clip_id, category=ref.category)
+    if ref.fmt == "asf_amc":
+        return load_amc(ref.path, ref.asf_path, name=ref.clip_id, category=ref.category)
+    if ref.fmt == "deepmimic":
+        return load_deepmimic(ref.path, name=ref.clip_id, category=ref.category)
+    if ref.fmt == "amass":
+        return load_amass_npz(ref.path, name=ref.clip_id, category=ref.category)
+    raise MotionImportError(ref.path, f"unknown clip format {ref.fmt!r}")

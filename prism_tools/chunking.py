@@ -1,0 +1,235 @@
+"""Chunking recordings into fixed-length sequences and building train/test split files.
+
+PRISM's evaluation slices every take into 1000-frame (10 s at 100 fps) chunks, ``seq000`` = frames
+0-999, ``seq001`` = frames 1000-1999 and so on, and splits the chunks at random (seed 42) into
+train and test, with chunks whose wrist IMU was synthesised kept in train.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from prism_tools.io import atomic_write
+from prism_tools.schema import Recording
+
+__all__ = [
+    "chunk_id",
+    "chunk_recording",
+    "load_split",
+    "make_split",
+    "save_split",
+    "segments",
+]
+
+SPLIT_FORMAT = "grip-prism-split"
+SPLIT_VERSION = 1
+
+
+def chunk_id(take_name: str, index: int) -> str:
+    """``chunk_id("subj001_take002", 3) -> "subj001_take002_seq003"``."""
+    return f"{take_name}_seq{index:03d}"
+
+
+def segments(n_frames: int, length: int = 500, *, min_length: int = 1) -> list[slice]:
+    """Consecutive, non-overlapping frame windows covering ``[0, n_frames)``.
+
+    Args:
+        n_frames: Number of frames, ``>= 0``.
+        length: Window length in frames, ``>= 1``.
+        min_length: A last window shorter than this is dropped (default 1: keep every frame).
+
+    Returns:
+        ``[slice(0, length), slice(length, 2 * length), ...]``; the last slice may be shorter than
+        ``length`` (but not shorter than ``min_length``). ``segments(1000, 500)`` gives two.
+    """
+    if length < 1:
+        raise ValueError(f"length must be >= 1, got {length}")
+    if n_frames < 0:
+        raise ValueError(f"n_frames must be >= 0, got {n_frames}")
+    starts = range(0, n_frames, length)
+    out = [slice(s, min(s + length, n_frames)) for s in starts]
+    return [s for s in out if s.stop - s.start >= min_length]
+
+
+def chunk_recording(
+    rec: Recording, length: int = 1000, *, min_length: int | None = None
+) -> list[Recording]:
+    """Slices a take into consecutive chunks, PRISM style.
+
+    Chunk ``i`` holds frames ``[i * length, (i + 1) * length)`` (arrays copied). A tail shorter than
+    ``min_length`` is dropped. Each chunk's extras gain ``chunk_id``
+    (``"<take>_seq000"``, from :attr:`Recording.take_name`), ``chunk_index``,
+    ``chunk_start_frame`` and ``take_name`` (the parent's).
+
+    Args:
+        rec: The take.
+        length: Chunk length in frames (1000 = 10 s at 100 fps).
+        min_length: Shortest tail kept, ``1 <= min_length <= length``; default ``length`` (only
+            full chunks, as PRISM does).
+
+    Returns:
+        The chunks in order; 2500 frames give 2 chunks of 1000 by default.
+    """
+    if length < 1:
+        raise ValueError(f"length must be >= 1, got {length}")
+    min_len = length if min_length is None else min_length
+    if not 1 <= min_len <= length:
+        raise ValueError(f"min_length must be in [1, {length}], got {min_length}")
+    take = rec.take_name
+    chunks = []
+    for i, sl in enumerate(segments(rec.n_frames, length, min_length=min_len)):
+        chunk = rec.slice_frames(sl.start, sl.stop)
+        chunk.extras.update(
+            take_name=take,
+            chunk_id=chunk_id(take, i),
+            chunk_index=i,
+            chunk_start_frame=sl.start,
+        )
+        chunks.append(chunk)
+    return chunks
+
+
+def _stats(
+    ids: Iterable[str], categories: Mapping[str, str], frames: int | Mapping[str, int]
+) -> dict[str, Any]:
+    ids = list(ids)
+    n_frames = len(ids) * frames if isinstance(frames, int) else sum(int(frames[i]) for i in ids)
+    cats = Counter(categories.get(i, "unknown") for i in ids)
+    return {"n_chunks": len(ids), "n_frames": n_frames, "categories": dict(sorted(cats.items()))}
+
+
+def make_split(
+    chunk_ids: Sequence[str],
+    test_fraction: float = 0.2,
+    seed: int = 42,
+    train_only: Iterable[str] = (),
+    *,
+    categories: Mapping[str, str] | None = None,
+    frames_per_chunk: int | Mapping[str, int] = 1000,
+) -> dict[str, Any]:
+    """Chunk-level random train/test split, in the shape of PRISM's statistics JSON.
+
+    The chunks not in ``train_only`` are sorted, permuted with ``np.random.default_rng(seed)``
+    and the first ``ceil(test_fraction * n_eligible)`` go to test; everything else (including all
+    of ``train_only``, e.g. chunks with a synthesised wrist IMU) goes to train. The result
+    depends only on the set of ids, not on their order. (PRISM: 1275 chunks, 1021 train / 254
+    test, which ``ceil(0.2 * 1270)`` reproduces with 5 train-only chunks.)
+
+    Returned dict (JSON-ready)::
+
+        {
+          "format": "grip-prism-split", "version": 1,
+          "seed": 42, "test_fraction": 0.2,
+          "train": ["subj001_take002_seq000", ...],   # sorted chunk ids
+          "test": [...],                              # sorted chunk ids
+          "train_only": [...],                        # sorted, all also in "train"
+          "stats": {
+            "train": {"n_chunks": int, "n_frames": int, "categories": {category: n_chunks}},
+            "test":  {... same ...},
+            "total": {... same ...},
+          },
+        }
+
+    Args:
+        chunk_ids: All chunk ids (unique).
+        test_fraction: Fraction of the eligible chunks put in test, in ``[0, 1]``.
+        seed: Seed of the permutation (PRISM: 42).
+        train_only: Chunk ids forced into train; each must be in ``chunk_ids``.
+        categories: Chunk id -> activity category for the per-category counts; ids missing from
+            it (or all, when ``None``) count as ``"unknown"``.
+        frames_per_chunk: Frames per chunk, one number or a chunk id -> frames mapping.
+
+    Returns:
+        The split dict described above.
+
+    Raises:
+        ValueError: Duplicate ids, ``train_only`` ids not in ``chunk_ids``, or a bad fraction.
+    """
+    ids = [str(i) for i in chunk_ids]
+    if len(set(ids)) != len(ids):
+        dups = sorted(i for i, c in Counter(ids).items() if c > 1)
+        raise ValueError(f"make_split: duplicate chunk ids {dups[:5]}")
+    if not 0.0 <= test_fraction <= 1.0:
+        raise ValueError(f"make_split: test_fraction must be in [0, 1], got {test_fraction}")
+    forced = {str(i) for i in train_only}
+    unknown = sorted(forced - set(ids))
+    if unknown:
+        raise ValueError(f"make_split: train_only ids not in chunk_ids: {unknown[:5]}")
+    eligible = sorted(set(ids) - forced)
+    n_test = min(len(eligible), math.ceil(test_fraction * len(eligible) - 1e-9))
+    perm = np.random.default_rng(seed).permutation(len(eligible))
+    test_set = {eligible[i] for i in perm[:n_test]}
+    test = sorted(test_set)
+    train = sorted(i for i in ids if i not in test_set)
+    cats = categories or {}
+    return {
+        "format": SPLIT_FORMAT,
+        "version": SPLIT_VERSION,
+        "seed": seed,
+        "test_fraction": test_fraction,
+        "train": train,
+        "test": test,
+        "train_only": sorted(forced),
+        "stats": {
+            "train": _stats(train, cats, frames_per_chunk),
+            "test": _stats(test, cats, frames_per_chunk),
+            "total": _stats(sorted(ids), cats, frames_per_chunk),
+        },
+    }
+
+
+def save_split(split: Mapping[str, Any], path: str | os.PathLike[str]) -> None:
+    """Writes a split dict as indented JSON, atomically (see :func:`prism_tools.io.atomic_write`).
+
+    Args:
+        split: A dict from :func:`make_split`.
+        path: Destination ``.json`` file.
+    """
+    _check_split(split, str(path))
+    data = (json.dumps(split, indent=2, sort_keys=False) + "\n").encode("utf-8")
+    atomic_write(path, lambda f: f.write(data))
+
+
+def load_split(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Reads and checks a split JSON file.
+
+    Args:
+        path: File written by :func:`save_split` (or any JSON with ``"train"``/``"test"`` lists).
+
+    Returns:
+        The split dict.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: Not valid JSON, ``train``/``test`` missing or not lists of strings, or a
+            chunk in both; the message starts with the path.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such split file")
+    try:
+        split = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{p}: not a valid split JSON file ({e})") from None
+    _check_split(split, str(p))
+    return split
+
+
+def _check_split(split: Any, where: str) -> None:
+    if not isinstance(split, Mapping):
+        raise ValueError(f"{where}: a split must be a dict, got {type(split).__name__}")
+    for key in ("train", "test"):
+        ids = split.get(key)
+        if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
+            raise ValueError(f"{where}: {key!r} must be a list of chunk id strings")
+    both = sorted(set(split["train"]) & set(split["test"]))
+    if both:
+        raise ValueError(f"{where}: chunks in both train and test: {both[:5]}")
