@@ -85,9 +85,9 @@ _LIMITS_DEG_LEFT = {
     "Hand": [(-90, 90), (-90, 90), (-90, 90)],
 }
 
-# Base PD gains per joint group for a 70 kg body (N m/rad, N m s/rad); scaled by mass / 70.
+# Base PD gains per joint group for a 1.70 m, 70 kg body (N m/rad); scaled by mass x height.
 _KP_BASE = {
-    "Hip": 800.0, "Knee": 800.0, "Ankle": 600.0, "Foot": 300.0, "Spine1": 1000.0,
+    "Hip": 1000.0, "Knee": 1000.0, "Ankle": 1000.0, "Foot": 300.0, "Spine1": 1000.0,
     "Spine2": 1000.0, "Spine3": 1000.0, "Neck": 400.0, "Head": 300.0, "Collar": 500.0,
     "Shoulder": 500.0, "Elbow": 400.0, "Wrist": 200.0, "Hand": 80.0,
 }  # fmt: skip
@@ -129,6 +129,17 @@ class BodyParams:
                 continue
             if not np.isfinite(value) or not lo <= value <= hi:
                 raise ValueError(f"BodyParams.{name}={value!r} is outside [{lo}, {hi}]")
+        ratios = {
+            "leg_length_m": (self.leg_length_m, 0.38, 0.62),
+            "arm_length_m": (self.arm_length_m, 0.22, 0.45),
+            "foot_length_m": (self.foot_length_m, 0.11, 0.20),
+        }
+        for name, (value, lo, hi) in ratios.items():
+            if value is not None and not lo <= value / self.height_m <= hi:
+                raise ValueError(
+                    f"BodyParams.{name}={value!r} is implausible for height_m={self.height_m}: "
+                    f"expected {lo:.2f}-{hi:.2f} x height"
+                )
 
     def to_array(self) -> np.ndarray:
         """``(5,)`` float64 with NaN for unset optional values (for npz storage)."""
@@ -350,7 +361,7 @@ def build_body(params: BodyParams | None = None) -> BodyModel:
         add_box(a, np.array([offsets[t, 0] / 2, -ankle_h / 2, 0.5 * (heel_z + toe_rel_z)]),
                 np.array([foot_w / 2, ankle_h / 2, 0.5 * (toe_rel_z - heel_z)]))  # fmt: skip
         toe_len = toe_tip_z - toe_rel_z
-        add_box(t, np.array([0.0, -toe_h / 2 + 0.005, toe_len / 2]),
+        add_box(t, np.array([-offsets[t, 0] / 2, -toe_h / 2 + 0.005, toe_len / 2]),
                 np.array([foot_w / 2, toe_h / 2 + 0.005, toe_len / 2]))  # fmt: skip
 
     # Segment COM and inertia from the main shape of each body, with the segment's mass.
@@ -381,7 +392,8 @@ def build_body(params: BodyParams | None = None) -> BodyModel:
             # Mirroring x -> -x keeps rotations about x and flips those about y and z.
             lim[1:] = -lim[1:, ::-1]
         hinge_range[j] = lim
-        kp[j] = _KP_BASE[grp] * p.mass_kg / 70.0
+        # Gravity torques grow with mass x height, so the gains do too.
+        kp[j] = _KP_BASE[grp] * (p.mass_kg / 70.0) * (p.height_m / 1.70)
     kd = _KD_RATIO * kp
 
     # ---------------------------------------------------------------- IMU sites
@@ -422,7 +434,8 @@ def build_body(params: BodyParams | None = None) -> BodyModel:
             [centre_x - half_w, -ankle_h, offsets[t, 2]], [centre_x + half_w, -ankle_h, offsets[t, 2]],
         ]  # fmt: skip
         toe_len = toe_tip_z - offsets[t, 2]
-        corners_toe = [[-half_w, -toe_h, toe_len], [half_w, -toe_h, toe_len]]
+        toe_x = -offsets[t, 0] / 2  # the toe box shares the foot box's centre line
+        corners_toe = [[toe_x - half_w, -toe_h, toe_len], [toe_x + half_w, -toe_h, toe_len]]
         sole_body[f] = [a, a, a, a, t, t]
         sole_pos[f] = np.array(corners_foot + corners_toe)
 

@@ -1,0 +1,167 @@
+"""Load the MuJoCo humanoid and map between SMPL-ordered arrays and MuJoCo's indices.
+
+MuJoCo orders ``qpos``/``qvel`` by depth-first body order, actuators in SMPL order; every
+mapping goes through :class:`HumanoidIndex`, whose integer arrays are resolved once per model so
+that per-step code never looks a name up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.core.body import BodyModel, BodyParams
+from grip.core.mjcf import (
+    ROOT_JOINT,
+    MjcfConfig,
+    build_mjcf,
+    hinge_names,
+    imu_site_names,
+    insole_site_names,
+    touch_sensor_names,
+)
+from grip.core.rotations import matrix_to_euler_xyz, matrix_to_quat
+
+
+def load_model(
+    body_or_params: BodyModel | BodyParams | None = None, cfg: MjcfConfig | None = None
+) -> mujoco.MjModel:
+    """Compile the humanoid of one subject.
+
+    Args:
+        body_or_params: Body model or subject parameters (``None``: 1.70 m, 70 kg).
+        cfg: MJCF options (``None``: :class:`MjcfConfig` defaults).
+
+    Returns:
+        The compiled model (nq = 76, nv = 75, nu = 69); ``qpos0`` and keyframe ``"stand"`` are
+        the rest T-pose standing on the floor.
+    """
+    return mujoco.MjModel.from_xml_string(build_mjcf(body_or_params, cfg))
+
+
+@dataclass(frozen=True)
+class HumanoidIndex:
+    """Integer indices of the humanoid's parts, resolved once per model.
+
+    Attributes:
+        body_ids: ``(24,)`` MuJoCo body id of each SMPL joint's body.
+        root_qpos_adr: First ``qpos`` address of the free root (position, then quaternion wxyz).
+        root_dof_adr: First ``qvel`` address of the free root (linear, then angular velocity).
+        hinge_qpos_adr: ``(69,)`` ``qpos`` address of each hinge, SMPL order (joint 1..23 x y z).
+        hinge_dof_adr: ``(69,)`` ``qvel``/``qfrc`` address of each hinge, same order.
+        actuator_ids: ``(69,)`` actuator id of each hinge, same order.
+        imu_site_ids: ``(8,)`` site ids in :data:`grip.core.skeleton.IMU_PARTS` order.
+        insole_site_ids: ``(2, 16)`` insole cell site ids, left foot first.
+        touch_adr: ``(2, 16)`` ``sensordata`` address of each cell's touch sensor, or an empty
+            ``(0,)`` array when the model has no insole sensors.
+    """
+
+    body_ids: np.ndarray
+    root_qpos_adr: int
+    root_dof_adr: int
+    hinge_qpos_adr: np.ndarray
+    hinge_dof_adr: np.ndarray
+    actuator_ids: np.ndarray
+    imu_site_ids: np.ndarray
+    insole_site_ids: np.ndarray
+    touch_adr: np.ndarray
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> HumanoidIndex:
+        """Resolve all names of a model built by :func:`grip.core.mjcf.build_mjcf`.
+
+        Raises:
+            KeyError: A body, joint, actuator or site of the humanoid is missing.
+        """
+        hinges = hinge_names()
+        jids = np.array([model.joint(n).id for n in hinges], dtype=np.int64)
+        root = model.joint(ROOT_JOINT)
+        touch = np.zeros(0, dtype=np.int64)
+        touch_names = touch_sensor_names()
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, touch_names[0][0]) >= 0:
+            touch = np.array([[model.sensor(n).adr[0] for n in row] for row in touch_names],
+                             dtype=np.int64)  # fmt: skip
+        return cls(
+            body_ids=np.array([model.body(n).id for n in sk.JOINT_NAMES], dtype=np.int64),
+            root_qpos_adr=int(root.qposadr[0]),
+            root_dof_adr=int(root.dofadr[0]),
+            hinge_qpos_adr=model.jnt_qposadr[jids].astype(np.int64),
+            hinge_dof_adr=model.jnt_dofadr[jids].astype(np.int64),
+            actuator_ids=np.array([model.actuator(n).id for n in hinges], dtype=np.int64),
+            imu_site_ids=np.array([model.site(n).id for n in imu_site_names()], dtype=np.int64),
+            insole_site_ids=np.array(
+                [[model.site(n).id for n in row] for row in insole_site_names()], dtype=np.int64
+            ),
+            touch_adr=touch,
+        )
+
+
+def pose_to_qpos(local_rot: np.ndarray, root_pos: np.ndarray, index: HumanoidIndex,
+                 qpos: np.ndarray) -> None:  # fmt: skip
+    """Write a pose into a ``qpos`` vector in place.
+
+    Args:
+        local_rot: ``(24, 3, 3)`` joint rotations relative to the parent body; row 0 is the
+            root's world rotation (as in :func:`grip.core.fk.forward_kinematics`).
+        root_pos: ``(3,)`` pelvis position, world frame, m.
+        index: Indices of the model.
+        qpos: ``(nq,)`` vector to fill (root and the 69 hinges).
+    """
+    local_rot = np.asarray(local_rot, dtype=np.float64)
+    if local_rot.shape != (sk.N_JOINTS, 3, 3):
+        raise ValueError(f"local_rot must have shape (24, 3, 3), got {local_rot.shape}")
+    r = index.root_qpos_adr
+    qpos[r : r + 3] = np.asarray(root_pos, dtype=np.float64).reshape(3)
+    qpos[r + 3 : r + 7] = matrix_to_quat(local_rot[0])
+    qpos[index.hinge_qpos_adr] = matrix_to_euler_xyz(local_rot[1:]).reshape(-1)
+
+
+def set_pose(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    index: HumanoidIndex,
+    local_rot: np.ndarray,
+    root_pos: np.ndarray,
+    kinematics: bool = True,
+) -> None:
+    """Put the humanoid in a pose (``qpos`` only; velocities are left as they are).
+
+    Hinge angles are the intrinsic X-Y-Z Euler angles of each local rotation; they are written
+    as they come, even outside the hinge limits.
+
+    Args:
+        model: The humanoid model.
+        data: Its data; ``data.qpos`` is overwritten for the root and all hinges.
+        index: :class:`HumanoidIndex` of ``model``.
+        local_rot: ``(24, 3, 3)`` local joint rotations, row 0 = root world rotation.
+        root_pos: ``(3,)`` pelvis position, world frame, m.
+        kinematics: Run ``mj_kinematics`` afterwards so that ``xpos``/``xmat``/``site_xpos``
+            match the pose (contacts and sensors still need ``mj_forward``).
+    """
+    pose_to_qpos(local_rot, root_pos, index, data.qpos)
+    if kinematics:
+        mujoco.mj_kinematics(model, data)
+
+
+def body_positions(data: mujoco.MjData, index: HumanoidIndex) -> np.ndarray:
+    """``(24, 3)`` world positions of the 24 joints (body origins) in SMPL order, m (a copy)."""
+    return data.xpos[index.body_ids].copy()
+
+
+def body_rotations(data: mujoco.MjData, index: HumanoidIndex) -> np.ndarray:
+    """``(24, 3, 3)`` world rotations of the 24 bodies in SMPL order (a copy)."""
+    return data.xmat[index.body_ids].reshape(sk.N_JOINTS, 3, 3).copy()
+
+
+def insole_forces(data: mujoco.MjData, index: HumanoidIndex) -> np.ndarray:
+    """``(2, 16)`` normal force on each insole cell from the touch sensors, N.
+
+    Raises:
+        ValueError: The model was built without insole sensors.
+    """
+    if index.touch_adr.size == 0:
+        raise ValueError("the model has no insole touch sensors (MjcfConfig.insole_sensors)")
+    return data.sensordata[index.touch_adr].copy()
