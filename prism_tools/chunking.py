@@ -114,6 +114,7 @@ def make_split(
     *,
     categories: Mapping[str, str] | None = None,
     frames_per_chunk: int | Mapping[str, int] = 1000,
+    groups: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Chunk-level random train/test split, in the shape of PRISM's statistics JSON.
 
@@ -146,6 +147,12 @@ def make_split(
         categories: Chunk id -> activity category for the per-category counts; ids missing from
             it (or all, when ``None``) count as ``"unknown"``.
         frames_per_chunk: Frames per chunk, one number or a chunk id -> frames mapping.
+        groups: Optional chunk id -> group id (e.g. the source clip). Whole groups are then
+            assigned: groups are permuted with the seed and go to test until it holds
+            ``ceil(test_fraction * n_eligible)`` chunks, so chunks of one motion (its noise
+            variants and consecutive pieces) never straddle train and test. A group with any
+            ``train_only`` chunk stays in train. The returned dict then also lists
+            ``"groups": {"train": [...], "test": [...]}``.
 
     Returns:
         The split dict described above.
@@ -165,12 +172,35 @@ def make_split(
         raise ValueError(f"make_split: train_only ids not in chunk_ids: {unknown[:5]}")
     eligible = sorted(set(ids) - forced)
     n_test = min(len(eligible), math.ceil(test_fraction * len(eligible) - 1e-9))
-    perm = np.random.default_rng(seed).permutation(len(eligible))
-    test_set = {eligible[i] for i in perm[:n_test]}
+    group_lists: dict[str, list[str]] | None = None
+    if groups is None:
+        perm = np.random.default_rng(seed).permutation(len(eligible))
+        test_set = {eligible[i] for i in perm[:n_test]}
+    else:
+        missing = sorted(set(ids) - set(groups))
+        if missing:
+            raise ValueError(f"make_split: chunk ids without a group: {missing[:5]}")
+        members: dict[str, list[str]] = {}
+        for i in ids:
+            members.setdefault(str(groups[i]), []).append(i)
+        blocked = {g for g, m in members.items() if forced.intersection(m)}
+        names = sorted(g for g in members if g not in blocked)
+        perm = np.random.default_rng(seed).permutation(len(names))
+        test_set = set()
+        test_groups = []
+        for k in perm:
+            if len(test_set) >= n_test:
+                break
+            test_groups.append(names[k])
+            test_set.update(members[names[k]])
+        group_lists = {
+            "train": sorted(g for g in members if g not in set(test_groups)),
+            "test": sorted(test_groups),
+        }
     test = sorted(test_set)
     train = sorted(i for i in ids if i not in test_set)
     cats = categories or {}
-    return {
+    out = {
         "format": SPLIT_FORMAT,
         "version": SPLIT_VERSION,
         "seed": seed,
@@ -184,6 +214,9 @@ def make_split(
             "total": _stats(sorted(ids), cats, frames_per_chunk),
         },
     }
+    if group_lists is not None:
+        out["groups"] = group_lists
+    return out
 
 
 def save_split(split: Mapping[str, Any], path: str | os.PathLike[str]) -> None:

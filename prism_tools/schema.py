@@ -1035,3 +1035,32 @@ def validate(rec: Recording) -> None:
                 )
     if not isinstance(rec.extras, dict) or not all(isinstance(k, str) for k in rec.extras):
         raise RecordingError("extras: expected a dict with str keys")
+
+
+def _float32_fields(obj: Any, keep: tuple[str, ...] = ()) -> Any:
+    """Copy of ``obj`` with its float64 arrays stored as float32 (names in ``keep`` excepted)."""
+    changes = {
+        name: np.asarray(arr, dtype=np.float32)
+        for name, arr in _array_fields(obj).items()
+        if name not in keep and arr.dtype == np.float64
+    }
+    return dataclasses.replace(obj, **changes)
+
+
+def recording_as_float32(rec: Recording) -> Recording:
+    """The recording with float32 sensor and pose arrays, as PRISM stores its ``poses``.
+
+    ``smpl_params.trans`` and ``root_offset`` stay float64 (PRISM's dtype; world translations
+    need the precision). Halves the size of synthesised datasets; float32 keeps ~7 significant
+    digits, far below any sensor noise.
+    """
+    return dataclasses.replace(
+        rec,
+        smpl_params=_float32_fields(rec.smpl_params, keep=("trans", "root_offset")),
+        imu={p: _float32_fields(s) for p, s in rec.imu.items()},
+        imu_gt={p: _float32_fields(s) for p, s in rec.imu_gt.items()},
+        insole={p: _float32_fields(s) for p, s in rec.insole.items()},
+        insole_combined=(
+            None if rec.insole_combined is None else _float32_fields(rec.insole_combined)
+        ),
+    )

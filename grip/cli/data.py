@@ -94,7 +94,7 @@ def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, s
     if limit is not None and limit < len(clips):
         if limit < 1:
             raise CliError("--limit must be >= 1")
-        idx = sorted({int(round(k)) for k in
+        idx = sorted({round(k) for k in
                       [i * (len(clips) - 1) / max(limit - 1, 1) for i in range(limit)]})
         clips = [clips[k] for k in idx]
     return clips

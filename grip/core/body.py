@@ -165,7 +165,8 @@ class Geom:
         body: Index of the carrying body (SMPL joint index).
         kind: ``"capsule"``, ``"box"`` or ``"sphere"``.
         pos: ``(3,)`` centre, m.
-        size: capsule: ``(radius, half_length)``; box: ``(hx, hy, hz)`` half sizes; sphere: ``(r,)``.
+        size: capsule: ``(radius, half_length)``; box: ``(hx, hy, hz)`` half sizes;
+            sphere: ``(r,)``.
         axis: ``(3,)`` unit axis of a capsule (unused otherwise).
     """
 
@@ -430,8 +431,10 @@ def build_body(params: BodyParams | None = None) -> BodyModel:
         insole_pos[f] = np.where(on_toe[:, None], pos_foot - offsets[t], pos_foot)
         half_w = foot_w / 2
         corners_foot = [
-            [centre_x - half_w, -ankle_h, heel_z], [centre_x + half_w, -ankle_h, heel_z],
-            [centre_x - half_w, -ankle_h, offsets[t, 2]], [centre_x + half_w, -ankle_h, offsets[t, 2]],
+            [centre_x - half_w, -ankle_h, heel_z],
+            [centre_x + half_w, -ankle_h, heel_z],
+            [centre_x - half_w, -ankle_h, offsets[t, 2]],
+            [centre_x + half_w, -ankle_h, offsets[t, 2]],
         ]  # fmt: skip
         toe_len = toe_tip_z - offsets[t, 2]
         toe_x = -offsets[t, 0] / 2  # the toe box shares the foot box's centre line

@@ -26,12 +26,12 @@ def forward_kinematics(
     root_pos = np.asarray(root_pos, dtype=np.float64)
     if local_rot.shape[-3:] != (sk.N_JOINTS, 3, 3):
         raise ValueError(f"local_rot must have shape (..., 24, 3, 3), got {local_rot.shape}")
-    if root_pos.shape != local_rot.shape[:-3] + (3,):
+    if root_pos.shape != (*local_rot.shape[:-3], 3):
         raise ValueError(
             f"root_pos shape {root_pos.shape} does not match local_rot {local_rot.shape}"
         )
     g_rot = np.empty_like(local_rot)
-    g_pos = np.empty(local_rot.shape[:-2] + (3,), dtype=np.float64)
+    g_pos = np.empty((*local_rot.shape[:-2], 3), dtype=np.float64)
     g_rot[..., 0, :, :] = local_rot[..., 0, :, :]
     g_pos[..., 0, :] = root_pos
     for j in range(1, sk.N_JOINTS):

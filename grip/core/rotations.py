@@ -171,7 +171,9 @@ def matrix_to_euler_xyz(m: np.ndarray) -> np.ndarray:
     b = np.arcsin(sb)
     cb = np.sqrt(np.maximum(1.0 - sb**2, 0.0))
     lock = cb < 1e-9
-    a = np.where(lock, np.arctan2(m[..., 2, 1], m[..., 1, 1]), np.arctan2(-m[..., 1, 2], m[..., 2, 2]))
+    a = np.where(
+        lock, np.arctan2(m[..., 2, 1], m[..., 1, 1]), np.arctan2(-m[..., 1, 2], m[..., 2, 2])
+    )
     c = np.where(lock, 0.0, np.arctan2(-m[..., 0, 1], m[..., 0, 0]))
     return np.stack([a, b, c], axis=-1)
 
@@ -234,7 +236,7 @@ def geodesic_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def rotation_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Minimal rotation (swing) taking direction ``u`` to direction ``v``. ``(..., 3) -> (..., 3, 3)``.
+    """Minimal rotation (swing) taking direction ``u`` to ``v``. ``(..., 3) -> (..., 3, 3)``.
 
     For opposite vectors a rotation by pi about an axis perpendicular to ``u`` is returned.
     """
@@ -266,7 +268,10 @@ def orthonormalize(m: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- interpolation
 def quat_slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray | float) -> np.ndarray:
-    """Spherical linear interpolation along the shorter arc. ``(..., 4) x (..., 4) x (...) -> (..., 4)``."""
+    """Spherical linear interpolation along the shorter arc.
+
+    ``(..., 4) x (..., 4) x (...) -> (..., 4)``.
+    """
     q0 = quat_normalize(q0)
     q1 = quat_normalize(q1)
     t = np.asarray(t, dtype=np.float64)[..., None]

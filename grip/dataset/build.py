@@ -44,6 +44,8 @@ class BuildConfig:
         mass_kg: Body mass when ``vary_body`` is off, kg.
         chunk_frames: Sequence length (PRISM: 1000 frames = 10 s).
         min_chunk_frames: Shortest tail (or whole short clip) kept as a sequence.
+        float32: Store sensor and pose arrays as float32 (translations stay float64), as
+            PRISM does for its poses; halves the dataset size.
         test_fraction: Share of clips in the test split (split by clip: all variants and
             chunks of a clip land in the same split, so no motion leaks across).
         split_seed: Seed of the split (PRISM used 42).
@@ -56,7 +58,8 @@ class BuildConfig:
     height_m: float = 1.70
     mass_kg: float = 70.0
     chunk_frames: int = 1000
-    min_chunk_frames: int = 200
+    min_chunk_frames: int = 100
+    float32: bool = True
     test_fraction: float = 0.2
     split_seed: int = 42
     seed: int = 0
@@ -122,6 +125,7 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
     from grip.motion.retarget import retarget
     from prism_tools.chunking import chunk_recording
     from prism_tools.io import save_recording
+    from prism_tools.schema import recording_as_float32
     from prism_tools.synth import SynthConfig, recording_from_motion
 
     t0 = time.perf_counter()
@@ -145,6 +149,8 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
                     motion.save(out / "motions" / f"{name}.npz")
             motion = motions[k]
             rec = recording_from_motion(motion, SynthConfig(), seed=seed + k, noise=noisy)
+            if cfg.float32:
+                rec = recording_as_float32(rec)
             chunks = chunk_recording(rec, cfg.chunk_frames, min_length=cfg.min_chunk_frames)
             for i, chunk in enumerate(chunks):
                 seq_id = f"{name}_{tag}_seq{i:03d}"
@@ -174,45 +180,22 @@ def _load_done(out: Path) -> dict[str, ClipResult]:
     return done
 
 
-def group_split(results: Sequence[ClipResult], test_fraction: float, seed: int) -> dict:
-    """Split clips (with all their sequences) into train/test, stratified by category.
+def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int) -> dict:
+    """Train/test split of the built sequences, whole clips at a time (PRISM statistics shape).
 
-    Returns:
-        ``{"train": [seq ids], "test": [seq ids], "clips": {"train": [...], "test": [...]},
-        "stats": {...}}`` - the train/test lists in the shape of PRISM's statistics JSON.
+    All sequences of one clip (its noise variants and consecutive chunks) share a split, so a
+    test motion is never seen in training.
     """
-    rng = np.random.default_rng(seed)
-    by_cat: dict[str, list[ClipResult]] = {}
-    for r in sorted(results, key=lambda r: r.clip_id):
-        if r.status == "done" and r.sequences:
-            by_cat.setdefault(r.category, []).append(r)
-    clips: dict[str, list[str]] = {"train": [], "test": []}
-    seqs: dict[str, list[str]] = {"train": [], "test": []}
-    frames = {"train": 0, "test": 0}
-    per_cat: dict[str, dict[str, int]] = {"train": {}, "test": {}}
-    for cat, rs in sorted(by_cat.items()):
-        order = rng.permutation(len(rs))
-        n_test = int(round(test_fraction * len(rs))) if len(rs) >= 3 else 0
-        for rank, idx in enumerate(order):
-            r = rs[idx]
-            part = "test" if rank < n_test else "train"
-            clips[part].append(r.clip_id)
-            seqs[part].extend(r.sequences)
-            frames[part] += int(sum(r.sequence_frames))
-            per_cat[part][cat] = per_cat[part].get(cat, 0) + len(r.sequences)
-    for part in ("train", "test"):
-        seqs[part].sort()
-        clips[part].sort()
-    return {
-        "train": seqs["train"],
-        "test": seqs["test"],
-        "clips": clips,
-        "stats": {
-            part: {"sequences": len(seqs[part]), "clips": len(clips[part]),
-                   "frames": frames[part], "per_category": per_cat[part]}
-            for part in ("train", "test")
-        } | {"seed": seed, "test_fraction": test_fraction, "unit": "clip"},
-    }  # fmt: skip
+    from prism_tools.chunking import make_split
+
+    groups, cats, frames = {}, {}, {}
+    for r in results:
+        if r.status != "done":
+            continue
+        for seq, n in zip(r.sequences, r.sequence_frames, strict=True):
+            groups[seq], cats[seq], frames[seq] = r.clip_id, r.category, n
+    return make_split(sorted(groups), test_fraction, seed, categories=cats,
+                      frames_per_chunk=frames, groups=groups)  # fmt: skip
 
 
 def build_dataset(
@@ -241,7 +224,9 @@ def build_dataset(
         try:
             old = json.loads(manifest_path.read_text())
         except ValueError as e:
-            raise ValueError(f"{manifest_path}: corrupt manifest ({e}); remove it to rebuild") from e
+            raise ValueError(
+                f"{manifest_path}: corrupt manifest ({e}); remove it to rebuild"
+            ) from e
         if old.get("config") != asdict(cfg):
             raise ValueError(
                 f"{manifest_path}: this folder was built with different settings "
@@ -275,6 +260,7 @@ def build_dataset(
         "clips": [asdict(r) for r in ordered],
     }
     atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
-    split = group_split(ordered, cfg.test_fraction, cfg.split_seed)
-    atomic_write_text(out / SPLIT, json.dumps(split, indent=1))
+    from prism_tools.chunking import save_split
+
+    save_split(dataset_split(ordered, cfg.test_fraction, cfg.split_seed), out / SPLIT)
     return ordered

@@ -81,6 +81,8 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         try:
             split = json.loads(split_path.read_text())
             summary["splits"] = split.get("stats", {})
+            for part, clips in split.get("groups", {}).items():
+                summary["splits"].setdefault(part, {})["clips"] = len(clips)
         except ValueError:
             summary["splits"] = {"error": f"{split_path}: unreadable"}
     return summary
@@ -147,7 +149,7 @@ def format_summary(s: dict) -> str:
         lines += ["", "| split | clips | sequences | frames |", "|---|---:|---:|---:|"]
         for part in ("train", "test"):
             p = splits[part]
-            lines.append(f"| {part} | {p['clips']} | {p['sequences']} | {p['frames']} |")
+            lines.append(f"| {part} | {p.get('clips', '-')} | {p['n_chunks']} | {p['n_frames']} |")
     bad = s.get("clips_failed") or s.get("unreadable") or []
     if bad:
         lines += ["", f"{len(bad)} clip(s)/file(s) failed:"]

@@ -223,3 +223,17 @@ def test_slice_frames_reindexes_synth_frames(rec: Recording) -> None:
     assert part.slam is not None and rec.slam is not None
     assert part.slam.points.shape == rec.slam.points.shape
     assert not np.shares_memory(part.imu["Head"].ori_world, rec.imu["Head"].ori_world)
+
+
+def test_recording_as_float32_halves_arrays_and_keeps_trans():
+    from prism_tools.schema import recording_as_float32
+    from prism_tools.synthetic import make_recording
+
+    rec = make_recording(50, seed=3)
+    small = recording_as_float32(rec)
+    assert small.imu["L_Foot"].acc_world_raw.dtype == np.float32
+    assert small.insole["R_Foot"].forces.dtype == np.float32
+    assert small.smpl_params.trans.dtype == rec.smpl_params.trans.dtype
+    np.testing.assert_allclose(small.imu["L_Wrist"].ori_world, rec.imu["L_Wrist"].ori_world,
+                               atol=1e-6)  # fmt: skip
+    validate(small)
