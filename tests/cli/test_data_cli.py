@@ -1,0 +1,83 @@
+"""The ``grip data`` commands end to end on three real shared clips (in-process, small)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from grip.cli.main import main
+
+MOTIONS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "motions"
+pytestmark = pytest.mark.skipif(not MOTIONS.is_dir(), reason="shared motion clips not found")
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ds") / "dataset"
+    rc = main(["data", "build", "--out", str(out), "--motions", str(MOTIONS / "deepmimic"),
+               "--limit", "3", "--workers", "1", "--test-fraction", "0.34"])  # fmt: skip
+    assert rc == 0
+    return out
+
+
+def test_build_writes_sequences_split_and_manifest(built: Path) -> None:
+    manifest = json.loads((built / "manifest.json").read_text())
+    assert [c["status"] for c in manifest["clips"]] == ["done"] * 3
+    split = json.loads((built / "split.json").read_text())
+    seqs = sorted(p.stem for p in (built / "sequences").glob("*.npz"))
+    assert sorted(split["train"] + split["test"]) == seqs
+    assert split["test"], "a third of the clips must be in the test split"
+    # Whole clips per split: no clip id appears on both sides.
+    assert not set(split["groups"]["train"]) & set(split["groups"]["test"])
+    assert not list(built.rglob("*.tmp")), "temporary files left behind"
+
+
+def test_build_resumes_and_refuses_other_settings(built: Path, capsys) -> None:
+    marker = sorted((built / "done").glob("*.json"))[0]
+    stamp = {p: p.stat().st_mtime_ns for p in (built / "done").glob("*.json")}
+    marker.unlink()
+    rc = main(["data", "build", "--out", str(built), "--motions", str(MOTIONS / "deepmimic"),
+               "--limit", "3", "--workers", "1", "--test-fraction", "0.34"])  # fmt: skip
+    assert rc == 0
+    after = {p: p.stat().st_mtime_ns for p in (built / "done").glob("*.json")}
+    rebuilt = [p for p in after if p not in stamp or after[p] != stamp[p]]
+    assert rebuilt == [marker], "only the clip without a done marker is built again"
+    rc = main(["data", "build", "--out", str(built), "--motions", str(MOTIONS / "deepmimic"),
+               "--limit", "3", "--noise-variants", "2"])  # fmt: skip
+    assert rc == 2
+    assert "different settings" in capsys.readouterr().err
+
+
+def test_info_json_and_plot(built: Path, tmp_path: Path) -> None:
+    js = tmp_path / "info.json"
+    assert main(["data", "info", str(built), "--json", str(js)]) == 0
+    info = json.loads(js.read_text())
+    assert info["clips"] == 3 and info["recordings"] >= 3 and info["frames"] > 100
+    assert sum(c["frames"] for c in info["categories"].values()) == info["frames"]
+    seq = sorted((built / "sequences").glob("*.npz"))[0]
+    png = tmp_path / "rec.png"
+    assert main(["data", "plot", str(seq), "--out", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+
+
+def test_plot_of_a_corrupt_file_is_a_clean_error(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "broken.npz"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    assert main(["data", "plot", str(bad), "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "broken.npz" in err and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_console_script_help_lists_the_subcommands() -> None:
+    out = subprocess.run([sys.executable, "-m", "grip.cli.main", "--help"],
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    for cmd in ("data", "body", "demo"):
+        assert cmd in out
+    out = subprocess.run([sys.executable, "-m", "grip.cli.main", "data", "build", "--help"],
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert "--workers" in out and "example" in out
