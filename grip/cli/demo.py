@@ -59,7 +59,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     done = [r for r in results if r.status == "done" and r.sequences]
     if not done:
         raise CliError("no clip could be built; see the errors above")
-    pick = next((r for r in done if "walk" in r.category), done[0])
+    walks = [r for r in done if r.category == "walk"] or [r for r in done if "walk" in r.category]
+    pick = next((r for r in walks if "normal" in r.clip_id), walks[0] if walks else done[0])
     seq = ds / "sequences" / f"{pick.sequences[0]}.npz"
     png = plot_recording(load_recording(seq), out / "recording.png")
     print(f"      {seq.name} -> {png}")
