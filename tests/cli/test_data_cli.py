@@ -81,3 +81,18 @@ def test_console_script_help_lists_the_subcommands() -> None:
     out = subprocess.run([sys.executable, "-m", "grip.cli.main", "data", "build", "--help"],
                          capture_output=True, text=True, check=True).stdout  # fmt: skip
     assert "--workers" in out and "example" in out
+
+
+def test_info_scans_a_folder_of_prism_pickles(tmp_path: Path) -> None:
+    """A folder laid out like the real PRISM release (<subject>/<take>.pkl) is summarised."""
+    from prism_tools.io import save_recording
+    from prism_tools.synthetic import make_recording
+
+    for subj, take, n in (("subj001", "take001", 120), ("subj002", "take004", 80)):
+        save_recording(make_recording(n, seed=n), tmp_path / subj / f"{take}.pkl")
+    (tmp_path / "subj002" / "take009.pkl").write_bytes(b"\x80\x04 not a pickle")
+    js = tmp_path / "info.json"
+    assert main(["data", "info", str(tmp_path), "--json", str(js)]) == 0
+    info = json.loads(js.read_text())
+    assert info["source"] == "scan" and info["recordings"] == 2 and info["frames"] == 200
+    assert len(info["unreadable"]) == 1 and "take009.pkl" in info["unreadable"][0]["file"]
