@@ -20,13 +20,11 @@ existing file untouched and no temporary file behind.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
 import pickle
 import re
-import tempfile
 import zipfile
 import zlib
 from collections import OrderedDict
@@ -36,6 +34,7 @@ from typing import IO, Any, Literal
 
 import numpy as np
 
+from grip.core.atomic import atomic_write
 from prism_tools.errors import RecordingError
 from prism_tools.schema import EXTRAS_KEY, ForceUnit, Recording, validate
 
@@ -291,47 +290,6 @@ def _with_extras(rec: Recording, **extras: Any) -> Recording:
 
 
 # ----------------------------------------------------------------------------------- writing
-def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> None:
-    """Writes a file atomically: temp file in the same directory, fsync, :func:`os.replace`.
-
-    Args:
-        path: Destination. Its parent directory is created if missing.
-        write: Called with the open binary temp file; writes the whole content.
-
-    Raises:
-        Whatever ``write`` or the file system raises; the destination is then unchanged and the
-        temporary file removed.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp_name, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp_name)
-        raise
-    _fsync_dir(path.parent)
-
-
-def _fsync_dir(directory: Path) -> None:
-    """Makes the rename durable where the platform allows fsync on a directory."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def _flatten(value: Any, key: str, arrays: dict[str, np.ndarray], dest: Path) -> Any:
     """JSON tree of ``value`` with arrays moved to ``arrays`` under slash-joined key paths."""
     if isinstance(value, np.ndarray):

@@ -144,7 +144,7 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     from grip.cli.main import CliError
-    from grip.dataset.build import atomic_write_text
+    from grip.core.atomic import atomic_write_text
     from grip.dataset.info import dataset_summary, format_summary
 
     try:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
@@ -27,6 +26,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from grip.core.atomic import atomic_write_text
 
 MANIFEST = "manifest.json"
 SPLIT = "split.json"
@@ -100,22 +101,6 @@ def subject_for(clip_id: str, variant: int, cfg: BuildConfig):
 
 def _safe_name(clip_id: str) -> str:
     return clip_id.replace("/", "__")
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write text through a temp file in the same folder and ``os.replace`` it into place."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,

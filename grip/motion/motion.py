@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from grip.core import skeleton as sk
+from grip.core.atomic import atomic_write
 from grip.core.body import BodyModel, BodyParams, build_body
 from grip.core.fk import forward_kinematics
 from grip.core.rotations import quat_normalize, quat_to_matrix
@@ -149,17 +149,5 @@ def normalized_quats(q: np.ndarray) -> np.ndarray:
 
 
 def atomic_save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write an uncompressed npz via a temp file in the same folder, then rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write an uncompressed npz atomically (temp file in the same folder, then rename)."""
+    atomic_write(path, lambda f: np.savez(f, **arrays))
