@@ -13,7 +13,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="run the end-to-end demo (a small dataset, its summary and a plot)",
         description="Build a small PRISM-format dataset from a spread of the shared mocap "
         "clips (import, retarget, IMU and insole synthesis by physics, noise, chunking, split), "
-        "print its summary and plot one walking recording. Takes a minute or two on 2 cores.",
+        "print its summary and plot one walking recording.",
         epilog="example: grip demo --out demo_out --clips 16",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
