@@ -1,0 +1,161 @@
+"""Per-frame network inputs and targets from PRISM-format recordings (numpy only).
+
+Inputs follow GRIP's description (PRISM_FORMAT.md, "What GRIP feeds its networks"): for every
+configured IMU site, in the order given, the world-frame free acceleration (3), the angular
+velocity from finite differences of the orientation x fps (3, world frame; gyroscopes unused)
+and the orientation matrix (9); then, optionally, per foot [force, CoP x, CoP y, contact front,
+contact back] (10). Unlike GRIP, sites that are not configured are left out rather than zeroed, so
+each sensor configuration gets an input of its own size.
+
+Targets are in GRIP's frame: joint positions relative to the root (pelvis) joint but keeping the
+body's global rotation (no pelvis IMU exists to remove it), global joint rotations as 6D, and
+world-frame velocities of the leaf joints and the pelvis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.core.body import BodyParams, build_body
+from grip.core.fk import forward_kinematics
+from grip.core.rotations import angular_velocity, axis_angle_to_matrix, matrix_to_6d
+
+DEFAULT_SITES: tuple[str, ...] = ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist")
+"""GRIP's 4 wearables, in its channel order."""
+
+VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
+"""LV stage joints: wrists, ankles, head (GRIP's leaves) and the pelvis."""
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Which sensors feed the networks, and how.
+
+    Attributes:
+        sites: IMU sites in channel order (any subset of the 8 PRISM parts).
+        insoles: Append the 10 insole values.
+        use_filtered_acc: Use ``acc_world_filt`` (the recording's causal low-pass) rather than
+            ``acc_world_raw``.
+        acc_scale: Accelerations are divided by this (m/s^2) to bring them near unit scale.
+        align_first_frame: Re-align each IMU's orientation to the ground-truth segment
+            orientation at the sequence's first frame (GRIP's calibration; at inference the
+            calibration pose plays the role of the ground truth).
+    """
+
+    sites: tuple[str, ...] = DEFAULT_SITES
+    insoles: bool = True
+    use_filtered_acc: bool = True
+    acc_scale: float = 30.0
+    align_first_frame: bool = True
+
+    def __post_init__(self) -> None:
+        unknown = [s for s in self.sites if s not in sk.IMU_PARTS]
+        if unknown or not self.sites:
+            raise ValueError(f"FeatureConfig.sites: unknown or empty {unknown or self.sites}; "
+                             f"choose from {sk.IMU_PARTS}")  # fmt: skip
+        if len(set(self.sites)) != len(self.sites):
+            raise ValueError(f"FeatureConfig.sites has duplicates: {self.sites}")
+
+    @property
+    def n_features(self) -> int:
+        return 15 * len(self.sites) + (10 if self.insoles else 0)
+
+
+def imu_orientations(rec, cfg: FeatureConfig) -> np.ndarray:
+    """``(T, S, 3, 3)`` IMU orientations, re-aligned at frame 0 when configured.
+
+    Raises:
+        KeyError: naming the missing site when the recording lacks a configured IMU.
+    """
+    rots = []
+    for site in cfg.sites:
+        if site not in rec.imu:
+            raise KeyError(f"recording {rec.name}: no IMU at site {site!r} "
+                           f"(has {sorted(rec.imu)})")  # fmt: skip
+        r = np.asarray(rec.imu[site].ori_world, dtype=np.float64)
+        if cfg.align_first_frame and site in rec.imu_gt:
+            gt0 = np.asarray(rec.imu_gt[site].ori_world[0], dtype=np.float64)
+            r = r @ (r[0].T @ gt0)  # constant sensor-to-segment offset from the first frame
+        rots.append(r)
+    return np.stack(rots, axis=1)
+
+
+def input_features(rec, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:
+    """``(T, F)`` float32 network inputs of one recording, ``F = cfg.n_features``."""
+    rot = imu_orientations(rec, cfg)
+    t = rot.shape[0]
+    key = "acc_world_filt" if cfg.use_filtered_acc else "acc_world_raw"
+    acc = np.stack([np.asarray(getattr(rec.imu[s], key), dtype=np.float64) for s in cfg.sites],
+                   axis=1) / cfg.acc_scale  # fmt: skip
+    gyr = angular_velocity(rot, float(rec.fps))
+    parts = [acc, gyr, rot.reshape(t, len(cfg.sites), 9)]
+    feats = np.concatenate(parts, axis=-1).reshape(t, -1)
+    if cfg.insoles:
+        feats = np.concatenate([feats, insole_features(rec)], axis=-1)
+    if not np.all(np.isfinite(feats)):
+        bad = int(np.argwhere(~np.isfinite(feats))[0][0])
+        raise ValueError(f"recording {rec.name}: non-finite sensor values (first at frame {bad})")
+    return feats.astype(np.float32)
+
+
+def insole_features(rec) -> np.ndarray:
+    """``(T, 10)``: per foot (L then R) ``[force (body weights), CoP x, CoP y (m), front, back]``."""
+    cols = []
+    for foot in sk.FEET:
+        if foot not in rec.insole:
+            raise KeyError(f"recording {rec.name}: no insole for {foot!r}")
+        ins = rec.insole[foot]
+        cols += [np.asarray(ins.force, dtype=np.float64).reshape(-1, 1),
+                 np.asarray(ins.CoP, dtype=np.float64),
+                 np.asarray(ins.contacts, dtype=np.float64)]  # fmt: skip
+    return np.concatenate(cols, axis=-1)
+
+
+@dataclass(frozen=True)
+class Targets:
+    """Ground truth of one recording in GRIP's frame.
+
+    Attributes:
+        leaf_pos: ``(T, 5, 3)`` leaf joints (wrists, ankles, head) minus the root, world axes, m.
+        joint_pos: ``(T, 24, 3)`` all joints minus the root, world axes, m.
+        rot6d: ``(T, 24, 6)`` global joint rotations, 6D.
+        velocity: ``(T, 6, 3)`` world velocities of the leaves and the pelvis, m/s.
+        root_pos: ``(T, 3)`` pelvis position, world, m (for translation metrics).
+        global_rot: ``(T, 24, 3, 3)``.
+    """
+
+    leaf_pos: np.ndarray
+    joint_pos: np.ndarray
+    rot6d: np.ndarray
+    velocity: np.ndarray
+    root_pos: np.ndarray
+    global_rot: np.ndarray
+
+
+def recording_body(rec) -> BodyParams:
+    """Body parameters of a recording's subject (defaults where the recording is silent)."""
+    h = rec.subject.height_m or 1.70
+    m = rec.subject.weight_kg or 70.0
+    return BodyParams(height_m=float(h), mass_kg=float(m))
+
+
+def targets(rec) -> Targets:
+    """Ground-truth targets from ``smpl_params`` on the subject's body model."""
+    sp = rec.smpl_params
+    local = axis_angle_to_matrix(np.asarray(sp.poses, dtype=np.float64).reshape(-1, 24, 3))
+    root = np.asarray(sp.trans, dtype=np.float64) + np.asarray(sp.root_offset, dtype=np.float64)
+    body = build_body(recording_body(rec))
+    g_rot, pos = forward_kinematics(local, root, body.offsets)
+    rel = pos - pos[:, :1]
+    vel = np.gradient(pos[:, list(VELOCITY_JOINTS)], axis=0) * float(rec.fps)
+    return Targets(
+        leaf_pos=rel[:, list(sk.LEAF_JOINTS)],
+        joint_pos=rel,
+        rot6d=matrix_to_6d(g_rot),
+        velocity=vel,
+        root_pos=pos[:, 0],
+        global_rot=g_rot,
+    )
