@@ -102,7 +102,7 @@ def input_features(rec, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:
 
 
 def insole_features(rec) -> np.ndarray:
-    """``(T, 10)``: per foot (L then R) ``[force (body weights), CoP x, CoP y (m), front, back]``."""
+    """``(T, 10)``: per foot (L, R) ``[force (body weights), CoP x, CoP y (m), front, back]``."""
     cols = []
     for foot in sk.FEET:
         if foot not in rec.insole:
