@@ -31,7 +31,7 @@ from scipy import optimize, signal
 from grip.core import skeleton as sk
 from grip.core.body import GRAVITY, BodyModel
 from grip.core.fk import body_points, segment_com
-from grip.core.rotations import angular_velocity
+from grip.core.metrics import net_external_wrench
 from prism_tools.synth.config import InsoleSynthConfig, NoiseConfig
 from prism_tools.synth.imu import central_velocity, second_difference
 from prism_tools.synth.noise import apply_drops, corrupt_insole_cells, drop_mask
@@ -161,18 +161,10 @@ def external_wrench(
         The wrench, the COM and the ZMP per frame.
     """
     cfg = cfg or InsoleSynthConfig()
-    win, order = cfg.smoothing_window_s, cfg.smoothing_polyorder
-    c = segment_com(global_rot, joint_pos, body)  # (T, 24, 3)
-    acc = smooth_derivative(c, fps, win, order, deriv=2)
-    lin = body.masses[:, None] * (acc - _G)  # (T, 24, 3) N
-    force = lin.sum(axis=1)
-    moment = np.cross(c, lin).sum(axis=1)
-    # Spin angular momentum sum_j R I R^T w, with w in the world frame.
-    w_body = angular_velocity(global_rot, fps, local=True)
-    spin = np.einsum(
-        "tjab,tjb->ta", global_rot, np.einsum("jbc,tjc->tjb", body.inertia_local, w_body)
+    force, moment = net_external_wrench(
+        global_rot, joint_pos, body, fps, cfg.smoothing_window_s, cfg.smoothing_polyorder
     )
-    moment = moment + smooth_derivative(spin, fps, win, order, deriv=1)
+    c = segment_com(global_rot, joint_pos, body)
     com = np.einsum("tjk,j->tk", c, body.masses) / body.masses.sum()
     return Wrench(force, moment, com, zero_moment_point(force, moment, com[:, :2]))
 
