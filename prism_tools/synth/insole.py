@@ -53,7 +53,6 @@ __all__ = [
     "zero_moment_point",
 ]
 
-_G = np.array([0.0, 0.0, -GRAVITY])
 _SLIDING_PENALTY_M = 1.0  # height added to a fully sliding cell when finding the contact level
 _MAX_TARGET_DIST_M = 1.0  # targets farther from the cells' centroid are pulled in to this
 _FEET_SEGMENTS = (sk.FOOT_BODY["L_Foot"], sk.FOOT_BODY["R_Foot"])
