@@ -1,0 +1,117 @@
+"""Training data for KinematicsNet: a dataset folder's split -> arrays -> random windows.
+
+Features and targets of every sequence of a split are computed once (numpy) and kept in memory
+as float32; a typical dataset built from the shared clips (~125k frames) takes ~120 MB.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from grip.kinematics.features import FeatureConfig, input_features, targets
+
+TARGET_KEYS: tuple[str, ...] = ("lp", "fp", "fa", "lv")
+
+
+@dataclass
+class SequenceArrays:
+    """One sequence: inputs ``(T, F)`` and stage targets ``{stage: (T, dim)}`` (float32)."""
+
+    name: str
+    category: str
+    x: np.ndarray
+    y: dict[str, np.ndarray]
+    root_pos: np.ndarray
+
+
+def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
+    """Features and flattened stage targets of one recording."""
+    t = targets(rec)
+    n = rec.n_frames
+    y = {
+        "lp": t.leaf_pos.reshape(n, -1),
+        "fp": t.joint_pos.reshape(n, -1),
+        "fa": t.rot6d.reshape(n, -1),
+        "lv": t.velocity.reshape(n, -1),
+    }
+    return SequenceArrays(
+        name=rec.name,
+        category=rec.category or "unknown",
+        x=input_features(rec, cfg),
+        y={k: v.astype(np.float32) for k, v in y.items()},
+        root_pos=t.root_pos.astype(np.float32),
+    )
+
+
+def load_split_sequences(
+    data_dir: str | os.PathLike, split: str, cfg: FeatureConfig, limit: int | None = None
+) -> list[SequenceArrays]:
+    """All sequences of ``split`` ("train" or "test") of a ``grip data build`` folder.
+
+    Raises:
+        FileNotFoundError / ValueError naming the folder, the split file or the bad recording.
+    """
+    from prism_tools.io import load_recording
+
+    root = Path(data_dir)
+    split_path = root / "split.json"
+    if not split_path.is_file():
+        raise FileNotFoundError(f"{root}: no split.json (build the folder with 'grip data build')")
+    try:
+        ids = json.loads(split_path.read_text())[split]
+    except (ValueError, KeyError) as e:
+        raise ValueError(f"{split_path}: no readable {split!r} list ({e})") from e
+    if limit is not None:
+        ids = ids[:limit]
+    out = []
+    for sid in ids:
+        path = root / "sequences" / f"{sid}.npz"
+        try:
+            out.append(sequence_arrays(load_recording(path), cfg))
+        except (KeyError, ValueError) as e:
+            raise ValueError(f"{path}: {e}") from e
+    return out
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Per-feature mean and standard deviation of the training inputs (saved in checkpoints)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+
+    @classmethod
+    def fit(cls, seqs: list[SequenceArrays], min_std: float = 1e-3) -> Normalizer:
+        x = np.concatenate([s.x for s in seqs], axis=0).astype(np.float64)
+        return cls(x.mean(0).astype(np.float32), np.maximum(x.std(0), min_std).astype(np.float32))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return ((x - self.mean) / self.std).astype(np.float32)
+
+
+def sample_windows(
+    seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
+    their last frame; a window never crosses sequences), weighted by sequence length.
+
+    Returns:
+        ``x (n, length, F)`` and ``{stage: (n, length, dim)}``.
+    """
+    lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
+    pick = rng.choice(len(seqs), size=n, p=lens / lens.sum())
+    xs, ys = [], {k: [] for k in TARGET_KEYS}
+    for i in pick:
+        s = seqs[i]
+        t = len(s.x)
+        start = int(rng.integers(0, max(t - length, 0) + 1))
+        idx = np.minimum(np.arange(start, start + length), t - 1)
+        xs.append(s.x[idx])
+        for k in TARGET_KEYS:
+            ys[k].append(s.y[k][idx])
+    return np.stack(xs), {k: np.stack(v) for k, v in ys.items()}
