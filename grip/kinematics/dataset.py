@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from grip.kinematics.features import FeatureConfig, input_features, targets
+from grip.core.body import build_body
+from grip.kinematics.features import FeatureConfig, input_features, recording_body, targets
 
 TARGET_KEYS: tuple[str, ...] = ("lp", "fp", "fa", "lv")
 
@@ -27,6 +28,7 @@ class SequenceArrays:
     x: np.ndarray
     y: dict[str, np.ndarray]
     root_pos: np.ndarray
+    offsets: np.ndarray  # (24, 3) rest offsets of the subject's body model, m
 
 
 def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
@@ -45,6 +47,7 @@ def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
         x=input_features(rec, cfg),
         y={k: v.astype(np.float32) for k, v in y.items()},
         root_pos=t.root_pos.astype(np.float32),
+        offsets=build_body(recording_body(rec)).offsets.astype(np.float32),
     )
 
 
@@ -101,17 +104,20 @@ def sample_windows(
     their last frame; a window never crosses sequences), weighted by sequence length.
 
     Returns:
-        ``x (n, length, F)`` and ``{stage: (n, length, dim)}``.
+        ``x (n, length, F)`` and ``{stage: (n, length, dim)}`` plus ``"offsets": (n, 24, 3)``.
     """
     lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
     pick = rng.choice(len(seqs), size=n, p=lens / lens.sum())
-    xs, ys = [], {k: [] for k in TARGET_KEYS}
+    xs, offs, ys = [], [], {k: [] for k in TARGET_KEYS}
     for i in pick:
         s = seqs[i]
         t = len(s.x)
         start = int(rng.integers(0, max(t - length, 0) + 1))
         idx = np.minimum(np.arange(start, start + length), t - 1)
         xs.append(s.x[idx])
+        offs.append(s.offsets)
         for k in TARGET_KEYS:
             ys[k].append(s.y[k][idx])
-    return np.stack(xs), {k: np.stack(v) for k, v in ys.items()}
+    out = {k: np.stack(v) for k, v in ys.items()}
+    out["offsets"] = np.stack(offs)
+    return np.stack(xs), out

@@ -1,0 +1,351 @@
+"""Training of KinematicsNet: stage-wise, then joint; checkpoints every epoch and resumes.
+
+A run folder holds ``config.json`` (resolved settings, seed, git hash), ``last.pt`` (the latest
+checkpoint, replaced atomically after every epoch), ``best.pt`` (lowest validation loss) and
+TensorBoard event files. Checkpoints contain only tensors and plain containers, so they load
+with ``torch.load(..., weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import subprocess
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from grip.core import skeleton as sk
+from grip.core.atomic import atomic_write, atomic_write_text
+from grip.kinematics.dataset import (
+    TARGET_KEYS,
+    Normalizer,
+    SequenceArrays,
+    sample_windows,
+)
+from grip.kinematics.features import FeatureConfig
+from grip.kinematics.model import STAGES, KinematicsNet, KinematicsNetConfig
+
+CHECKPOINT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings (GRIP: Adam, batch 256, 100 Hz).
+
+    Attributes:
+        window_frames: Frames per training window.
+        batch_size: Windows per step.
+        steps_per_epoch: Optimiser steps per epoch.
+        stage_epochs: Epochs per stage in the stage-wise phase (LP, then FP, FA, LV).
+        joint_epochs: Epochs of joint training of all stages.
+        lr: Adam learning rate.
+        grad_clip: Gradient-norm clip.
+        fk_loss_weight: Weight of the forward-kinematics joint-position loss on FA's rotations.
+        acc_noise: Std of Gaussian noise added to normalised acceleration features.
+        ori_noise_rad: Std of random rotation noise (rad) applied to IMU orientations.
+        yaw_augment: Rotate each window about the vertical axis by a random angle.
+        val_windows: Validation windows (fixed draw) evaluated after every epoch.
+        seed: Seed of windows, noise and initialisation.
+    """
+
+    window_frames: int = 200
+    batch_size: int = 64
+    steps_per_epoch: int = 200
+    stage_epochs: int = 2
+    joint_epochs: int = 10
+    lr: float = 1e-3
+    grad_clip: float = 1.0
+    fk_loss_weight: float = 1.0
+    acc_noise: float = 0.05
+    ori_noise_rad: float = 0.02
+    yaw_augment: bool = True
+    val_windows: int = 256
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class KinematicsRunConfig:
+    """Everything a training run needs (written to ``config.json``)."""
+
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    hidden: int = 256
+    layers: int = 2
+    init_hidden: int = 256
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def net_config(self) -> KinematicsNetConfig:
+        return KinematicsNetConfig(n_inputs=self.features.n_features, hidden=self.hidden,
+                                   layers=self.layers, init_hidden=self.init_hidden)  # fmt: skip
+
+    def phases(self) -> list[tuple[str, int]]:
+        """``(phase, epochs)``: one phase per stage, then ``"joint"``."""
+        return [(s, self.train.stage_epochs) for s in STAGES] + [("joint", self.train.joint_epochs)]
+
+    def total_epochs(self) -> int:
+        return sum(n for _, n in self.phases())
+
+
+def run_config_from_dict(d: dict) -> KinematicsRunConfig:
+    """Inverse of ``asdict`` for :class:`KinematicsRunConfig` (unknown keys are errors)."""
+    d = dict(d)
+    feats = dict(d.pop("features", {}))
+    if "sites" in feats:
+        feats["sites"] = tuple(feats["sites"])
+    train = TrainConfig(**d.pop("train", {}))
+    return KinematicsRunConfig(features=FeatureConfig(**feats), train=train, **d)
+
+
+def git_hash() -> str:
+    """The repository's commit (``"unknown"`` outside a git checkout)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                             cwd=Path(__file__).resolve().parent, timeout=5)  # fmt: skip
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+# ---------------------------------------------------------------------------- augmentation
+def _yaw_matrices(angles: torch.Tensor) -> torch.Tensor:
+    c, s = torch.cos(angles), torch.sin(angles)
+    z, o = torch.zeros_like(c), torch.ones_like(c)
+    return torch.stack([c, -s, z, s, c, z, z, z, o], -1).view(*angles.shape, 3, 3)
+
+
+def rotate_batch(
+    x: torch.Tensor, y: dict[str, torch.Tensor], rot: torch.Tensor, n_sites: int
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Rotate raw features and targets of each window by a world rotation ``rot (B, 3, 3)``.
+
+    Accelerations, angular velocities, orientations, leaf/joint positions, 6D global rotations and
+    velocities all rotate; insole values do not.
+    """
+    b, t, _ = x.shape
+    r = rot[:, None]  # (B, 1, 3, 3)
+    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
+    acc = torch.einsum("btij,btsj->btsi", r, imu[..., 0:3])
+    gyr = torch.einsum("btij,btsj->btsi", r, imu[..., 3:6])
+    ori = (r[:, :, None] @ imu[..., 6:15].reshape(b, t, n_sites, 3, 3)).reshape(b, t, n_sites, 9)
+    x = torch.cat([torch.cat([acc, gyr, ori], -1).reshape(b, t, -1), x[..., 15 * n_sites :]], -1)
+    out = {}
+    for k, v in y.items():
+        if k in ("lp", "fp", "lv"):
+            out[k] = torch.einsum("btij,btnj->btni", r, v.reshape(b, t, -1, 3)).reshape(b, t, -1)
+        elif k == "fa":
+            cols = v.reshape(b, t, 24, 2, 3)
+            out[k] = torch.einsum("btij,btncj->btnci", r, cols).reshape(b, t, -1)
+        else:
+            out[k] = v
+    return x, out
+
+
+def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
+    """Root-relative joint positions from global 6D rotations.
+
+    Args:
+        rot6d: ``(B, T, 144)`` global rotations (6D: first two columns).
+        offsets: ``(B, 24, 3)`` rest offsets.
+
+    Returns:
+        ``(B, T, 72)`` positions with the root at the origin.
+    """
+    b, t, _ = rot6d.shape
+    d = rot6d.reshape(b, t, 24, 6)
+    a1, a2 = d[..., :3], d[..., 3:]
+    c0 = torch.nn.functional.normalize(a1, dim=-1)
+    c1 = torch.nn.functional.normalize(a2 - (c0 * a2).sum(-1, keepdim=True) * c0, dim=-1)
+    c2 = torch.cross(c0, c1, dim=-1)
+    mats = torch.stack([c0, c1, c2], dim=-1)  # (B, T, 24, 3, 3)
+    pos = [torch.zeros(b, t, 3, dtype=rot6d.dtype, device=rot6d.device)]
+    for j in range(1, 24):
+        p = int(sk.PARENTS[j])
+        pos.append(pos[p] + torch.einsum("btij,bj->bti", mats[:, :, p], offsets[:, j]))
+    return torch.stack(pos, dim=2).reshape(b, t, 72)
+
+
+# ---------------------------------------------------------------------------- training
+class Trainer:
+    """Owns the model, optimiser, data and the run folder."""
+
+    def __init__(self, cfg: KinematicsRunConfig, train_seqs: list[SequenceArrays],
+                 val_seqs: list[SequenceArrays], run_dir: str | os.PathLike) -> None:  # fmt: skip
+        if not train_seqs:
+            raise ValueError("no training sequences")
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        self.train_seqs = train_seqs
+        self.val_seqs = val_seqs or train_seqs
+        torch.manual_seed(cfg.train.seed)
+        self.model = KinematicsNet(cfg.net_config())
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
+        self.norm = Normalizer.fit(train_seqs)
+        self.rng = np.random.default_rng(cfg.train.seed)
+        self.epoch = 0
+        self.best_val = float("inf")
+        self.history: list[dict] = []
+        vx, vy = sample_windows(self.val_seqs, cfg.train.val_windows, cfg.train.window_frames,
+                                np.random.default_rng(cfg.train.seed + 1))  # fmt: skip
+        self.val_batch = (vx, vy)
+
+    # ------------------------------------------------------------------ batches
+    def _tensors(self, x: np.ndarray, y: dict[str, np.ndarray], augment: bool):
+        xt = torch.from_numpy(x)
+        yt = {k: torch.from_numpy(v) for k, v in y.items()}
+        n_sites = len(self.cfg.features.sites)
+        if augment and self.cfg.train.yaw_augment:
+            ang = torch.from_numpy(self.rng.uniform(-np.pi, np.pi, x.shape[0]).astype(np.float32))
+            xt, yt = rotate_batch(xt, yt, _yaw_matrices(ang), n_sites)
+        if augment and self.cfg.train.ori_noise_rad > 0:
+            noise = self.rng.normal(0, self.cfg.train.ori_noise_rad, (x.shape[0], n_sites, 3))
+            from grip.core.rotations import axis_angle_to_matrix
+
+            dr = torch.from_numpy(axis_angle_to_matrix(noise).astype(np.float32))  # (B, S, 3, 3)
+            b, t = xt.shape[:2]
+            imu = xt[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
+            ori = imu[..., 6:15].reshape(b, t, n_sites, 3, 3) @ dr[:, None]
+            imu = torch.cat([imu[..., :6], ori.reshape(b, t, n_sites, 9)], -1)
+            xt = torch.cat([imu.reshape(b, t, -1), xt[..., 15 * n_sites :]], -1)
+        xt = (xt - torch.from_numpy(self.norm.mean)) / torch.from_numpy(self.norm.std)
+        if augment and self.cfg.train.acc_noise > 0:
+            idx = torch.tensor([s * 15 + k for s in range(n_sites) for k in range(3)])
+            xt[..., idx] += self.cfg.train.acc_noise * torch.from_numpy(
+                self.rng.standard_normal((*xt.shape[:2], len(idx))).astype(np.float32))
+        return xt, yt
+
+    def losses(self, x: torch.Tensor, y: dict[str, torch.Tensor],
+               only: str | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
+        first = {k: y[k][:, 0] for k in TARGET_KEYS}
+        out, _ = self.model(x, self.model.initial_state(first), only=only)
+        losses = {k: ((out[k] - y[k]) ** 2).mean() for k in out}
+        if "fa" in out and self.cfg.train.fk_loss_weight > 0:
+            losses["fk"] = ((fk_positions(out["fa"], y["offsets"]) - y["fp"]) ** 2).mean()
+        return losses
+
+    def _total(self, losses: dict[str, torch.Tensor], phase: str) -> torch.Tensor:
+        if phase != "joint":
+            keys = [phase] + (["fk"] if phase == "fa" else [])
+        else:
+            keys = list(losses)
+        w = {"fk": self.cfg.train.fk_loss_weight}
+        return sum(w.get(k, 1.0) * losses[k] for k in keys)
+
+    def validate(self) -> dict[str, float]:
+        self.model.eval()
+        with torch.no_grad():
+            x, y = self._tensors(*self.val_batch, augment=False)
+            losses = self.losses(x, y)
+        self.model.train()
+        out = {k: float(v) for k, v in losses.items()}
+        out["total"] = float(sum(out.values()))
+        return out
+
+    # ------------------------------------------------------------------ loop
+    def phase_of(self, epoch: int) -> str:
+        n = 0
+        for phase, k in self.cfg.phases():
+            n += k
+            if epoch < n:
+                return phase
+        return "joint"
+
+    def fit(self, writer=None, progress: Callable[[dict], object] | None = None) -> list[dict]:
+        """Train until ``total_epochs``; checkpoints after each epoch (resumes from ``epoch``)."""
+        tc = self.cfg.train
+        self.model.train()
+        while self.epoch < self.cfg.total_epochs():
+            phase = self.phase_of(self.epoch)
+            sums: dict[str, float] = {}
+            for _ in range(tc.steps_per_epoch):
+                x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
+                xt, yt = self._tensors(x, y, augment=True)
+                losses = self.losses(xt, yt, only=None if phase == "joint" else phase)
+                total = self._total(losses, phase)
+                self.opt.zero_grad(set_to_none=True)
+                total.backward()
+                torch.nn.utils.clip_grad_norm_(self.model.parameters(), tc.grad_clip)
+                self.opt.step()
+                for k, v in losses.items():
+                    sums[k] = sums.get(k, 0.0) + v.item()
+                if progress is not None:
+                    progress({"phase": phase, "loss": total.item()})
+            val = self.validate()
+            record = {"epoch": self.epoch, "phase": phase,
+                      "train": {k: v / tc.steps_per_epoch for k, v in sums.items()}, "val": val}
+            self.history.append(record)
+            if writer is not None:
+                for k, v in record["train"].items():
+                    writer.add_scalar(f"train/{k}", v, self.epoch)
+                for k, v in val.items():
+                    writer.add_scalar(f"val/{k}", v, self.epoch)
+                writer.flush()
+            self.epoch += 1
+            if phase == "joint" and val["total"] < self.best_val:
+                self.best_val = val["total"]
+                self.save(self.run_dir / "best.pt")
+            self.save(self.run_dir / "last.pt")
+        return self.history
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict:
+        return {
+            "version": CHECKPOINT_VERSION,
+            "config": json.dumps(asdict(self.cfg)),
+            "model": self.model.state_dict(),
+            "optimizer": self.opt.state_dict(),
+            "norm_mean": torch.from_numpy(self.norm.mean),
+            "norm_std": torch.from_numpy(self.norm.std),
+            "epoch": self.epoch,
+            "best_val": self.best_val,
+            "rng": json.dumps(self.rng.bit_generator.state),
+            "history": json.dumps(self.history),
+            "git": git_hash(),
+        }
+
+    def save(self, path: Path) -> None:
+        buf = io.BytesIO()
+        torch.save(self.state(), buf)
+        atomic_write(path, lambda f: f.write(buf.getvalue()))
+
+    def load(self, path: Path) -> None:
+        ck = load_checkpoint(path)
+        if json.loads(ck["config"]) != json.loads(json.dumps(asdict(self.cfg))):
+            raise ValueError(f"{path}: checkpoint was trained with another configuration")
+        self.model.load_state_dict(ck["model"])
+        self.opt.load_state_dict(ck["optimizer"])
+        self.norm = Normalizer(ck["norm_mean"].numpy(), ck["norm_std"].numpy())
+        self.epoch = int(ck["epoch"])
+        self.best_val = float(ck["best_val"])
+        self.rng.bit_generator.state = json.loads(ck["rng"])
+        self.history = json.loads(ck["history"])
+
+
+def load_checkpoint(path: str | os.PathLike) -> dict:
+    """Load a checkpoint safely (``weights_only=True``); errors name the file."""
+    path = Path(path)
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise
+    except Exception as e:  # torch raises many types for corrupt or hostile files
+        raise ValueError(f"{path}: not a readable KinematicsNet checkpoint ({e})") from e
+    missing = [k for k in ("version", "config", "model", "norm_mean", "norm_std") if k not in ck]
+    if missing:
+        raise ValueError(f"{path}: checkpoint lacks {missing}")
+    return ck
+
+
+def write_run_config(run_dir: Path, cfg: KinematicsRunConfig, extra: dict) -> None:
+    """``config.json`` with the resolved settings, the git hash and ``extra`` (data, command)."""
+    payload = {"config": asdict(cfg), "git": git_hash(), **extra}
+    atomic_write_text(run_dir / "config.json", json.dumps(payload, indent=1))
+
+
+def replace_train(cfg: KinematicsRunConfig, **kw) -> KinematicsRunConfig:
+    """Copy of ``cfg`` with some :class:`TrainConfig` fields replaced."""
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, **kw))

@@ -1,0 +1,85 @@
+import numpy as np
+import pytest
+import torch
+
+from grip.core.body import build_body
+from grip.kinematics.dataset import sequence_arrays
+from grip.kinematics.features import FeatureConfig, targets
+from grip.kinematics.train import (
+    KinematicsRunConfig,
+    TrainConfig,
+    Trainer,
+    _yaw_matrices,
+    fk_positions,
+    load_checkpoint,
+    rotate_batch,
+)
+from prism_tools.synthetic import make_recording
+
+
+@pytest.fixture(scope="module")
+def seqs():
+    return [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (150, 120)]
+
+
+def _cfg(**kw):
+    train = TrainConfig(window_frames=40, batch_size=4, steps_per_epoch=3, stage_epochs=1,
+                        joint_epochs=1, val_windows=4, **kw)  # fmt: skip
+    return KinematicsRunConfig(hidden=16, layers=1, init_hidden=8, train=train)
+
+
+def test_fk_positions_match_the_targets():
+    rec = make_recording(30, seed=2)
+    t = targets(rec)
+    from grip.kinematics.features import recording_body
+
+    offs = torch.from_numpy(build_body(recording_body(rec)).offsets[None].astype(np.float32))
+    pos = fk_positions(torch.from_numpy(t.rot6d.reshape(1, 30, 144).astype(np.float32)), offs)
+    np.testing.assert_allclose(pos[0].numpy(), t.joint_pos.reshape(30, 72), atol=1e-4)
+
+
+def test_yaw_rotation_keeps_features_and_targets_consistent(seqs):
+    s = seqs[0]
+    rot = _yaw_matrices(torch.tensor([0.7]))
+    x = torch.from_numpy(s.x[None])
+    y = {k: torch.from_numpy(v[None]) for k, v in s.y.items()}
+    xr, yr = rotate_batch(x, y, rot, 4)
+    # Insoles untouched, orientation rotated, FK of rotated rotations = rotated positions.
+    torch.testing.assert_close(xr[..., 60:], x[..., 60:])
+    ori = x[0, :, 6:15].reshape(-1, 3, 3)
+    torch.testing.assert_close(xr[0, :, 6:15].reshape(-1, 3, 3), rot[0] @ ori)
+    offs = torch.from_numpy(s.offsets[None])
+    torch.testing.assert_close(fk_positions(yr["fa"], offs), yr["fp"], atol=1e-4, rtol=0)
+
+
+def test_training_runs_checkpoints_and_resumes(seqs, tmp_path):
+    cfg = _cfg()
+    tr = Trainer(cfg, seqs, seqs, tmp_path)
+    hist = tr.fit()
+    assert len(hist) == cfg.total_epochs() == 5
+    assert [h["phase"] for h in hist] == ["lp", "fp", "fa", "lv", "joint"]
+    ck = load_checkpoint(tmp_path / "last.pt")
+    assert int(ck["epoch"]) == 5 and (tmp_path / "best.pt").exists()
+    # Resume: a new trainer continues from epoch 5 with the same weights.
+    tr2 = Trainer(cfg, seqs, seqs, tmp_path)
+    tr2.load(tmp_path / "last.pt")
+    assert tr2.epoch == 5
+    for a, b in zip(tr.model.parameters(), tr2.model.parameters(), strict=True):
+        torch.testing.assert_close(a, b)
+    with pytest.raises(ValueError, match="another configuration"):
+        Trainer(_cfg(lr=0.5), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
+
+
+def test_training_lowers_the_validation_loss(seqs, tmp_path):
+    cfg = _cfg()
+    tr = Trainer(cfg, seqs, seqs, tmp_path)
+    before = tr.validate()["total"]
+    tr.fit()
+    assert tr.validate()["total"] < before
+
+
+def test_corrupt_checkpoint_is_a_clean_error(tmp_path):
+    bad = tmp_path / "x.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match=r"x\.pt"):
+        load_checkpoint(bad)
