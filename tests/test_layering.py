@@ -16,6 +16,9 @@ FORBIDDEN = {
     "grip.core": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.core.mjcf": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.motion": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
+    "grip.config": ("numpy", "torch", "mujoco", "gymnasium", "stable_baselines3"),
+    "grip.kinematics.features": ("torch", "mujoco", "envs", "policies"),
+    "grip.kinematics": ("mujoco", "envs", "policies", "gymnasium"),
     "grip.cli.main": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
 }  # fmt: skip
 

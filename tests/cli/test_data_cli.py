@@ -96,3 +96,21 @@ def test_info_scans_a_folder_of_prism_pickles(tmp_path: Path) -> None:
     info = json.loads(js.read_text())
     assert info["source"] == "scan" and info["recordings"] == 2 and info["frames"] == 200
     assert len(info["unreadable"]) == 1 and "take009.pkl" in info["unreadable"][0]["file"]
+
+
+def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    args = ["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+            "--set", "hidden=16", "--set", "layers=1", "--set", "init_hidden=8",
+            "--set", "train.window_frames=30", "--set", "train.batch_size=2",
+            "--set", "train.steps_per_epoch=2", "--set", "train.stage_epochs=0",
+            "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"]  # fmt: skip
+    assert main(args) == 0
+    cfg = json.loads((run / "config.json").read_text())
+    assert cfg["config"]["hidden"] == 16 and "git" in cfg
+    assert (run / "last.pt").exists() and list((run / "tb").iterdir())
+    assert main(args) == 0
+    assert "resuming" in capsys.readouterr().out
+    bad = [*args[:-2], "--set", "train.lrr=1"]
+    assert main(bad) == 2
+    assert "lrr" in capsys.readouterr().err

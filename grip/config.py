@@ -1,0 +1,90 @@
+"""Config files: TOML overrides on top of frozen dataclass defaults (stdlib only).
+
+``load_config(path, cls, overrides)`` reads a TOML file whose tables mirror the dataclass
+nesting, applies dotted ``key=value`` overrides (``train.lr=3e-4``), and returns a new instance.
+Unknown keys are errors that name the file and the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+import typing
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+
+class ConfigError(ValueError):
+    """A config file or override is invalid; the message names the file/key."""
+
+
+def _coerce(value: Any, hint: Any, where: str) -> Any:
+    origin = typing.get_origin(hint)
+    if origin is tuple or hint is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        return tuple(value)
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if hint in (int, float, bool, str) and not isinstance(value, hint):
+        raise ConfigError(f"{where}: expected {hint.__name__}, got {value!r}")
+    return value
+
+
+def apply_dict(obj: Any, data: dict, where: str) -> Any:
+    """A copy of dataclass ``obj`` with the values of nested dict ``data``."""
+    hints = typing.get_type_hints(type(obj))
+    fields = {f.name: f for f in dataclasses.fields(obj)}
+    changes = {}
+    for key, value in data.items():
+        if key not in fields:
+            raise ConfigError(f"{where}: unknown key {key!r} (known: {', '.join(fields)})")
+        current = getattr(obj, key)
+        if dataclasses.is_dataclass(current):
+            if not isinstance(value, dict):
+                raise ConfigError(f"{where}.{key}: expected a table")
+            changes[key] = apply_dict(current, value, f"{where}.{key}")
+        else:
+            changes[key] = _coerce(value, hints[key], f"{where}.{key}")
+    try:
+        return dataclasses.replace(obj, **changes)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{where}: {e}") from e
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``"train.lr=3e-4"`` -> (["train", "lr"], 0.0003); the value is parsed as TOML."""
+    if "=" not in text:
+        raise ConfigError(f"override {text!r}: expected KEY=VALUE")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw  # bare strings
+    return key.strip().split("."), value
+
+
+def load_config(path: str | os.PathLike | None, default: Any,
+                overrides: Sequence[str] = ()) -> Any:  # fmt: skip
+    """``default`` updated by the TOML file at ``path`` (if any) and dotted overrides."""
+    cfg = default
+    if path is not None:
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text())
+        except OSError as e:
+            raise ConfigError(f"{p}: cannot read config ({e})") from e
+        except tomllib.TOMLDecodeError as e:
+            raise ConfigError(f"{p}: invalid TOML ({e})") from e
+        cfg = apply_dict(cfg, data, str(p))
+    for text in overrides:
+        keys, value = parse_override(text)
+        nested: dict = {}
+        cur = nested
+        for k in keys[:-1]:
+            cur = cur.setdefault(k, {})
+        cur[keys[-1]] = value
+        cfg = apply_dict(cfg, nested, f"--set {text}")
+    return cfg
