@@ -33,3 +33,14 @@ def test_offline_batched_equals_single_and_streaming(ckpt):
     np.testing.assert_allclose(fp, both[0].joint_pos, atol=1e-5)
     sp = recs[0].smpl_params
     np.testing.assert_allclose(both[0].root_pos[0], sp.trans[0] + sp.root_offset, atol=1e-6)
+
+
+def test_evaluation_rows_and_table(ckpt, tmp_path):
+    from grip.kinematics.evaluate import aggregate, evaluate_recordings, markdown_table
+
+    est = KinematicsEstimator.from_checkpoint(ckpt)
+    rows = evaluate_recordings(est, [make_recording(130, seed=3)], segment_frames=50)
+    assert [r["frames"] for r in rows] == [50, 50, 30]
+    agg = aggregate(rows)
+    assert agg["overall"]["frames"] == 130 and agg["overall"]["PEL_MPJPE_mm"] > 0
+    assert "**all**" in markdown_table(agg)
