@@ -31,6 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="override one setting, e.g. --set train.lr=3e-4 (repeatable)")
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: all cores)")
     p.set_defaults(func=cmd_train)
+    add_eval_parser(sub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -92,4 +93,87 @@ def cmd_train(args: argparse.Namespace) -> int:
     if trainer.history:
         print(f"final validation losses: {trainer.history[-1]['val']}")
     print(f"checkpoints: {out / 'last.pt'} and {out / 'best.pt'}")
+    return 0
+
+
+SHIPPED_KIN = "grip/assets/kinematics_default.pt"
+
+
+def add_eval_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "eval-kin",
+        help="evaluate KinematicsNet on the test split of a dataset",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Run KinematicsNet on the 500-frame segments of a dataset's test split (each\n"
+            "initialised from its first frame's ground truth) and report root-relative MPJPE,\n"
+            "MPJRE, leaf-velocity error and the error of the integrated root trajectory, per\n"
+            "motion category, as a Markdown table, a plot and (with --json) the overall figures\n"
+            "under PEL_MPJPE_mm, MPJRE_deg, leaf_vel_err_mps, frames."
+        ),
+        epilog="example: grip eval-kin --model runs/kin/best.pt --data data/prism_synth "
+        "--json kin.json --out runs/kin/eval",
+    )
+    p.add_argument("--model", type=Path, default=None,
+                   help=f"checkpoint (default: the shipped {SHIPPED_KIN})")  # fmt: skip
+    p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
+    p.add_argument("--split", default="test", choices=("train", "test"), help="split to use")
+    p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
+    p.add_argument("--out", type=Path, default=None, help="folder for the table and the plot")
+    p.add_argument("--segment-frames", type=int, default=500, help="segment length (frames)")
+    p.set_defaults(func=cmd_eval)
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    import json
+
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+    from grip.core.atomic import atomic_write_text
+    from grip.kinematics.evaluate import (
+        aggregate,
+        evaluate_recordings,
+        markdown_table,
+        plot_categories,
+    )
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.io import load_recording
+
+    model = args.model or REPO_ROOT / SHIPPED_KIN
+    if not Path(model).is_file():
+        raise CliError(f"{model}: no such checkpoint (train one with 'grip train-kin' and pass "
+                       "--model RUN/best.pt)")  # fmt: skip
+    try:
+        est = KinematicsEstimator.from_checkpoint(model)
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    split_path = args.data / "split.json"
+    try:
+        ids = json.loads(split_path.read_text())[args.split]
+        recs = [load_recording(args.data / "sequences" / f"{i}.npz") for i in ids]
+    except (OSError, ValueError, KeyError) as e:
+        raise CliError(f"{split_path}: {e}") from e
+    if not recs:
+        raise CliError(f"{split_path}: the {args.split} split is empty")
+    with tqdm(total=len(recs), unit="seq", desc="evaluating") as bar:
+        rows = evaluate_recordings(est, recs, args.segment_frames)
+        bar.update(len(recs))
+    agg = aggregate(rows)
+    table = markdown_table(agg)
+    print(table)
+    overall = agg["overall"]
+    figures = {k: overall[k] for k in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps",
+                                       "trans_err_m", "frames", "segments")}  # fmt: skip
+    figures["model"] = str(model)
+    if args.json:
+        atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"]},
+                                                indent=1))  # fmt: skip
+        print(f"wrote {args.json}")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out / "table.md", table + "\n")
+        plot_categories(agg, args.out / "categories.png")
+        print(f"wrote {args.out / 'table.md'} and {args.out / 'categories.png'}")
     return 0

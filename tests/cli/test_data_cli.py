@@ -114,3 +114,21 @@ def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None
     bad = [*args[:-2], "--set", "train.lrr=1"]
     assert main(bad) == 2
     assert "lrr" in capsys.readouterr().err
+
+
+def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    main(["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+          "--set", "hidden=16", "--set", "layers=1", "--set", "init_hidden=8",
+          "--set", "train.window_frames=30", "--set", "train.batch_size=2",
+          "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
+          "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"])  # fmt: skip
+    js = tmp_path / "kin.json"
+    assert main(["eval-kin", "--model", str(run / "last.pt"), "--data", str(built),
+                 "--json", str(js), "--out", str(tmp_path / "ev")]) == 0  # fmt: skip
+    fig = json.loads(js.read_text())
+    for key in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "frames"):
+        assert key in fig
+    assert fig["frames"] > 0 and (tmp_path / "ev" / "categories.png").exists()
+    assert main(["eval-kin", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    assert "none.pt" in capsys.readouterr().err
