@@ -1,0 +1,98 @@
+"""KinematicsNet speed: streaming latency (batch 1, one thread) and offline throughput.
+
+Each figure is printed with a reference measured in the same run on the same thread count: a
+bare ``torch.nn.LSTM`` of the same width and depth (one stage's recurrent core). The ratio is
+what to compare across machines; the absolute numbers depend on the CPU and its load.
+
+    python benchmarks/kinematics_speed.py [--model CKPT] [--hidden 256 --layers 2] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import torch
+
+from grip.kinematics.model import KinematicsNet, KinematicsNetConfig
+
+
+def _time(fn, repeats: int) -> float:
+    fn()  # warm-up
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    return (time.perf_counter() - t0) / repeats
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--model", default=None, help="checkpoint (else a random net of the sizes)")
+    ap.add_argument("--hidden", type=int, default=256)
+    ap.add_argument("--layers", type=int, default=2)
+    ap.add_argument("--inputs", type=int, default=70)
+    ap.add_argument("--frames", type=int, default=2000, help="streamed frames")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    if args.model:
+        from grip.kinematics.inference import KinematicsEstimator
+
+        net = KinematicsEstimator.from_checkpoint(args.model).model
+        cfg = net.cfg
+    else:
+        cfg = KinematicsNetConfig(n_inputs=args.inputs, hidden=args.hidden, layers=args.layers)
+        net = KinematicsNet(cfg).eval()
+    first = {k: torch.zeros(1, s.head.out_features) for k, s in net.stages.items()}
+    ref = torch.nn.LSTM(cfg.hidden, cfg.hidden, cfg.layers, batch_first=True).eval()
+
+    x1 = torch.randn(1, 1, cfg.n_inputs)
+    r1 = torch.randn(1, 1, cfg.hidden)
+    prev = torch.backends.mkldnn.set_flags(False)
+    with torch.no_grad():
+        state = net.initial_state(first)
+
+        def net_step():
+            nonlocal state
+            _, state = net(x1, state)
+
+        ref_state = None
+
+        def ref_step():
+            nonlocal ref_state
+            _, ref_state = ref(r1, ref_state)
+
+        n = args.frames
+        stream_s = _time(net_step, n)
+        ref_stream_s = _time(ref_step, n)
+    torch.backends.mkldnn.set_flags(prev[0])
+
+    xb = torch.randn(32, 500, cfg.n_inputs)
+    rb = torch.randn(32, 500, cfg.hidden)
+    with torch.no_grad():
+        off_s = _time(lambda: net(xb, net.initial_state(
+            {k: v.expand(32, -1) for k, v in first.items()})), 3)  # fmt: skip
+        ref_off_s = _time(lambda: ref(rb), 3)
+    frames = 32 * 500
+    res = {
+        "stream_ms_per_frame": stream_s * 1e3,
+        "ref_lstm_stream_ms_per_frame": ref_stream_s * 1e3,
+        "stream_ratio_to_ref": stream_s / ref_stream_s,
+        "offline_frames_per_s": frames / off_s,
+        "ref_lstm_offline_frames_per_s": frames / ref_off_s,
+        "offline_ratio_to_ref": (frames / off_s) / (frames / ref_off_s),
+        "hidden": cfg.hidden,
+        "layers": cfg.layers,
+        "parameters": int(sum(p.numel() for p in net.parameters())),
+        "threads": 1,
+    }
+    for k, v in res.items():
+        print(f"{k:32s} {v:.4g}" if isinstance(v, float) else f"{k:32s} {v}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(res, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
