@@ -1064,3 +1064,19 @@ def recording_as_float32(rec: Recording) -> Recording:
             None if rec.insole_combined is None else _float32_fields(rec.insole_combined)
         ),
     )
+
+
+def contacts_from_cells(cells: np.ndarray, threshold: float) -> np.ndarray:
+    """PRISM's insole contact rule.
+
+    Args:
+        cells: ``(..., 16)`` cell forces (any unit).
+        threshold: Summed force above which a contact is on, same unit as ``cells``.
+
+    Returns:
+        ``(..., 2)`` bool ``[front, back]``: cells 8-15 sum above ``threshold``, cells 0-3 likewise.
+    """
+    cells = np.asarray(cells)
+    front = cells[..., list(INSOLE_FRONT_CELLS)].sum(axis=-1) > threshold
+    back = cells[..., list(INSOLE_BACK_CELLS)].sum(axis=-1) > threshold
+    return np.stack([front, back], axis=-1)

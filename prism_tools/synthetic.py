@@ -39,9 +39,10 @@ from prism_tools.schema import (
     Slam,
     SmplParams,
     SubjectInfo,
+    contacts_from_cells,
 )
 
-__all__ = ["CONTACT_THRESHOLD_BW", "INSOLE_CELL_XY_M", "contacts_from_cells", "make_recording"]
+__all__ = ["CONTACT_THRESHOLD_BW", "INSOLE_CELL_XY_M", "make_recording"]
 
 CONTACT_THRESHOLD_BW = 0.02
 """Summed cell force above which a contact (front or back) is on, body weights."""
@@ -76,21 +77,6 @@ _PART_OFFSET_M = {
     "R_Knee": (0.1, 0.05, -0.45),
 }
 _FOOT_SIDE = {"L_Foot": -1.0, "R_Foot": 1.0}  # x side; also the sign of the gait phase
-
-
-def contacts_from_cells(forces: np.ndarray, threshold: float = CONTACT_THRESHOLD_BW) -> np.ndarray:
-    """PRISM's contact rule applied to insole cells.
-
-    Args:
-        forces: ``(F, 16)`` cell values, body weights.
-        threshold: Summed force above which a contact is on, body weights.
-
-    Returns:
-        ``(F, 2)`` bool ``[front, back]``: cells 8-15 sum above ``threshold``, cells 0-3 likewise.
-    """
-    front = forces[:, list(INSOLE_FRONT_CELLS)].sum(axis=1) > threshold
-    back = forces[:, list(INSOLE_BACK_CELLS)].sum(axis=1) > threshold
-    return np.stack([front, back], axis=1)
 
 
 def _smooth(rng: np.random.Generator, t: np.ndarray, dims: int, max_hz: float = 1.5) -> np.ndarray:
@@ -245,7 +231,7 @@ def make_recording(
         force_world = np.zeros((n_frames, 3))
         force_world[:, 2] = total
         insole[foot] = InsoleStream(
-            contacts=contacts_from_cells(forces),
+            contacts=contacts_from_cells(forces, CONTACT_THRESHOLD_BW),
             force=total[:, None],
             forces=forces,
             CoP=cop,

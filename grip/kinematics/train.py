@@ -22,6 +22,7 @@ import torch
 
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write, atomic_write_text
+from grip.core.rotations import axis_angle_to_matrix
 from grip.kinematics.dataset import (
     TARGET_KEYS,
     Normalizer,
@@ -203,8 +204,6 @@ class Trainer:
             xt, yt = rotate_batch(xt, yt, _yaw_matrices(ang), n_sites)
         if augment and self.cfg.train.ori_noise_rad > 0:
             noise = self.rng.normal(0, self.cfg.train.ori_noise_rad, (x.shape[0], n_sites, 3))
-            from grip.core.rotations import axis_angle_to_matrix
-
             dr = torch.from_numpy(axis_angle_to_matrix(noise).astype(np.float32))  # (B, S, 3, 3)
             b, t = xt.shape[:2]
             imu = xt[..., : 15 * n_sites].reshape(b, t, n_sites, 15)

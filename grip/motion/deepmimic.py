@@ -20,6 +20,7 @@ centre of its front (+x) bottom (-y) edge (the toe tip on the sole). Other shape
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,17 @@ class DeepMimicSkeleton:
         return 1 + sum(_DOF_SIZE[t] for t in self.types)
 
 
+
+def _read_json(path: str | os.PathLike) -> object:
+    """Parse a JSON file; failures become :class:`MotionImportError` naming the file."""
+    path_s = str(path)
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except OSError as exc:
+        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
+    except json.JSONDecodeError as exc:
+        raise MotionImportError(path_s, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+
 def _end_site(
     shape: str, attach: np.ndarray, params: np.ndarray, joint_offset: np.ndarray
 ) -> np.ndarray | None:
@@ -143,12 +155,7 @@ def load_deepmimic_skeleton(path: str | Path) -> DeepMimicSkeleton:
             (not supported), parents out of order.
     """
     path_s = str(path)
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8-sig"))
-    except OSError as exc:
-        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
-    except json.JSONDecodeError as exc:
-        raise MotionImportError(path_s, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    data = _read_json(path)
     try:
         raw_joints = data["Skeleton"]["Joints"]
     except (KeyError, TypeError):
@@ -249,12 +256,7 @@ def load_deepmimic(
         skel = load_deepmimic_skeleton(default) if default.is_file() else humanoid3d_skeleton()
     else:
         skel = load_deepmimic_skeleton(skeleton_path)
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8-sig"))
-    except OSError as exc:
-        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
-    except json.JSONDecodeError as exc:
-        raise MotionImportError(path_s, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    data = _read_json(path)
     arr = _load_frames(path_s, data, skel.frame_size)
     n_frames = arr.shape[0]
     dt = arr[:, 0]

@@ -14,7 +14,7 @@ from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
 from grip.core.body import BodyModel, BodyParams, build_body
 from grip.core.fk import forward_kinematics
-from grip.core.rotations import quat_normalize, quat_to_matrix
+from grip.core.rotations import quat_to_matrix
 
 _FORMAT_VERSION = 1
 
@@ -141,11 +141,6 @@ def check_motion_arrays(fps: float, root_pos: np.ndarray, local_quat: np.ndarray
     norms = np.linalg.norm(local_quat, axis=-1)
     if np.any(np.abs(norms - 1.0) > 1e-3):
         raise MotionError(f"{where}: local_quat rows are not unit quaternions")
-
-
-def normalized_quats(q: np.ndarray) -> np.ndarray:
-    """Convenience re-export: unit quaternions with w >= 0."""
-    return quat_normalize(q)
 
 
 def atomic_save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:

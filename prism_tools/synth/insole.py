@@ -32,6 +32,7 @@ from grip.core import skeleton as sk
 from grip.core.body import GRAVITY, BodyModel
 from grip.core.fk import body_points, segment_com
 from grip.core.metrics import net_external_wrench
+from prism_tools.schema import contacts_from_cells
 from prism_tools.synth.config import InsoleSynthConfig, NoiseConfig
 from prism_tools.synth.imu import central_velocity, second_difference
 from prism_tools.synth.noise import apply_drops, corrupt_insole_cells, drop_mask
@@ -476,9 +477,7 @@ def insole_readings_from_cells(
     cop_w = np.where(
         loaded[..., None], np.einsum("tfp,tfpk->tfk", f, cell_pos_world) / safe, origin_world
     )
-    front = f[..., list(sk.INSOLE_FRONT_CELLS)].sum(-1) > cfg.contact_threshold_n
-    back = f[..., list(sk.INSOLE_BACK_CELLS)].sum(-1) > cfg.contact_threshold_n
-    contacts = np.stack([front, back], axis=-1)
+    contacts = contacts_from_cells(f, cfg.contact_threshold_n)
     pressure = f / body.insole_area_cm2
     if dropped is not None and dropped.any():
         f, foot, cop_uv, cop_w, contacts, pressure = (

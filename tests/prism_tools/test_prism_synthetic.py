@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from prism_tools import validate
-from prism_tools.schema import FEET, GRAVITY
-from prism_tools.synthetic import contacts_from_cells, make_recording
+from prism_tools.schema import FEET, GRAVITY, contacts_from_cells
+from prism_tools.synthetic import CONTACT_THRESHOLD_BW, make_recording
 
 
 def test_deterministic_and_seed_dependent() -> None:
@@ -28,7 +28,8 @@ def test_self_consistent() -> None:
     for foot in FEET:
         s = rec.insole[foot]
         np.testing.assert_allclose(s.forces.sum(axis=1), s.force[:, 0], atol=1e-12)
-        np.testing.assert_array_equal(s.contacts, contacts_from_cells(s.forces))
+        expected = contacts_from_cells(s.forces, CONTACT_THRESHOLD_BW)
+        np.testing.assert_array_equal(s.contacts, expected)
         np.testing.assert_allclose(s.force_world[:, 2], s.force[:, 0])
         assert not s.contacts.all() and s.contacts.any()  # the walk has swing phases
         # Accelerometer (specific force, sensor frame) back in the world equals acc + g.
