@@ -78,6 +78,8 @@ class ClipResult:
     sequences: list[str] = field(default_factory=list)
     sequence_frames: list[int] = field(default_factory=list)
     seconds: float = 0.0
+    synth_frames: int = 0  # frames synthesised over all variants (before chunking)
+    zmp_outside_frames: int = 0  # of those, frames whose ZMP lies > 3 cm outside the insole cells
     error: str = ""
 
 
@@ -134,6 +136,8 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
                     motion.save(out / "motions" / f"{name}.npz")
             motion = motions[k]
             rec = recording_from_motion(motion, SynthConfig(), seed=seed + k, noise=noisy)
+            res.synth_frames += rec.n_frames
+            res.zmp_outside_frames += int(rec.extras.get("insole_zmp_outside_frames", 0))
             if cfg.float32:
                 rec = recording_as_float32(rec)
             chunks = chunk_recording(rec, cfg.chunk_frames, min_length=cfg.min_chunk_frames)

@@ -63,6 +63,9 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         entry["frames"] += int(sum(c.get("sequence_frames", [])))
         n_rec += len(c.get("sequences", []))
         frames += int(sum(c.get("sequence_frames", [])))
+    done = [c for c in manifest.get("clips", []) if c.get("status") == "done"]
+    synth = sum(int(c.get("synth_frames", 0)) for c in done)
+    outside = sum(int(c.get("zmp_outside_frames", 0)) for c in done)
     summary = {
         "source": "manifest",
         "root": str(root),
@@ -74,6 +77,7 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         "categories": dict(sorted(cats.items())),
         "clips_failed": failed,
         "config": manifest.get("config", {}),
+        "insole_zmp_outside_fraction": outside / synth if synth else None,
         "size_bytes": folder_size_bytes(root),
     }
     split_path = root / "split.json"
@@ -134,6 +138,11 @@ def format_summary(s: dict) -> str:
         f"- recordings: {s['recordings']}",
         f"- frames: {s['frames']} ({s['hours']:.2f} h at {s['fps'] or '?'} Hz)",
         f"- size on disk: {s['size_bytes'] / 1e6:.1f} MB",
+    ]  # fmt: skip
+    if s.get("insole_zmp_outside_fraction") is not None:
+        lines.append(f"- synthesised frames whose ZMP lies > 3 cm outside the insole cells: "
+                     f"{100 * s['insole_zmp_outside_fraction']:.1f} %")  # fmt: skip
+    lines += [
         "",
         "| category | clips | recordings | frames |" if "clips" in s
         else "| category | recordings | frames |",

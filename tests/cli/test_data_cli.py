@@ -58,6 +58,7 @@ def test_info_json_and_plot(built: Path, tmp_path: Path) -> None:
     info = json.loads(js.read_text())
     assert info["clips"] == 3 and info["recordings"] >= 3 and info["frames"] > 100
     assert sum(c["frames"] for c in info["categories"].values()) == info["frames"]
+    assert 0.0 <= info["insole_zmp_outside_fraction"] <= 1.0
     seq = sorted((built / "sequences").glob("*.npz"))[0]
     png = tmp_path / "rec.png"
     assert main(["data", "plot", str(seq), "--out", str(png)]) == 0
