@@ -21,29 +21,51 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
         epilog="example: grip train-kin --data data/prism_synth --out runs/kin\n"
         "         grip train-kin --data data/prism_synth --out runs/kin_small "
-        "--set hidden=128 --set train.joint_epochs=5",
+        "--set hidden=128 --set train.joint_epochs=5\n"
+        "         grip train-kin --data data/prism_synth --out runs/sweep --sweep "
+        "--config configs/kinematics/sweep.toml",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
-    p.add_argument("--config", type=Path, default=None,
-                   help="TOML overrides (default: configs/kinematics/default.toml if present)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one setting, e.g. --set train.lr=3e-4 (repeatable)")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="TOML overrides (default: configs/kinematics/default.toml if present)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one setting, e.g. --set train.lr=3e-4 (repeatable)",
+    )
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: all cores)")
+    p.add_argument(
+        "--sweep",
+        action="store_true",
+        help="sensor sweep (GRIP Table 3): train one run per IMU count, with and "
+        "without insoles, in OUT/imu<N>_press|nopress (finished runs are skipped, "
+        "interrupted ones resume); evaluate with 'grip eval-kin --sweep OUT'",
+    )
+    p.add_argument(
+        "--imus",
+        default="2,3,4,6",
+        metavar="N,N,...",
+        help="IMU counts of --sweep (feet, +left wrist, +right wrist, +pelvis, +head; "
+        "default 2,3,4,6)",
+    )
     p.set_defaults(func=cmd_train)
     add_eval_parser(sub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
-    from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
 
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT
     from grip.config import ConfigError, load_config
-    from grip.kinematics.dataset import load_split_sequences
-    from grip.kinematics.train import KinematicsRunConfig, Trainer, write_run_config
+    from grip.kinematics.train import KinematicsRunConfig
 
     cfg_path = args.config
     if cfg_path is None:
@@ -55,30 +77,59 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     if args.threads:
         torch.set_num_threads(args.threads)
+    if not args.sweep:
+        return _train_one(args.data, args.out, cfg)
+    import dataclasses
+
+    from grip.kinematics.sweep import parse_counts, sensor_sets
+
+    try:
+        sets = sensor_sets(parse_counts(args.imus))
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    for i, s in enumerate(sets):
+        run_cfg = dataclasses.replace(
+            cfg, features=dataclasses.replace(cfg.features, sites=s.sites, insoles=s.insoles)
+        )
+        print(f"[{i + 1}/{len(sets)}] {s.name}: {', '.join(s.sites)}"
+              f"{' + insoles' if s.insoles else ''}")  # fmt: skip
+        _train_one(args.data, args.out / s.name, run_cfg)
+    print(f"sweep finished; evaluate with: grip eval-kin --sweep {args.out} --data {args.data}")
+    return 0
+
+
+def _train_one(data: Path, out: Path, cfg) -> int:
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.kinematics.dataset import load_split_sequences
+    from grip.kinematics.train import Trainer, write_run_config
+
+    last = out / "last.pt"
     t0 = time.perf_counter()
     try:
-        train = load_split_sequences(args.data, "train", cfg.features)
-        val = load_split_sequences(args.data, "test", cfg.features)
+        train = load_split_sequences(data, "train", cfg.features)
+        val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e)) from e
     n_frames = sum(len(s.x) for s in train)
     print(f"loaded {len(train)} train / {len(val)} test sequences ({n_frames} train frames) "
           f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
-    out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, train, val, out)
-    last = out / "last.pt"
     if last.exists():
         try:
             trainer.load(last)
         except ValueError as e:
             raise CliError(f"{e}; use another --out or the same settings") from e
         print(f"resuming {last} at epoch {trainer.epoch}/{cfg.total_epochs()}")
-    write_run_config(out, cfg, {"data": str(args.data.resolve()), "train_frames": n_frames})
+    write_run_config(out, cfg, {"data": str(data.resolve()), "train_frames": n_frames})
     total = cfg.total_epochs() * cfg.train.steps_per_epoch
     done = trainer.epoch * cfg.train.steps_per_epoch
     with SummaryWriter(str(out / "tb")) as writer, tqdm(total=total, initial=done,
                                                           unit="step") as bar:  # fmt: skip
+
         def progress(info: dict) -> None:
             bar.set_postfix(phase=info["phase"], loss=f"{info['loss']:.4f}")
             bar.update(1)
@@ -121,6 +172,14 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     p.add_argument("--out", type=Path, default=None, help="folder for the table and the plot")
     p.add_argument("--segment-frames", type=int, default=500, help="segment length (frames)")
+    p.add_argument(
+        "--sweep",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="evaluate every run of a sensor sweep folder ('grip train-kin --sweep') "
+        "and print a table like GRIP Table 3 instead",
+    )
     p.set_defaults(func=cmd_eval)
 
 
@@ -139,8 +198,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
         plot_categories,
     )
     from grip.kinematics.inference import KinematicsEstimator
-    from prism_tools.io import load_recording
 
+    if args.sweep is not None:
+        if args.model is not None:
+            raise CliError("give --model or --sweep, not both")
+        return _eval_sweep(args)
     model = args.model or REPO_ROOT / SHIPPED_KIN
     if not Path(model).is_file():
         raise CliError(f"{model}: no such checkpoint (train one with 'grip train-kin' and pass "
@@ -149,14 +211,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         est = KinematicsEstimator.from_checkpoint(model)
     except ValueError as e:
         raise CliError(str(e)) from e
-    split_path = args.data / "split.json"
-    try:
-        ids = json.loads(split_path.read_text())[args.split]
-        recs = [load_recording(args.data / "sequences" / f"{i}.npz") for i in ids]
-    except (OSError, ValueError, KeyError) as e:
-        raise CliError(f"{split_path}: {e}") from e
-    if not recs:
-        raise CliError(f"{split_path}: the {args.split} split is empty")
+    recs = _load_split(args.data, args.split)
     with tqdm(total=len(recs), unit="seq", desc="evaluating") as bar:
         rows = evaluate_recordings(est, recs, args.segment_frames)
         bar.update(len(recs))
@@ -165,7 +220,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     print(table)
     overall = agg["overall"]
     figures = {k: overall[k] for k in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps",
-                                       "trans_err_m", "frames", "segments")}  # fmt: skip
+                                       "trans_err_m", "MPJPE_mm", "PA_MPJPE_mm", "frames",
+                                       "segments")}  # fmt: skip
     figures["model"] = str(model)
     if args.json:
         atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"]},
@@ -176,4 +232,62 @@ def cmd_eval(args: argparse.Namespace) -> int:
         atomic_write_text(args.out / "table.md", table + "\n")
         plot_categories(agg, args.out / "categories.png")
         print(f"wrote {args.out / 'table.md'} and {args.out / 'categories.png'}")
+    return 0
+
+
+def _load_split(data: Path, split: str) -> list:
+    import json
+
+    from grip.cli.main import CliError
+    from prism_tools.io import load_recording
+
+    split_path = data / "split.json"
+    try:
+        ids = json.loads(split_path.read_text())[split]
+        recs = [load_recording(data / "sequences" / f"{i}.npz") for i in ids]
+    except (OSError, ValueError, KeyError) as e:
+        raise CliError(f"{split_path}: {e}") from e
+    if not recs:
+        raise CliError(f"{split_path}: the {split} split is empty")
+    return recs
+
+
+def _eval_sweep(args: argparse.Namespace) -> int:
+    import json
+
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.core.atomic import atomic_write_text
+    from grip.kinematics.evaluate import aggregate, evaluate_recordings
+    from grip.kinematics.inference import KinematicsEstimator
+    from grip.kinematics.sweep import find_runs, sweep_table
+
+    runs = find_runs(args.sweep)
+    if not runs:
+        raise CliError(f"{args.sweep}: no sweep runs (imu<N>_press|nopress/best.pt); train them "
+                       "with 'grip train-kin --sweep --out DIR'")  # fmt: skip
+    recs = _load_split(args.data, args.split)
+    results = []
+    for s, ck in tqdm(runs, unit="config", desc="sweep"):
+        try:
+            est = KinematicsEstimator.from_checkpoint(ck)
+        except ValueError as e:
+            raise CliError(str(e)) from e
+        if tuple(est.cfg.features.sites) != s.sites or est.cfg.features.insoles != s.insoles:
+            raise CliError(f"{ck}: trained on {est.cfg.features.sites} "
+                           f"(insoles={est.cfg.features.insoles}), not the {s.name} "
+                           "configuration its folder names")  # fmt: skip
+        results.append((s, aggregate(evaluate_recordings(est, recs, args.segment_frames))))
+    table = sweep_table([(s, a["overall"]) for s, a in results])
+    print(table)
+    if args.json:
+        data = {s.name: {"n_imu": s.n_imu, "insoles": s.insoles, "sites": list(s.sites),
+                         **a["overall"]} for s, a in results}  # fmt: skip
+        atomic_write_text(args.json, json.dumps(data, indent=1))
+        print(f"wrote {args.json}")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out / "sweep.md", table + "\n")
+        print(f"wrote {args.out / 'sweep.md'}")
     return 0

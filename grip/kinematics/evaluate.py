@@ -10,7 +10,9 @@ from grip.core import metrics as M
 from grip.kinematics.features import targets
 from grip.kinematics.inference import KinematicsEstimator
 
-METRIC_KEYS: tuple[str, ...] = ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "trans_err_m")
+METRIC_KEYS: tuple[str, ...] = (
+    "PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "trans_err_m", "MPJPE_mm", "PA_MPJPE_mm",
+)  # fmt: skip
 
 
 def segment_metrics(est_out, rec) -> dict[str, float]:
@@ -18,14 +20,20 @@ def segment_metrics(est_out, rec) -> dict[str, float]:
 
     ``PEL_MPJPE_mm``: root-relative joint error (mm); ``MPJRE_deg``: global joint rotation
     error (deg); ``leaf_vel_err_mps``: mean error of the 6 velocity outputs (m/s);
-    ``trans_err_m``: mean distance between the integrated and the true root trajectory (m).
+    ``trans_err_m``: mean distance between the integrated and the true root trajectory (m);
+    ``MPJPE_mm``: global joint error with the integrated root trajectory (mm);
+    ``PA_MPJPE_mm``: joint error after Procrustes alignment per frame (mm).
     """
     gt = targets(rec)
+    est_glob = est_out.joint_pos + est_out.root_pos[:, None]
+    gt_glob = gt.joint_pos + gt.root_pos[:, None]
     return {
         "PEL_MPJPE_mm": float(M.pel_mpjpe(est_out.joint_pos, gt.joint_pos)),
         "MPJRE_deg": float(M.mpjre(est_out.global_rot, gt.global_rot)),
         "leaf_vel_err_mps": float(np.linalg.norm(est_out.velocity - gt.velocity, axis=-1).mean()),
         "trans_err_m": float(np.linalg.norm(est_out.root_pos - gt.root_pos, axis=-1).mean()),
+        "MPJPE_mm": float(M.mpjpe(est_glob, gt_glob)),
+        "PA_MPJPE_mm": float(M.pa_mpjpe(est_out.joint_pos, gt.joint_pos)),
         "frames": int(rec.n_frames),
     }
 
@@ -83,8 +91,10 @@ def markdown_table(agg: dict) -> str:
             "| root transl. (m) |\n|---|---:|---:|---:|---:|---:|---:|")  # fmt: skip
 
     def row(name: str, m: dict) -> str:
-        return (f"| {name} | {m['segments']} | {m['frames']} | {m['PEL_MPJPE_mm']:.1f} | "
-                f"{m['MPJRE_deg']:.2f} | {m['leaf_vel_err_mps']:.3f} | {m['trans_err_m']:.3f} |")
+        return (
+            f"| {name} | {m['segments']} | {m['frames']} | {m['PEL_MPJPE_mm']:.1f} | "
+            f"{m['MPJRE_deg']:.2f} | {m['leaf_vel_err_mps']:.3f} | {m['trans_err_m']:.3f} |"
+        )
 
     lines = [head] + [row(c, m) for c, m in agg["categories"].items()]
     lines.append(row("**all**", agg["overall"]))

@@ -75,7 +75,7 @@ class KinematicsRunConfig:
     """Everything a training run needs (written to ``config.json``)."""
 
     features: FeatureConfig = field(default_factory=FeatureConfig)
-    hidden: int = 256
+    hidden: int = 192
     layers: int = 2
     init_hidden: int = 256
     train: TrainConfig = field(default_factory=TrainConfig)

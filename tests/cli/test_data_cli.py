@@ -133,3 +133,35 @@ def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsy
     assert fig["frames"] > 0 and (tmp_path / "ev" / "categories.png").exists()
     assert main(["eval-kin", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
     assert "none.pt" in capsys.readouterr().err
+
+
+def test_sensor_sweep_trains_each_configuration_and_tabulates(
+    built: Path, tmp_path: Path, capsys
+) -> None:
+    sweep = tmp_path / "sweep"
+    args = ["train-kin", "--data", str(built), "--out", str(sweep), "--threads", "1",
+            "--sweep", "--imus", "2,4",
+            "--set", "hidden=8", "--set", "layers=1", "--set", "init_hidden=8",
+            "--set", "train.window_frames=20", "--set", "train.batch_size=2",
+            "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
+            "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"]  # fmt: skip
+    assert main(args) == 0
+    names = sorted(p.name for p in sweep.iterdir())
+    assert names == ["imu2_nopress", "imu2_press", "imu4_nopress", "imu4_press"]
+    cfg = json.loads((sweep / "imu2_press" / "config.json").read_text())["config"]
+    assert cfg["features"]["sites"] == ["L_Foot", "R_Foot"] and cfg["features"]["insoles"]
+    js = tmp_path / "sweep.json"
+    capsys.readouterr()
+    assert main(["eval-kin", "--sweep", str(sweep), "--data", str(built),
+                 "--json", str(js)]) == 0  # fmt: skip
+    table = capsys.readouterr().out
+    assert table.count("\n| 2 |") == 2 and table.count("\n| 4 |") == 2
+    res = json.loads(js.read_text())
+    assert set(res) == set(names) and res["imu4_press"]["n_imu"] == 4
+    assert all(r["PA_MPJPE_mm"] <= r["PEL_MPJPE_mm"] + 1e-6 for r in res.values())
+    # a run whose folder name lies about its sensors is refused
+    (sweep / "imu2_press").rename(sweep / "imu3_press")
+    assert main(["eval-kin", "--sweep", str(sweep), "--data", str(built)]) == 2
+    assert "imu3_press" in capsys.readouterr().err
+    assert main(["train-kin", "--data", str(built), "--out", str(sweep), "--sweep",
+                 "--imus", "2,9"]) == 2  # fmt: skip
