@@ -39,8 +39,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="use only N clips, spread evenly over the sorted list")  # fmt: skip
     b.add_argument("--workers", type=int, default=0, metavar="K",
                    help="worker processes (default: one per core)")  # fmt: skip
-    b.add_argument("--noise-variants", type=int, default=1, metavar="N",
-                   help="noisy recordings per clip, each with its own noise draw (default 1)")
+    b.add_argument(
+        "--noise-variants",
+        type=int,
+        default=1,
+        metavar="N",
+        help="noisy recordings per clip, each with its own noise draw (default 1)",
+    )
     b.add_argument("--clean", action="store_true",
                    help="also write a noise-free recording of every clip")  # fmt: skip
     b.add_argument("--fixed-body", action="store_true",
@@ -78,6 +83,34 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument("--out", required=True, type=Path, help="output PNG")
     pl.set_defaults(func=cmd_plot)
 
+    r = dsub.add_parser(
+        "reference",
+        help="precompute KinematicsNet estimates for the tracking environment",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Run KinematicsNet once over recordings (batched) and write a reference-set file\n"
+            "(.npz: estimate + ground truth + sensor features per clip) that the MuJoCo\n"
+            "tracking environment reads: GripTrackingEnv(TrackingEnvConfig(reference=FILE)).\n"
+            "Sources: a dataset folder's split (--data DIR --split train) or recording files."
+        ),
+        epilog="example: grip data reference --data data/prism_synth --split train "
+        "--out data/ref_train.npz\n"
+        "         grip data reference rec1.pkl rec2.npz --out ref.npz --kin runs/kin/best.pt",
+    )
+    r.add_argument("files", nargs="*", type=Path, help="recordings (.pkl/.npz) instead of --data")
+    r.add_argument("--data", type=Path, default=None, help="dataset folder (with split.json)")
+    r.add_argument("--split", default="train", choices=("train", "test", "all"),
+                   help="split of --data (default train)")  # fmt: skip
+    r.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    r.add_argument("--out", required=True, type=Path, help="output .npz")
+    r.add_argument("--category", action="append", default=[],
+                   help="keep only recordings of this category (repeatable)")  # fmt: skip
+    r.add_argument("--limit", type=int, default=None, help="at most this many recordings")
+    r.add_argument("--max-frames", type=int, default=None,
+                   help="crop each recording to its first N frames")  # fmt: skip
+    r.set_defaults(func=cmd_reference)
+
 
 def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, str]]:
     """``(path, clip_id, category)`` of the clips under ``roots`` (``limit``: evenly spread)."""
@@ -94,8 +127,9 @@ def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, s
     if limit is not None and limit < len(clips):
         if limit < 1:
             raise CliError("--limit must be >= 1")
-        idx = sorted({round(k) for k in
-                      [i * (len(clips) - 1) / max(limit - 1, 1) for i in range(limit)]})
+        idx = sorted(
+            {round(k) for k in [i * (len(clips) - 1) / max(limit - 1, 1) for i in range(limit)]}
+        )
         clips = [clips[k] for k in idx]
     return clips
 
@@ -169,4 +203,57 @@ def cmd_plot(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     out = plot_recording(rec, args.out)
     print(f"wrote {out}")
+    return 0
+
+
+def cmd_reference(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from grip.cli.kinematics import SHIPPED_KIN
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+    from grip.kinematics.inference import KinematicsEstimator
+    from grip.kinematics.reference import build_reference_set
+    from prism_tools.io import load_recording
+
+    if bool(args.files) == (args.data is not None):
+        raise CliError("give recording files or --data DIR (one of them)")
+    if args.data is not None:
+        split_path = args.data / "split.json"
+        try:
+            split = json.loads(split_path.read_text())
+            ids = split["train"] + split["test"] if args.split == "all" else split[args.split]
+        except (OSError, ValueError, KeyError) as e:
+            raise CliError(f"{split_path}: {e}") from e
+        files = [args.data / "sequences" / f"{i}.npz" for i in ids]
+    else:
+        files = list(args.files)
+    recs = []
+    for f in files:
+        try:
+            rec = load_recording(f)
+        except (OSError, ValueError) as e:
+            raise CliError(str(e)) from e
+        if args.category and rec.category not in args.category:
+            continue
+        if args.max_frames and rec.n_frames > args.max_frames:
+            rec = rec.slice_frames(0, args.max_frames)
+        recs.append(rec)
+        if args.limit and len(recs) >= args.limit:
+            break
+    if not recs:
+        raise CliError("no recordings selected")
+    kin = args.kin or REPO_ROOT / SHIPPED_KIN
+    if not Path(kin).is_file():
+        raise CliError(f"{kin}: no such checkpoint (pass --kin RUN/best.pt)")
+    try:
+        est = KinematicsEstimator.from_checkpoint(kin)
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    with tqdm(total=len(recs), unit="rec", desc="KinematicsNet") as bar:
+        ref = build_reference_set(recs, est, progress=bar.update, source=str(args.out))
+    ref.save(args.out)
+    print(f"wrote {args.out}: {len(ref)} clips, {ref.total_frames} frames, "
+          f"sensor features {ref.sensor_dim} ({', '.join(ref.sensor_sites)}"
+          f"{' + insoles' if ref.insoles else ''})")  # fmt: skip
     return 0

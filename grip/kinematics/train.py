@@ -312,9 +312,23 @@ class Trainer:
         atomic_write(path, lambda f: f.write(buf.getvalue()))
 
     def load(self, path: Path) -> None:
+        """Resume from a checkpoint of the same configuration.
+
+        Only ``train.joint_epochs`` may differ (to extend or shorten a run's last phase), as
+        long as the checkpoint is still in the stage-wise phase or within the new length.
+        """
         ck = load_checkpoint(path)
-        if json.loads(ck["config"]) != json.loads(json.dumps(asdict(self.cfg))):
-            raise ValueError(f"{path}: checkpoint was trained with another configuration")
+        old = json.loads(ck["config"])
+        new = json.loads(json.dumps(asdict(self.cfg)))
+        old["train"].pop("joint_epochs")
+        new["train"].pop("joint_epochs")
+        if old != new:
+            diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+            raise ValueError(f"{path}: checkpoint was trained with another configuration "
+                             f"(differs in {', '.join(diff)})")  # fmt: skip
+        if int(ck["epoch"]) > self.cfg.total_epochs():
+            raise ValueError(f"{path}: checkpoint is at epoch {int(ck['epoch'])}, beyond the "
+                             f"{self.cfg.total_epochs()} epochs of this configuration")  # fmt: skip
         self.model.load_state_dict(ck["model"])
         self.opt.load_state_dict(ck["optimizer"])
         self.norm = Normalizer(ck["norm_mean"].numpy(), ck["norm_std"].numpy())

@@ -23,8 +23,9 @@ def seqs():
 
 
 def _cfg(**kw):
-    train = TrainConfig(window_frames=40, batch_size=4, steps_per_epoch=3, stage_epochs=1,
-                        joint_epochs=1, val_windows=4, **kw)  # fmt: skip
+    kw = {"window_frames": 40, "batch_size": 4, "steps_per_epoch": 3, "stage_epochs": 1,
+          "joint_epochs": 1, "val_windows": 4} | kw  # fmt: skip
+    train = TrainConfig(**kw)
     return KinematicsRunConfig(hidden=16, layers=1, init_hidden=8, train=train)
 
 
@@ -68,6 +69,12 @@ def test_training_runs_checkpoints_and_resumes(seqs, tmp_path):
         torch.testing.assert_close(a, b)
     with pytest.raises(ValueError, match="another configuration"):
         Trainer(_cfg(lr=0.5), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
+    # A longer last phase resumes and trains only the extra epoch.
+    tr3 = Trainer(_cfg(joint_epochs=2), seqs, seqs, tmp_path)
+    tr3.load(tmp_path / "last.pt")
+    assert [h["phase"] for h in tr3.fit()][-2:] == ["joint", "joint"] and tr3.epoch == 6
+    with pytest.raises(ValueError, match="beyond"):
+        Trainer(_cfg(joint_epochs=0), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
 
 
 def test_training_lowers_the_validation_loss(seqs, tmp_path):

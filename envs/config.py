@@ -1,0 +1,128 @@
+"""Settings of the tracking environment (frozen dataclasses; TOML files hold overrides only)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from grip.core.mjcf import MjcfConfig
+
+KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel")
+"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel)."""
+
+ACTION_MODES: tuple[str, ...] = ("relative", "absolute")
+REWARD_FORMS: tuple[str, ...] = ("mean_sq", "norm")
+TERRAINS: tuple[str, ...] = ("auto", "flat", "boxes", "stairs", "chair")
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weight of each raw reward term; the term, its weight and its ``info`` key share a name.
+
+    The defaults are GRIP's eq. 7 (0.5 r_amp + 0.5 r_imit + r_energy) with PHC's imitation
+    weights (w_p, w_theta, w_v, w_omega = 0.5, 0.3, 0.1, 0.1) folded in.
+    """
+
+    imit_pos: float = 0.25  # 0.5 x w_p
+    imit_rot: float = 0.15  # 0.5 x w_theta
+    imit_vel: float = 0.05  # 0.5 x w_v
+    imit_angvel: float = 0.05  # 0.5 x w_omega
+    energy: float = -0.0005  # -alpha (GRIP eq. 9); the raw term is the mechanical power, W
+    amp: float = 0.5  # the AMP term is 0 until a wrapper fills it (policies)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Imitation kernels (GRIP supplement eq. 8) and the energy penalty (eq. 9).
+
+    Attributes:
+        k_pos: Position kernel coefficient (1/m^2 with ``mean_sq``, 1/m with ``norm``).
+        k_rot: Rotation kernel coefficient (1/rad^2 or 1/rad).
+        k_vel: Linear-velocity kernel coefficient.
+        k_angvel: Angular-velocity kernel coefficient.
+        form: ``"mean_sq"``: exp(-k * mean over joints of the squared error) (PHC's code);
+            ``"norm"``: exp(-k * norm of the stacked error) (GRIP's equation as printed).
+        energy_skip_frames: The energy term is 0 for this many steps after a reset (GRIP).
+        weights: Weight of each term.
+    """
+
+    k_pos: float = 100.0
+    k_rot: float = 100.0
+    k_vel: float = 10.0
+    k_angvel: float = 0.1
+    form: str = "mean_sq"
+    energy_skip_frames: int = 3
+    weights: RewardWeights = field(default_factory=RewardWeights)
+
+
+@dataclass(frozen=True)
+class TrackingEnvConfig:
+    """Everything :class:`envs.tracking_env.GripTrackingEnv` needs.
+
+    Attributes:
+        reference: Reference-set file (``grip data reference``); empty = the bundled sample.
+        substeps: Physics steps per control step (control rate = 1 / (substeps x timestep)).
+        action_mode: ``"relative"``: PD target = the KinematicsNet pose of the next frame plus
+            the action times ``action_scale`` x half the hinge range (an untrained policy
+            already follows the estimate); ``"absolute"``: the action in [-1, 1] spans the
+            hinge range.
+        action_scale: Fraction of the half range that a relative action of 1 moves the target.
+        velocity_feedforward: In relative mode, add ``kd/kp`` x the reference hinge velocity to
+            the target, so that MuJoCo's ``kp (target - q) - kd qdot`` becomes
+            ``kp (q_ref - q) + kd (qdot_ref - qdot)``: without it a PD servo lags a moving
+            reference by ``kd/kp`` seconds (0.1 s here), 10 cm at the feet of a walk.
+        kinematic_obs: State-difference variant (:data:`KINEMATIC_OBS`, GRIP Table 4).
+        heightmap_size: Samples per side of the height map.
+        heightmap_extent_m: Side of the square the height map covers, m.
+        terrain: ``"auto"`` (a clip's scene objects, else flat), or a fixed scene for all clips.
+        heightfield_cell_m: Resolution of the terrain height field, m.
+        termination_dist_m: End an episode when any joint is farther than this from the ground
+            truth, m (GRIP stage 1: 0.25); 0 turns early termination off (stage 2).
+        random_start: Reference state initialisation: start at a random frame of a random clip
+            (training). Off: play one clip from its first frame (inference).
+        clip_index: Play this clip (>= 0) instead of sampling one.
+        max_episode_frames: Truncate episodes after this many steps (0: run to the clip's end).
+        min_episode_frames: Random starts leave at least this many frames to play.
+        pin_root: Drive the pelvis along the ground-truth root trajectory (position and
+            orientation written before every substep): a physics check of the PD tracking, not
+            a training mode.
+        mjcf: Humanoid and simulation options.
+        reward: Reward settings.
+    """
+
+    reference: str = ""
+    substeps: int = 2
+    action_mode: str = "relative"
+    action_scale: float = 0.5
+    velocity_feedforward: bool = True
+    kinematic_obs: str = "OAV_Jrel"
+    heightmap_size: int = 25
+    heightmap_extent_m: float = 1.5
+    terrain: str = "auto"
+    heightfield_cell_m: float = 0.02
+    termination_dist_m: float = 0.25
+    random_start: bool = True
+    clip_index: int = -1
+    max_episode_frames: int = 0
+    min_episode_frames: int = 10
+    pin_root: bool = False
+    mjcf: MjcfConfig = field(default_factory=MjcfConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+
+    def __post_init__(self) -> None:
+        checks = (
+            (self.action_mode in ACTION_MODES, f"action_mode must be one of {ACTION_MODES}"),
+            (self.kinematic_obs in KINEMATIC_OBS, f"kinematic_obs must be one of {KINEMATIC_OBS}"),
+            (self.reward.form in REWARD_FORMS, f"reward.form must be one of {REWARD_FORMS}"),
+            (self.terrain in TERRAINS, f"terrain must be one of {TERRAINS}"),
+            (self.substeps >= 1, "substeps must be >= 1"),
+            (self.heightmap_size >= 1, "heightmap_size must be >= 1"),
+            (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),
+            (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
+        )
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(f"TrackingEnvConfig: {msg}")
+
+    @property
+    def control_dt_s(self) -> float:
+        return self.substeps * self.mjcf.timestep_s

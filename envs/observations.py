@@ -1,0 +1,113 @@
+"""Observation parts of the tracking task as pure numpy functions (GRIP Sec. 3.3-3.4).
+
+Everything is expressed in the simulated humanoid's *heading frame*: a yaw-only frame at the
+pelvis whose x axis points where the body faces (the pelvis' canonical +z axis projected on
+the floor), y to its left, z up. World row vectors ``v`` become ``v @ H`` with ``H`` from
+:func:`heading_matrix` (``H.T @ v`` for column vectors).
+
+Shapes: J = 24 joints. 6D rotations are the first two matrix columns, ``(c0, c1)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grip.core import skeleton as sk
+
+IMU_JOINTS: tuple[int, ...] = (
+    sk.IMU_BODY["L_Foot"], sk.IMU_BODY["R_Foot"], sk.IMU_BODY["L_Wrist"], sk.IMU_BODY["R_Wrist"],
+)  # fmt: skip
+"""Bodies carrying GRIP's four IMUs (ankles, forearms): where D_leaf's rotation terms live."""
+
+VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
+"""Joints of the linear-velocity difference d_v: wrists, ankles, head, pelvis (KinematicsNet LV)."""
+
+SELF_DIM = 1 + 3 * (sk.N_JOINTS - 1) + 6 * sk.N_JOINTS + 3 * sk.N_JOINTS + 3 * sk.N_JOINTS
+
+
+def kinematic_dim(variant: str) -> int:
+    """Length of the state difference for a GRIP Table 4 variant."""
+    n = len(IMU_JOINTS) * (6 + 3 + 6)  # d_theta, d_omega, theta_leaf
+    if variant != "OA":
+        n += 3 * len(VELOCITY_JOINTS)  # d_v
+    if variant in ("OAV_Jglo", "OAV_Jrel"):
+        n += 2 * 3 * sk.N_JOINTS  # d_p and p
+    return n
+
+
+_IMU = np.array(IMU_JOINTS)
+_VEL = np.array(VELOCITY_JOINTS)
+_N_IMU = len(IMU_JOINTS)
+_N_SELF_VEC = (sk.N_JOINTS - 1) + 2 * sk.N_JOINTS  # rows of 3-vectors in O^self
+
+
+def heading_matrix(root_rot: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` yaw rotation whose x axis is the pelvis' facing direction on the floor."""
+    fx, fy = float(root_rot[0, 2]), float(root_rot[1, 2])  # image of the canonical forward +z
+    n = math.hypot(fx, fy)
+    c, s = (fx / n, fy / n) if n > 1e-9 else (1.0, 0.0)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def observation_parts(
+    variant: str,
+    h: np.ndarray,
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    est_pos: np.ndarray,
+    est_rot: np.ndarray,
+    est_vel: np.ndarray,
+    est_angvel: np.ndarray,
+    est_root_pos: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """O^kin (GRIP's State Difference) and O^self, in the simulated heading frame.
+
+    Both are built together so that every vector is rotated by one matrix product and every
+    rotation by another (this runs at every control step).
+
+    Args:
+        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4).
+        h: ``(3, 3)`` heading matrix of the simulated pelvis (:func:`heading_matrix`).
+        sim_pvw: ``(3, J, 3)`` simulated world joint positions (m), linear (m/s) and angular
+            (rad/s) velocities.
+        sim_rot: ``(J, 3, 3)`` simulated global joint rotations.
+        est_pos: ``(J, 3)`` estimated joints minus the root (world axes), m.
+        est_rot: ``(J, 3, 3)`` estimated global rotations.
+        est_vel: ``(6, 3)`` estimated world velocities of :data:`VELOCITY_JOINTS`, m/s.
+        est_angvel: ``(J, 3)`` estimated world angular velocities, rad/s.
+        est_root_pos: ``(3,)`` root integrated from the estimated pelvis velocity (J_glo), m.
+
+    Returns:
+        ``kinematic (kinematic_dim(variant),)`` = [d_theta (4x6): rotation from simulated to
+        estimated orientation, theta_leaf (4x6): estimated orientation, d_omega (4x3)] at the
+        IMU bodies, then [d_v (6x3)] (not in ``OA``), then [d_p (24x3), p (24x3)] (``J``
+        variants; d_p root-relative for ``J_rel``, global via the integrated root for
+        ``J_glo``; p = the estimated root-relative joints);
+        ``self (SELF_DIM,)`` = [pelvis height (1), joints 1..23 minus the pelvis (69), linear
+        velocities (72), angular velocities (72), rotations 6D (144)].
+    """
+    pos, vel, w = sim_pvw
+    rel = pos - pos[0]
+    rows = [rel[1:], vel, w, est_angvel[_IMU] - w[_IMU]]
+    if variant != "OA":
+        rows.append(est_vel - vel[_VEL])
+    if variant == "OAV_Jrel":
+        rows += [est_pos - rel, est_pos]
+    elif variant == "OAV_Jglo":
+        rows += [(est_root_pos + est_pos) - pos, est_pos]
+    vecs = np.concatenate(rows) @ h
+    e_leaf = est_rot[_IMU]
+    d_rot = e_leaf @ np.swapaxes(sim_rot[_IMU], -1, -2)
+    stack = np.concatenate([sim_rot, e_leaf, d_rot])  # (M, 3, 3)
+    m = stack.shape[0]
+    # h.T @ R for every R as one (3 x 3) @ (3 x 3M) product; then d_rot @ h as (4*3 x 3) @ h
+    rots = (h.T @ stack.transpose(1, 0, 2).reshape(3, 3 * m)).reshape(3, m, 3).transpose(1, 0, 2)
+    rots[-_N_IMU:] = (rots[-_N_IMU:].reshape(-1, 3) @ h).reshape(_N_IMU, 3, 3)
+    six = np.swapaxes(rots[..., :2], -1, -2).reshape(-1, 6)
+    n = sk.N_JOINTS
+    self_vec = np.concatenate([pos[0, 2:3], vecs[:_N_SELF_VEC].ravel(), six[:n].ravel()])
+    kin = np.concatenate([six[n + _N_IMU :].ravel(), six[n : n + _N_IMU].ravel(),
+                          vecs[_N_SELF_VEC:].ravel()])  # fmt: skip
+    return kin, self_vec

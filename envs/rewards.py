@@ -1,0 +1,55 @@
+"""Reward terms of the tracking task (GRIP supplement eq. 8-9), as pure numpy functions.
+
+Each function returns raw, unweighted terms; the environment multiplies them by
+:class:`envs.config.RewardWeights` and reports every term as ``info["reward/<name>"]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from envs.config import RewardConfig
+
+IMITATION_TERMS: tuple[str, ...] = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel")
+TERMS: tuple[str, ...] = (*IMITATION_TERMS, "energy", "amp")
+
+
+def rotation_angles(sim_rot: np.ndarray, ref_rot: np.ndarray) -> np.ndarray:
+    """Per-joint angle of ``sim^T ref``, rad. ``(J, 3, 3) x (J, 3, 3) -> (J,)``."""
+    tr = np.einsum("jab,jab->j", sim_rot, ref_rot)
+    return np.arccos(np.clip((tr - 1.0) * 0.5, -1.0, 1.0))
+
+
+def imitation_terms(
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    ref_pvw: np.ndarray,
+    ref_rot: np.ndarray,
+    cfg: RewardConfig,
+) -> tuple[dict[str, float], np.ndarray]:
+    """GRIP's imitation kernels against the ground-truth reference, each in (0, 1].
+
+    Args:
+        sim_pvw, ref_pvw: ``(3, J, 3)`` stacked world joint positions (m), linear velocities
+            (m/s) and angular velocities (rad/s) of the simulation and of the reference.
+        sim_rot, ref_rot: ``(J, 3, 3)`` global joint rotations.
+        cfg: Kernel coefficients and form (``mean_sq``: exp(-k mean_j e_j^2); ``norm``:
+            exp(-k sqrt(sum_j e_j^2))).
+
+    Returns:
+        ``{"imit_pos", "imit_rot", "imit_vel", "imit_angvel"}`` (all 1 at perfect tracking) and
+        the per-joint squared position/velocity/angular-velocity errors ``(3, J)``.
+    """
+    e = sim_pvw - ref_pvw
+    sq = np.einsum("kji,kji->kj", e, e)
+    ang = rotation_angles(sim_rot, ref_rot)
+    tot = sq.sum(axis=1)
+    x = np.array([tot[0], np.dot(ang, ang), tot[1], tot[2]])
+    x = x * (1.0 / ang.size) if cfg.form == "mean_sq" else np.sqrt(x)
+    r = np.exp(-np.array([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel]) * x)
+    return dict(zip(IMITATION_TERMS, r.tolist(), strict=True)), sq
+
+
+def mechanical_power(torque: np.ndarray, joint_vel: np.ndarray) -> float:
+    """Sum over actuated DoF of ``|tau * qdot|``, W (GRIP eq. 9 before the ``-alpha`` weight)."""
+    return float(np.abs(torque * joint_vel).sum())

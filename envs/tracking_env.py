@@ -1,0 +1,382 @@
+"""``GripTrackingEnv``: a torque-driven humanoid in MuJoCo follows a KinematicsNet estimate.
+
+One control step (100 Hz by default) writes PD targets for the 69 hinges into MuJoCo's position
+actuators (PD runs inside MuJoCo), advances the physics ``substeps`` times, and returns GRIP's
+observations (sensor, kinematic = State Difference, self, environment = height map) and reward
+terms (imitation against the ground truth, energy; AMP is filled by a wrapper).
+
+Timing: after ``reset`` the simulation is at frame ``s`` of the clip (the ground-truth state).
+The observation at frame ``t`` carries the estimate and sensors of frame ``t + 1`` (what the
+next action aims at: with streaming sensors this is the newest frame); the step that follows
+moves the simulation to ``t + 1``, whose state is rewarded against the ground truth of ``t + 1``.
+"""
+
+from __future__ import annotations
+
+import types
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from envs import observations as O
+from envs import rewards as R
+from envs.config import TrackingEnvConfig
+from envs.terrain import (
+    HeightField,
+    add_heightfield,
+    heightmap_grid,
+    make_scene,
+    rasterize,
+    sample_heightmap,
+)
+from grip.core import skeleton as sk
+from grip.core.body import BodyParams
+from grip.core.mjcf import build_mjcf
+from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
+from grip.sim.model import HumanoidIndex
+
+SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_reference.npz"
+"""The small bundled reference set used when the env is made without a reference."""
+
+_UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
+                                       mujoco.mjtWarning.mjWARN_BADQVEL,
+                                       mujoco.mjtWarning.mjWARN_BADQACC)])  # fmt: skip
+"""MuJoCo's warnings for a state it could not integrate (it then resets ``MjData`` itself)."""
+
+_C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
+
+
+@dataclass
+class _Sim:
+    """A compiled humanoid (one body and scene) with its data and index arrays."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    index: HumanoidIndex
+    hfield: HeightField | None
+    lo: np.ndarray  # (69,) hinge lower limits, SMPL order
+    hi: np.ndarray
+    pelvis_body: int
+    kd_over_kp: np.ndarray  # (69,) s
+    # views of MjData arrays, taken once (attribute access through the bindings is slow)
+    xpos: np.ndarray
+    xmat: np.ndarray
+    cvel: np.ndarray
+    com: np.ndarray  # (3,) subtree COM of the pelvis
+    ctrl: np.ndarray
+    qvel: np.ndarray
+    act_force: np.ndarray
+    warnings: np.ndarray  # live view of MjData.warning.number
+
+
+class GripTrackingEnv(gym.Env):
+    """Track a reference clip with the simulated humanoid (Gymnasium API).
+
+    Args:
+        cfg: Settings (defaults: GRIP's stage-1 training setup on the bundled sample).
+        reference: Clips to track; default: the file ``cfg.reference`` or the bundled sample.
+        render_mode: ``None`` or ``"rgb_array"`` (needs an OpenGL backend, e.g.
+            ``MUJOCO_GL=egl``).
+
+    Observation: ``spaces.Dict`` with ``"sensor"`` (the KinematicsNet inputs of the next frame),
+    ``"kinematic"`` (State Difference, :func:`envs.observations.state_difference`), ``"self"``
+    (:func:`envs.observations.self_obs`) and ``"environment"`` (terrain height minus pelvis
+    height on a heading-aligned ``heightmap_size``^2 grid). Action: ``(69,)`` in [-1, 1], see
+    :attr:`TrackingEnvConfig.action_mode`.
+
+    ``info`` holds every reward term as ``"reward/<name>"``, the clip name and frame,
+    ``"max_joint_err_m"`` and ``"mpjpe_m"`` (against the ground truth), ``"sim_unstable"``
+    (this step blew up) and ``"blowups"`` (count over
+    the env's life).
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 100}
+
+    def __init__(self, cfg: TrackingEnvConfig | None = None,
+                 reference: ReferenceSource | None = None,
+                 render_mode: str | None = None) -> None:  # fmt: skip
+        self.cfg = cfg = cfg or TrackingEnvConfig()
+        if reference is None:
+            reference = ReferenceSet.load(cfg.reference or SAMPLE_REFERENCE)
+        if len(reference) == 0:
+            raise ValueError("GripTrackingEnv: the reference source has no clips")
+        self.reference = reference
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode {render_mode!r}: use None or 'rgb_array'")
+        self.render_mode = render_mode
+        fps = 1.0 / cfg.control_dt_s
+        for i in range(len(reference)):
+            c = reference.clip(i)
+            if abs(c.fps - fps) > 1e-6 * fps:
+                raise ValueError(f"clip {c.name!r} runs at {c.fps} Hz but the env controls at "
+                                 f"{fps:g} Hz (substeps x timestep)")  # fmt: skip
+        self._sims: dict[tuple, _Sim] = {}
+        self._grid = heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m)
+        self._hm = np.zeros(len(self._grid))
+        clip0 = reference.clip(0)
+        self._sim = self._sim_for(clip0, 0)
+        sensor_dim = clip0.sensor.shape[1]
+        box = lambda n: spaces.Box(-np.inf, np.inf, (n,), np.float32)  # noqa: E731
+        self.observation_space = spaces.Dict({
+            "sensor": box(sensor_dim),
+            "kinematic": box(O.kinematic_dim(cfg.kinematic_obs)),
+            "self": box(O.SELF_DIM),
+            "environment": box(len(self._grid)),
+        })  # fmt: skip
+        self.action_space = spaces.Box(-1.0, 1.0, (3 * (sk.N_JOINTS - 1),), np.float32)
+        self.blowups = 0
+        self._clip: ReferenceClip = clip0
+        self._clip_i = 0
+        self._next_clip = 0
+        self._t = 0
+        self._steps = 0
+        self._last_obs: dict[str, np.ndarray] | None = None
+        self._renderer = None
+        self._renderer_model = None
+        self._gt_pvw: np.ndarray = np.zeros(0)  # (T, 3, J, 3) of the current clip
+        self._gt_pvw_clip: ReferenceClip | None = None
+        self._n_bad = 0
+        self._weights = tuple((k, float(getattr(cfg.reward.weights, k))) for k in R.TERMS)
+
+    # ------------------------------------------------------------------ models
+    def _scene_key(self, clip: ReferenceClip, i: int) -> tuple:
+        if self.cfg.terrain == "auto":
+            return ("objects", i) if clip.objects else ("flat",)
+        return (self.cfg.terrain,)
+
+    def _sim_for(self, clip: ReferenceClip, i: int) -> _Sim:
+        body: BodyParams = clip.body
+        key = (body.height_m, body.mass_kg, *self._scene_key(clip, i))
+        sim = self._sims.get(key)
+        if sim is not None:
+            return sim
+        kind = self._scene_key(clip, i)[0]
+        if kind == "objects":
+            objs = {n: types.SimpleNamespace(vertices=v, faces=f)
+                    for n, (v, f) in clip.objects.items()}  # fmt: skip
+            scene = make_scene("objects", objects=objs)
+        else:
+            scene = make_scene(kind)
+        xml = build_mjcf(body, self.cfg.mjcf)
+        hf = None if scene.is_flat else rasterize(scene, self.cfg.heightfield_cell_m)
+        if hf is not None:
+            xml = add_heightfield(xml, hf)
+        model = mujoco.MjModel.from_xml_string(xml)
+        index = HumanoidIndex.from_model(model)
+        act = index.actuator_ids
+        rng = model.actuator_ctrlrange[act]
+        kp, kd = model.actuator_gainprm[act, 0], -model.actuator_biasprm[act, 2]
+        d = mujoco.MjData(model)
+        pelvis = int(index.body_ids[0])
+        sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis, kd / kp,
+                   d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel,
+                   d.actuator_force, d.warning.number)  # fmt: skip
+        if len(self._sims) >= 16:  # bounded cache: drop the oldest compiled model
+            self._sims.pop(next(iter(self._sims)))
+        self._sims[key] = sim
+        return sim
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model of the current episode."""
+        return self._sim.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data of the current episode."""
+        return self._sim.data
+
+    @property
+    def clip(self) -> ReferenceClip:
+        """The reference clip of the current episode."""
+        return self._clip
+
+    @property
+    def frame(self) -> int:
+        """The clip frame the simulation is at."""
+        return self._t
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode.
+
+        ``options``: ``{"clip": i, "start": frame}`` pick the clip and start frame (otherwise
+        ``cfg.clip_index``, random starts, or the clips in turn from frame 0).
+        """
+        super().reset(seed=seed)
+        cfg = self.cfg
+        options = options or {}
+        n = len(self.reference)
+        if "clip" in options:
+            i = int(options["clip"])
+        elif cfg.clip_index >= 0:
+            i = cfg.clip_index
+        elif cfg.random_start:
+            lengths = np.array([self.reference.clip(k).n_frames for k in range(n)], dtype=float)
+            i = int(self.np_random.choice(n, p=lengths / lengths.sum()))
+        else:
+            i = self._next_clip
+            self._next_clip = (self._next_clip + 1) % n
+        if not 0 <= i < n:
+            raise ValueError(f"clip index {i} outside 0..{n - 1}")
+        clip = self.reference.clip(i)
+        last_start = max(clip.n_frames - 1 - cfg.min_episode_frames, 0)
+        if "start" in options:
+            start = int(options["start"])
+            if not 0 <= start < clip.n_frames - 1:
+                raise ValueError(f"start frame {start} outside 0..{clip.n_frames - 2}")
+        elif cfg.random_start:
+            start = int(self.np_random.integers(0, last_start + 1))
+        else:
+            start = 0
+        self._clip, self._clip_i = clip, i
+        self._sim = self._sim_for(clip, i)
+        self._t = start
+        self._steps = 0
+        self._set_state(clip, start)
+        if self._gt_pvw_clip is not clip:
+            self._gt_pvw = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1)
+            self._gt_pvw_clip = clip
+        obs = self._observe(*self._sim_state())
+        self._last_obs = obs
+        return obs, {"clip": clip.name, "clip_index": i, "frame": start}
+
+    def _set_state(self, clip: ReferenceClip, t: int) -> None:
+        sim = self._sim
+        m, d, ix = sim.model, sim.data, sim.index
+        mujoco.mj_resetData(m, d)
+        q, v = clip.gt_qpos[t], clip.gt_qvel[t]
+        r, rv = ix.root_qpos_adr, ix.root_dof_adr
+        d.qpos[r : r + 7] = q[:7]
+        d.qpos[ix.hinge_qpos_adr] = q[7:]
+        d.qvel[rv : rv + 6] = v[:6]
+        d.qvel[ix.hinge_dof_adr] = v[6:]
+        d.ctrl[ix.actuator_ids] = np.clip(q[7:], sim.lo, sim.hi)
+        mujoco.mj_forward(m, d)
+        self._n_bad = int(sim.warnings[_UNSTABLE].sum())
+
+    def _sim_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """World state of the 24 bodies: ``pvw (3, J, 3)`` = positions (m), linear (m/s) and
+        angular (rad/s) velocities, and rotations ``(J, 3, 3)``."""
+        sim = self._sim
+        ids = sim.index.body_ids
+        pvw = np.empty((3, sk.N_JOINTS, 3))
+        pos = pvw[0]
+        pos[:] = sim.xpos[ids]
+        cvel = sim.cvel[ids]
+        w = cvel[:, :3]
+        pvw[2] = w
+        r = pos - sim.com
+        # cvel is the velocity at the subtree COM; move it to each body origin: v + w x r
+        pvw[1] = cvel[:, 3:] + (w[:, _C1] * r[:, _C2] - w[:, _C2] * r[:, _C1])
+        return pvw, sim.xmat[ids].reshape(-1, 3, 3)
+
+    def _observe(self, pvw: np.ndarray, rot: np.ndarray) -> dict[str, np.ndarray]:
+        cfg, clip = self.cfg, self._clip
+        t = min(self._t + 1, clip.n_frames - 1)
+        root = pvw[0, 0]
+        h = O.heading_matrix(rot[0])
+        kin, self_vec = O.observation_parts(
+            cfg.kinematic_obs, h, pvw, rot, clip.est_pos[t], clip.est_rot[t], clip.est_vel[t],
+            clip.est_angvel[t], clip.est_root_pos[t],
+        )  # fmt: skip
+        hm = sample_heightmap(self._sim.hfield, root[:2], h[:2, :2], self._grid, out=self._hm)
+        return {
+            "sensor": clip.sensor[t].astype(np.float32),
+            "kinematic": kin.astype(np.float32),
+            "self": self_vec.astype(np.float32),
+            "environment": (hm - root[2]).astype(np.float32),
+        }
+
+    def step(self, action):
+        cfg, sim, clip = self.cfg, self._sim, self._clip
+        m, d, ix = sim.model, sim.data, sim.index
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        if a.shape != (ix.actuator_ids.size,):
+            raise ValueError(f"action must have shape ({ix.actuator_ids.size},), got {a.shape}")
+        t = self._t + 1
+        half = 0.5 * (sim.hi - sim.lo)
+        if cfg.action_mode == "relative":
+            target = clip.est_hinge[t] + a * (cfg.action_scale * half)
+            if cfg.velocity_feedforward:
+                target += sim.kd_over_kp * clip.est_hinge_vel[t]
+        else:
+            target = sim.lo + (a + 1.0) * half
+        sim.ctrl[ix.actuator_ids] = np.clip(target, sim.lo, sim.hi)
+        if cfg.pin_root:
+            self._step_pinned(t)
+        else:
+            mujoco.mj_step(m, d, nstep=cfg.substeps)
+        self._t = t
+        self._steps += 1
+        # After a state it cannot integrate (bad qpos, qvel or qacc) MuJoCo resets MjData and
+        # counts a warning: that count is the blow-up test.
+        n_bad = int(sim.warnings[_UNSTABLE].sum())
+        if n_bad > self._n_bad:
+            self._n_bad = n_bad
+            self.blowups += 1
+            info = {f"reward/{k}": 0.0 for k in R.TERMS}
+            info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=np.inf,
+                        mpjpe_m=np.inf, sim_unstable=True, blowups=self.blowups)  # fmt: skip
+            return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
+        # positions and velocities of the state after the last substep (mj_step leaves the
+        # derived quantities one substep behind)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        pvw, rot = self._sim_state()
+        terms, sq = R.imitation_terms(pvw, rot, self._gt_pvw[t], clip.gt_rot[t], cfg.reward)
+        power = R.mechanical_power(sim.act_force[ix.actuator_ids], sim.qvel[ix.hinge_dof_adr])
+        terms["energy"] = power if self._steps > cfg.reward.energy_skip_frames else 0.0
+        terms["amp"] = 0.0
+        reward = 0.0
+        for k, wk in self._weights:
+            reward += wk * terms[k]
+        dist = np.sqrt(sq[0])
+        err = float(dist.max())  # (the unstable check above also makes this never NaN)
+        terminated = cfg.termination_dist_m > 0 and err > cfg.termination_dist_m
+        truncated = t >= clip.n_frames - 1 or (
+            cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
+        )
+        obs = self._observe(pvw, rot)
+        self._last_obs = obs
+        info = {f"reward/{k}": v for k, v in terms.items()}
+        info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=err,
+                    mpjpe_m=float(dist.sum()) / dist.size, sim_unstable=False,
+                    blowups=self.blowups)  # fmt: skip
+        return obs, reward, bool(terminated), bool(truncated and not terminated), info
+
+    def _step_pinned(self, t: int) -> None:
+        """Substeps with the root written from the ground truth before each (``pin_root``)."""
+        m, d, ix, clip = self._sim.model, self._sim.data, self._sim.index, self._clip
+        r, rv, n = ix.root_qpos_adr, ix.root_dof_adr, self.cfg.substeps
+        for k in range(n):
+            f = (k + 1) / n
+            d.qpos[r : r + 3] = (1 - f) * clip.gt_qpos[t - 1, :3] + f * clip.gt_qpos[t, :3]
+            d.qpos[r + 3 : r + 7] = clip.gt_qpos[t if f >= 0.5 else t - 1, 3:7]
+            d.qvel[rv : rv + 6] = clip.gt_qvel[t, :6]
+            mujoco.mj_step(m, d)
+
+    # ------------------------------------------------------------------ rendering
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None or self._renderer_model is not self.model:
+            self._renderer = mujoco.Renderer(self.model, 480, 640)
+            self._renderer_model = self.model
+            self._camera = mujoco.MjvCamera()
+            self._camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+            self._camera.trackbodyid = self._sim.pelvis_body
+            self._camera.distance, self._camera.elevation = 3.5, -15.0
+        self._renderer.update_scene(self.data, camera=self._camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

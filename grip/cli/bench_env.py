@@ -1,0 +1,100 @@
+"""``grip bench-env``: tracking-environment steps/s against raw ``mj_step`` of the same model."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench-env",
+        help="measure tracking-env steps/s against raw mj_step/s of the same model",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Time GripTrackingEnv.step (observations, reward, termination; zero actions in the\n"
+            "default relative mode, reset when an episode ends) and, in the same run, raw\n"
+            "mujoco.mj_step on the same compiled model from the same start state. The ratio\n"
+            "env_steps_per_s x substeps / raw_mj_steps_per_s is the share of time left to\n"
+            "physics (target >= 0.5: observation building and reward must not dominate)."
+        ),
+        epilog="example: grip bench-env --json bench_env.json",
+    )
+    p.add_argument("--steps", type=int, default=3000, help="env steps to time (default 3000)")
+    p.add_argument("--reference", type=Path, default=None,
+                   help="reference-set file (default: the bundled sample)")  # fmt: skip
+    p.add_argument("--repeats", type=int, default=3, help="best of N timings (default 3)")
+    p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
+    p.set_defaults(func=cmd_bench_env)
+
+
+def bench_env(steps: int, reference: str | None = None, repeats: int = 3) -> dict:
+    """Env steps/s and raw mj_step/s (best of ``repeats``), single process, single thread."""
+    import time
+
+    import mujoco
+    import numpy as np
+
+    from envs.config import TrackingEnvConfig
+    from envs.tracking_env import GripTrackingEnv
+
+    env = GripTrackingEnv(TrackingEnvConfig(reference=reference or ""))
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
+
+    def run_env() -> float:
+        env.reset(seed=0)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            _, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                env.reset()
+        return time.perf_counter() - t0
+
+    env.reset(seed=0)
+    model = env.model
+    start = mujoco.MjData(model)
+    start.qpos[:], start.qvel[:], start.ctrl[:] = env.data.qpos, env.data.qvel, env.data.ctrl
+    data = mujoco.MjData(model)
+    n_raw = steps * env.cfg.substeps
+
+    def run_raw() -> float:
+        mujoco.mj_copyData(data, model, start)
+        t0 = time.perf_counter()
+        for i in range(n_raw):
+            mujoco.mj_step(model, data)
+            if i % 400 == 399:  # restart like the env does after its (short) episodes
+                mujoco.mj_copyData(data, model, start)
+        return time.perf_counter() - t0
+
+    env_s = min(run_env() for _ in range(repeats))
+    raw_s = min(run_raw() for _ in range(repeats))
+    env_sps = steps / env_s
+    raw_sps = n_raw / raw_s
+    return {
+        "env_steps_per_s": env_sps,
+        "raw_mj_steps_per_s": raw_sps,
+        "substeps": env.cfg.substeps,
+        "physics_share": env_sps * env.cfg.substeps / raw_sps,
+        "steps": steps,
+    }
+
+
+def cmd_bench_env(args: argparse.Namespace) -> int:
+    import json
+
+    from grip.cli.main import CliError
+    from grip.core.atomic import atomic_write_text
+    from grip.core.reference import ReferenceError
+
+    if args.steps < 1 or args.repeats < 1:
+        raise CliError("--steps and --repeats must be >= 1")
+    try:
+        res = bench_env(args.steps, str(args.reference) if args.reference else None, args.repeats)
+    except (OSError, ReferenceError) as e:
+        raise CliError(str(e)) from e
+    for k, v in res.items():
+        print(f"{k:22s} {v:.4g}" if isinstance(v, float) else f"{k:22s} {v}")
+    if args.json:
+        atomic_write_text(args.json, json.dumps(res, indent=1))
+        print(f"wrote {args.json}")
+    return 0

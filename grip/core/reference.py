@@ -1,0 +1,301 @@
+"""Reference motions for the tracking environment: a small numpy protocol (no torch, no MuJoCo).
+
+It lives in ``grip.core`` because both sides use it: ``envs`` reads it, and
+:mod:`grip.kinematics.reference` (torch) writes it; neither may import the other.
+
+The environment never runs KinematicsNet. For every recording, :mod:`grip.kinematics.reference`
+precomputes the KinematicsNet estimate once (offline, batched) and stores it next to the ground
+truth and the sensor features in a :class:`ReferenceSet` file; the environment only indexes
+arrays. What the env reads from a clip:
+
+* the **estimate** (observations, and the reference pose of relative actions): root-relative
+  joint positions, global joint rotations, leaf/pelvis velocities, the integrated root
+  trajectory, hinge angles and angular velocities derived from them;
+* the **ground truth** (imitation reward, reference state initialisation, early termination):
+  the pose as ``qpos``, and joint positions, rotations, linear and angular velocities from FK;
+* the **sensor features** (the same inputs KinematicsNet sees), for the sensor observation;
+* the subject's body (height, mass) and the recording's scene objects (terrain).
+
+Only primary arrays are stored (float32, compressed); derived arrays are computed on load in
+numpy, so a file of a few seconds of motion stays small enough to bundle.
+
+Array conventions: world frame z up, metres, radians, w-first quaternions; hinge angles in SMPL
+order (joint 1..23 x hinge x, y, z), i.e. :func:`grip.core.mjcf.hinge_names` order, *not*
+MuJoCo's ``qpos`` order (the env maps them through its index arrays).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.core.body import BodyParams, build_body
+from grip.core.fk import forward_kinematics
+from grip.core.rotations import (
+    angular_velocity,
+    euler_xyz_to_matrix,
+    matrix_to_euler_xyz,
+    quat_to_matrix,
+    sixd_to_matrix,
+)
+
+FORMAT_VERSION = 1
+
+VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
+"""Joints of ``est_vel``: wrists, ankles, head (GRIP's leaves), then the pelvis."""
+
+N_HINGES = 3 * (sk.N_JOINTS - 1)
+
+# name -> trailing shape of the stored (primary) arrays; T is the first axis of each.
+PRIMARY: dict[str, tuple[int, ...]] = {
+    "gt_qpos": (7 + N_HINGES,),
+    "est_pos": (sk.N_JOINTS, 3),
+    "est_rot6d": (sk.N_JOINTS, 6),
+    "est_vel": (len(VELOCITY_JOINTS), 3),
+    "sensor": (-1,),
+}
+
+
+class ReferenceError(ValueError):
+    """A reference file or clip is malformed (the message names the file and the key)."""
+
+
+def local_rot_from_qpos(qpos: np.ndarray) -> np.ndarray:
+    """``(T, 76)`` reference ``qpos`` (hinges in SMPL order) -> ``(T, 24, 3, 3)`` local rotations
+    (row 0 = the root's world rotation)."""
+    t = qpos.shape[0]
+    local = np.empty((t, sk.N_JOINTS, 3, 3))
+    local[:, 0] = quat_to_matrix(qpos[:, 3:7])
+    local[:, 1:] = euler_xyz_to_matrix(qpos[:, 7:].reshape(t, sk.N_JOINTS - 1, 3))
+    return local
+
+
+def hinge_angles(global_rot: np.ndarray) -> np.ndarray:
+    """``(T, 24, 3, 3)`` global rotations -> ``(T, 69)`` hinge angles (SMPL order), unwrapped
+    over time so that finite differences stay small."""
+    parent = global_rot[:, list(sk.PARENTS[1:])]
+    local = np.swapaxes(parent, -1, -2) @ global_rot[:, 1:]
+    e = matrix_to_euler_xyz(local).reshape(global_rot.shape[0], -1)
+    return np.unwrap(e, axis=0)
+
+
+@dataclass(eq=False)
+class ReferenceClip:
+    """One recording prepared for the environment (see the module docstring).
+
+    Attributes (T frames at ``fps``):
+        name, category: From the recording.
+        fps: Frame rate, Hz (the env's control rate must match).
+        body: Subject parameters; the env builds its humanoid from them.
+        gt_qpos: ``(T, 76)`` ground-truth ``[root_pos_world, root_quat_wxyz, 69 hinges]``.
+        est_pos: ``(T, 24, 3)`` KinematicsNet joint positions minus the root, world axes, m.
+        est_rot6d: ``(T, 24, 6)`` KinematicsNet global joint rotations, 6D.
+        est_vel: ``(T, 6, 3)`` KinematicsNet world velocities of :data:`VELOCITY_JOINTS`, m/s.
+        sensor: ``(T, F)`` the KinematicsNet input features (unnormalised).
+        objects: Scene meshes ``{name: (vertices (V, 3), faces (F, 3))}`` or ``None``.
+
+    Derived on construction (float64): ``gt_qvel (T, 75)`` (root linear velocity in the world,
+    root angular velocity in the root frame, hinge rates: MuJoCo's free-joint convention),
+    ``gt_pos``, ``gt_rot``, ``gt_vel``, ``gt_angvel`` (world, per joint), ``est_rot (T, 24, 3, 3)``,
+    ``est_angvel (T, 24, 3)`` (world), ``est_hinge (T, 69)``, ``est_hinge_vel (T, 69)``, ``est_root_pos (T, 3)`` (the root
+    integrated from the estimated pelvis velocity, starting at the ground truth).
+    """
+
+    name: str
+    category: str
+    fps: float
+    body: BodyParams
+    gt_qpos: np.ndarray
+    est_pos: np.ndarray
+    est_rot6d: np.ndarray
+    est_vel: np.ndarray
+    sensor: np.ndarray
+    objects: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
+
+    def __post_init__(self) -> None:
+        where = f"clip {self.name!r}"
+        arrays = {k: np.asarray(getattr(self, k), dtype=np.float64) for k in PRIMARY}
+        t = arrays["gt_qpos"].shape[0] if arrays["gt_qpos"].ndim else 0
+        if t < 2:
+            raise ReferenceError(f"{where}: needs at least 2 frames, got {t}")
+        for k, shape in PRIMARY.items():
+            a = arrays[k]
+            if (
+                a.ndim != 1 + len(shape)
+                or a.shape[0] != t
+                or any(s not in (-1, d) for s, d in zip(shape, a.shape[1:], strict=True))
+            ):
+                dims = ", ".join("F" if s < 0 else str(s) for s in shape)
+                raise ReferenceError(f"{where}: {k} has shape {a.shape}, expected (T={t}, {dims})")
+            if not np.isfinite(a).all():
+                bad = int(np.argwhere(~np.isfinite(a.reshape(t, -1)).all(axis=1))[0, 0])
+                raise ReferenceError(f"{where}: {k} has non-finite values (first at frame {bad})")
+            setattr(self, k, a)
+        if not self.fps > 0:
+            raise ReferenceError(f"{where}: fps must be positive, got {self.fps}")
+        self._derive()
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.gt_qpos.shape[0])
+
+    def _derive(self) -> None:
+        fps = float(self.fps)
+        q = self.gt_qpos
+        q[:, 3:7] /= np.linalg.norm(q[:, 3:7], axis=1, keepdims=True)
+        local = local_rot_from_qpos(q)
+        offsets = build_body(self.body).offsets
+        gt_rot, gt_pos = forward_kinematics(local, q[:, :3], offsets)
+        qvel = np.empty((self.n_frames, 6 + N_HINGES))
+        qvel[:, :3] = np.gradient(q[:, :3], axis=0) * fps
+        qvel[:, 3:6] = angular_velocity(local[:, 0], fps, local=True)
+        qvel[:, 6:] = np.gradient(np.unwrap(q[:, 7:], axis=0), axis=0) * fps
+        est_rot = sixd_to_matrix(self.est_rot6d)
+        est_hinge = hinge_angles(est_rot)
+        root0 = q[0, :3]
+        disp = np.concatenate([np.zeros((1, 3)), np.cumsum(self.est_vel[:-1, -1], axis=0) / fps])
+        derived = {
+            "gt_qvel": qvel,
+            "gt_pos": gt_pos,
+            "gt_rot": gt_rot,
+            "gt_vel": np.gradient(gt_pos, axis=0) * fps,
+            "gt_angvel": angular_velocity(gt_rot, fps),
+            "est_rot": est_rot,
+            "est_angvel": angular_velocity(est_rot, fps),
+            "est_hinge": est_hinge,
+            "est_hinge_vel": np.gradient(est_hinge, axis=0) * fps,
+            "est_root_pos": root0 + disp,
+        }
+        for k, v in derived.items():
+            setattr(self, k, v)
+
+
+class ReferenceSource(Protocol):
+    """What the environment needs from a collection of reference clips."""
+
+    def __len__(self) -> int: ...
+
+    def clip(self, i: int) -> ReferenceClip: ...
+
+
+class ReferenceSet:
+    """A list of :class:`ReferenceClip` with the feature settings they were made with.
+
+    Args:
+        clips: The clips (at least one).
+        sensor_sites: IMU sites of the ``sensor`` features, in channel order.
+        insoles: Whether the features end with the 10 insole values.
+        source: Where the clips came from (a path or a description), for messages.
+    """
+
+    def __init__(self, clips: list[ReferenceClip], sensor_sites: tuple[str, ...],
+                 insoles: bool, source: str = "<memory>") -> None:  # fmt: skip
+        if not clips:
+            raise ReferenceError(f"{source}: no reference clips")
+        widths = {c.sensor.shape[1] for c in clips}
+        if len(widths) != 1:
+            raise ReferenceError(f"{source}: clips have different sensor widths {sorted(widths)}")
+        expected = 15 * len(sensor_sites) + (10 if insoles else 0)
+        if widths != {expected}:
+            raise ReferenceError(f"{source}: sensor width {widths.pop()} does not match "
+                                 f"{len(sensor_sites)} sites (+insoles={insoles})")  # fmt: skip
+        self.clips = list(clips)
+        self.sensor_sites = tuple(sensor_sites)
+        self.insoles = bool(insoles)
+        self.source = source
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def clip(self, i: int) -> ReferenceClip:
+        return self.clips[i]
+
+    @property
+    def sensor_dim(self) -> int:
+        return int(self.clips[0].sensor.shape[1])
+
+    @property
+    def total_frames(self) -> int:
+        return sum(c.n_frames for c in self.clips)
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> None:
+        """Write a compressed ``.npz`` (float32 arrays, JSON metadata; no pickles), atomically."""
+        from grip.core.atomic import atomic_write
+
+        meta = {
+            "format": "grip-reference",
+            "version": FORMAT_VERSION,
+            "sensor_sites": list(self.sensor_sites),
+            "insoles": self.insoles,
+            "clips": [],
+        }
+        arrays: dict[str, np.ndarray] = {}
+        for i, c in enumerate(self.clips):
+            meta["clips"].append({
+                "name": c.name, "category": c.category, "fps": c.fps,
+                "body": {"height_m": c.body.height_m, "mass_kg": c.body.mass_kg},
+                "objects": sorted(c.objects) if c.objects else [],
+            })  # fmt: skip
+            for k in PRIMARY:
+                arrays[f"{i}/{k}"] = getattr(c, k).astype(np.float32)
+            arrays[f"{i}/gt_qpos"] = c.gt_qpos  # float64: root positions of long clips
+            for name, (v, f) in (c.objects or {}).items():
+                arrays[f"{i}/objects/{name}/vertices"] = np.asarray(v, dtype=np.float64)
+                arrays[f"{i}/objects/{name}/faces"] = np.asarray(f, dtype=np.int64)
+        arrays["__meta__"] = np.array(json.dumps(meta))
+
+        def write(f) -> None:
+            np.savez_compressed(f, **arrays)
+
+        atomic_write(path, write)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> ReferenceSet:
+        """Read a file written by :meth:`save`.
+
+        Raises:
+            ReferenceError: Not a reference file, a missing key, a bad shape or value (the
+                message names the file and the key).
+        """
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError) as e:
+            raise ReferenceError(f"{path}: not a readable .npz reference file ({e})") from e
+        try:
+            meta = json.loads(str(data["__meta__"]))
+        except (KeyError, json.JSONDecodeError) as e:
+            raise ReferenceError(f"{path}: missing or corrupt '__meta__' ({e})") from e
+        if meta.get("format") != "grip-reference":
+            raise ReferenceError(f"{path}: not a grip reference file")
+        if meta.get("version") != FORMAT_VERSION:
+            raise ReferenceError(f"{path}: format version {meta.get('version')}, this code "
+                                 f"reads {FORMAT_VERSION}")  # fmt: skip
+        clips = []
+        try:
+            for i, cm in enumerate(meta["clips"]):
+                objects = None
+                if cm["objects"]:
+                    objects = {
+                        n: (data[f"{i}/objects/{n}/vertices"], data[f"{i}/objects/{n}/faces"])
+                        for n in cm["objects"]
+                    }
+                body = BodyParams(height_m=float(cm["body"]["height_m"]),
+                                  mass_kg=float(cm["body"]["mass_kg"]))  # fmt: skip
+                clips.append(ReferenceClip(
+                    name=str(cm["name"]), category=str(cm["category"]), fps=float(cm["fps"]),
+                    body=body, objects=objects, **{k: data[f"{i}/{k}"] for k in PRIMARY},
+                ))  # fmt: skip
+            return cls(clips, tuple(meta["sensor_sites"]), bool(meta["insoles"]), str(path))
+        except KeyError as e:
+            raise ReferenceError(f"{path}: missing key {e}") from e
+        except ReferenceError as e:
+            raise ReferenceError(f"{path}: {e}") from e
