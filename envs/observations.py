@@ -100,12 +100,10 @@ def observation_parts(
     vecs = np.concatenate(rows) @ h
     e_leaf = est_rot[_IMU]
     d_rot = e_leaf @ np.swapaxes(sim_rot[_IMU], -1, -2)
-    stack = np.concatenate([sim_rot, e_leaf, d_rot])  # (M, 3, 3)
-    m = stack.shape[0]
-    # h.T @ R for every R as one (3 x 3) @ (3 x 3M) product; then d_rot @ h as (4*3 x 3) @ h
-    rots = (h.T @ stack.transpose(1, 0, 2).reshape(3, 3 * m)).reshape(3, m, 3).transpose(1, 0, 2)
-    rots[-_N_IMU:] = (rots[-_N_IMU:].reshape(-1, 3) @ h).reshape(_N_IMU, 3, 3)
-    six = np.swapaxes(rots[..., :2], -1, -2).reshape(-1, 6)
+    # Only the first two columns of each rotation are needed (6D). H.T @ R[:, :2] for every R
+    # is one (2M x 3) @ (3 x 3) product on the transposed columns; d_theta = H.T d_rot H.
+    cols = np.concatenate([sim_rot[..., :2], e_leaf[..., :2], d_rot @ h[:, :2]])
+    six = (np.swapaxes(cols, 1, 2).reshape(-1, 3) @ h).reshape(-1, 6)
     n = sk.N_JOINTS
     self_vec = np.concatenate([pos[0, 2:3], vecs[:_N_SELF_VEC].ravel(), six[:n].ravel()])
     kin = np.concatenate([six[n + _N_IMU :].ravel(), six[n : n + _N_IMU].ravel(),

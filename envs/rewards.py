@@ -17,7 +17,7 @@ TERMS: tuple[str, ...] = (*IMITATION_TERMS, "energy", "amp")
 def rotation_angles(sim_rot: np.ndarray, ref_rot: np.ndarray) -> np.ndarray:
     """Per-joint angle of ``sim^T ref``, rad. ``(J, 3, 3) x (J, 3, 3) -> (J,)``."""
     tr = np.einsum("jab,jab->j", sim_rot, ref_rot)
-    return np.arccos(np.clip((tr - 1.0) * 0.5, -1.0, 1.0))
+    return np.arccos(np.minimum(np.maximum((tr - 1.0) * 0.5, -1.0), 1.0))
 
 
 def imitation_terms(

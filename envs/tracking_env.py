@@ -48,6 +48,16 @@ _UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
                                        mujoco.mjtWarning.mjWARN_BADQACC)])  # fmt: skip
 """MuJoCo's warnings for a state it could not integrate (it then resets ``MjData`` itself)."""
 
+
+def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice for consecutive indices (basic indexing is cheaper than fancy indexing)."""
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
+_INFO_KEYS = tuple((k, f"reward/{k}") for k in R.TERMS)
+
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
 
 
@@ -72,6 +82,7 @@ class _Sim:
     qvel: np.ndarray
     act_force: np.ndarray
     warnings: np.ndarray  # live view of MjData.warning.number
+    act: slice | np.ndarray  # actuator_ids, as a slice when they are 0..68 in order
 
 
 class GripTrackingEnv(gym.Env):
@@ -175,7 +186,7 @@ class GripTrackingEnv(gym.Env):
         pelvis = int(index.body_ids[0])
         sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis, kd / kp,
                    d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel,
-                   d.actuator_force, d.warning.number)  # fmt: skip
+                   d.actuator_force, d.warning.number, _as_slice(act))  # fmt: skip
         if len(self._sims) >= 16:  # bounded cache: drop the oldest compiled model
             self._sims.pop(next(iter(self._sims)))
         self._sims[key] = sim
@@ -296,7 +307,8 @@ class GripTrackingEnv(gym.Env):
     def step(self, action):
         cfg, sim, clip = self.cfg, self._sim, self._clip
         m, d, ix = sim.model, sim.data, sim.index
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = np.minimum(np.maximum(a, -1.0), 1.0)  # (np.clip's dispatch costs more per step)
         if a.shape != (ix.actuator_ids.size,):
             raise ValueError(f"action must have shape ({ix.actuator_ids.size},), got {a.shape}")
         t = self._t + 1
@@ -307,11 +319,16 @@ class GripTrackingEnv(gym.Env):
                 target += sim.kd_over_kp * clip.est_hinge_vel[t]
         else:
             target = sim.lo + (a + 1.0) * half
-        sim.ctrl[ix.actuator_ids] = np.clip(target, sim.lo, sim.hi)
+        sim.ctrl[sim.act] = np.minimum(np.maximum(target, sim.lo), sim.hi)
         if cfg.pin_root:
             self._step_pinned(t)
         else:
-            mujoco.mj_step(m, d, nstep=cfg.substeps)
+            # mj_step = mj_step1 (positions, velocities) + mj_step2 (forces, integration). Run
+            # them as step2 + step1 so that positions and velocities of the new state are
+            # computed once, by the step itself (same trajectory as mj_step, bit for bit).
+            for _ in range(cfg.substeps):
+                mujoco.mj_step2(m, d)
+                mujoco.mj_step1(m, d)
         self._t = t
         self._steps += 1
         # After a state it cannot integrate (bad qpos, qvel or qacc) MuJoCo resets MjData and
@@ -324,14 +341,9 @@ class GripTrackingEnv(gym.Env):
             info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=np.inf,
                         mpjpe_m=np.inf, sim_unstable=True, blowups=self.blowups)  # fmt: skip
             return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
-        # positions and velocities of the state after the last substep (mj_step leaves the
-        # derived quantities one substep behind)
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        mujoco.mj_comVel(m, d)
         pvw, rot = self._sim_state()
         terms, sq = R.imitation_terms(pvw, rot, self._gt_pvw[t], clip.gt_rot[t], cfg.reward)
-        power = R.mechanical_power(sim.act_force[ix.actuator_ids], sim.qvel[ix.hinge_dof_adr])
+        power = R.mechanical_power(sim.act_force[sim.act], sim.qvel[ix.hinge_dof_adr])
         terms["energy"] = power if self._steps > cfg.reward.energy_skip_frames else 0.0
         terms["amp"] = 0.0
         reward = 0.0
@@ -345,7 +357,7 @@ class GripTrackingEnv(gym.Env):
         )
         obs = self._observe(pvw, rot)
         self._last_obs = obs
-        info = {f"reward/{k}": v for k, v in terms.items()}
+        info = {key: terms[k] for k, key in _INFO_KEYS}
         info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=err,
                     mpjpe_m=float(dist.sum()) / dist.size, sim_unstable=False,
                     blowups=self.blowups)  # fmt: skip
@@ -361,6 +373,7 @@ class GripTrackingEnv(gym.Env):
             d.qpos[r + 3 : r + 7] = clip.gt_qpos[t if f >= 0.5 else t - 1, 3:7]
             d.qvel[rv : rv + 6] = clip.gt_qvel[t, :6]
             mujoco.mj_step(m, d)
+        mujoco.mj_step1(m, d)  # derived quantities of the final state (see step())
 
     # ------------------------------------------------------------------ rendering
     def render(self):

@@ -20,6 +20,10 @@ FORBIDDEN = {
     "grip.kinematics.features": ("torch", "mujoco", "envs", "policies"),
     "grip.kinematics": ("mujoco", "envs", "policies", "gymnasium"),
     "grip.cli.main": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
+    "grip.core.reference": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
+    "grip.sim": ("torch", "gymnasium", "stable_baselines3", "envs", "policies"),
+    "envs": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
+    "envs.tracking_env": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
 }  # fmt: skip
 
 _PROBE = """

@@ -23,12 +23,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=3000, help="env steps to time (default 3000)")
     p.add_argument("--reference", type=Path, default=None,
                    help="reference-set file (default: the bundled sample)")  # fmt: skip
-    p.add_argument("--repeats", type=int, default=3, help="best of N timings (default 3)")
+    p.add_argument("--repeats", type=int, default=5, help="best of N timings (default 5)")
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     p.set_defaults(func=cmd_bench_env)
 
 
-def bench_env(steps: int, reference: str | None = None, repeats: int = 3) -> dict:
+def bench_env(steps: int, reference: str | None = None, repeats: int = 5) -> dict:
     """Env steps/s and raw mj_step/s (best of ``repeats``), single process, single thread."""
     import time
 

@@ -102,9 +102,10 @@ class ReferenceClip:
 
     Derived on construction (float64): ``gt_qvel (T, 75)`` (root linear velocity in the world,
     root angular velocity in the root frame, hinge rates: MuJoCo's free-joint convention),
-    ``gt_pos``, ``gt_rot``, ``gt_vel``, ``gt_angvel`` (world, per joint), ``est_rot (T, 24, 3, 3)``,
-    ``est_angvel (T, 24, 3)`` (world), ``est_hinge (T, 69)``, ``est_hinge_vel (T, 69)``, ``est_root_pos (T, 3)`` (the root
-    integrated from the estimated pelvis velocity, starting at the ground truth).
+    ``gt_pos``, ``gt_rot``, ``gt_vel``, ``gt_angvel`` (world, per joint),
+    ``est_rot (T, 24, 3, 3)``, ``est_angvel (T, 24, 3)`` (world), ``est_hinge (T, 69)``,
+    ``est_hinge_vel (T, 69)``, ``est_root_pos (T, 3)`` (the root integrated from the estimated
+    pelvis velocity, starting at the ground truth).
     """
 
     name: str

@@ -73,22 +73,22 @@ INSOLE_BACK_CELLS: tuple[int, ...] = (0, 1, 2, 3)
 
 INSOLE_CELL_UV: np.ndarray = np.array(
     [
-        [-0.41, 0.12],   # 0 rear heel, medial
+        [-0.41, 0.12],  # 0 rear heel, medial
         [-0.41, -0.12],  # 1 rear heel, lateral
-        [-0.29, 0.13],   # 2 front heel, medial
+        [-0.29, 0.13],  # 2 front heel, medial
         [-0.29, -0.15],  # 3 front heel, lateral
-        [-0.14, 0.04],   # 4 rear midfoot, central
+        [-0.14, 0.04],  # 4 rear midfoot, central
         [-0.14, -0.22],  # 5 rear midfoot, lateral
-        [0.00, 0.20],    # 6 small medial arch
-        [0.00, -0.26],   # 7 lateral arch
-        [0.19, 0.27],    # 8 first metatarsal head (largest)
-        [0.20, 0.12],    # 9 second metatarsal head
-        [0.18, -0.02],   # 10 third metatarsal head
-        [0.15, -0.15],   # 11 fourth metatarsal head
-        [0.11, -0.28],   # 12 fifth metatarsal head
-        [0.40, 0.24],    # 13 hallux
-        [0.38, 0.02],    # 14 second/third toes
-        [0.33, -0.20],   # 15 fourth/fifth toes
+        [0.00, 0.20],  # 6 small medial arch
+        [0.00, -0.26],  # 7 lateral arch
+        [0.19, 0.27],  # 8 first metatarsal head (largest)
+        [0.20, 0.12],  # 9 second metatarsal head
+        [0.18, -0.02],  # 10 third metatarsal head
+        [0.15, -0.15],  # 11 fourth metatarsal head
+        [0.11, -0.28],  # 12 fifth metatarsal head
+        [0.40, 0.24],  # 13 hallux
+        [0.38, 0.02],  # 14 second/third toes
+        [0.33, -0.20],  # 15 fourth/fifth toes
     ]
 )
 """Cell centres in the normalised insole plane, ``(16, 2)``: u along heel->toe divided by foot

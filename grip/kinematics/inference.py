@@ -77,7 +77,7 @@ class KinematicsEstimator:
         x = np.zeros((len(feats), t_max, feats[0].shape[1]), dtype=np.float32)
         for i, f in enumerate(feats):
             x[i, : len(f)] = f
-            x[i, len(f):] = f[-1]  # causal model: padding never affects earlier frames
+            x[i, len(f) :] = f[-1]  # causal model: padding never affects earlier frames
         with torch.no_grad():
             out, _ = self.model(torch.from_numpy(x), self.model.initial_state(self._first(recs)))
         res = []

@@ -90,7 +90,8 @@ class KinematicsNet(nn.Module):
         Args:
             x: ``(B, T, n_inputs)`` normalised features.
             state: Per-stage ``(h, c)`` from :meth:`initial_state` or a previous call.
-            only: Stop after this stage (stage-wise training).
+            only: Stop after this stage (stage-wise training); the stages before it are run
+                without gradients.
 
         Returns:
             ``{stage: (B, T, dim)}`` outputs and the new states.
@@ -98,8 +99,14 @@ class KinematicsNet(nn.Module):
         outs: dict[str, torch.Tensor] = {}
         new_state: State = {}
         inp = x
+        frozen = only is not None
         for name in STAGES:
-            y, new_state[name] = self.stages[name](inp, state[name])
+            if name == only:
+                frozen = False
+            # Stage-wise training: the stages before ``only`` run without gradients, so that
+            # training one stage never changes the ones it reads from.
+            with torch.set_grad_enabled(torch.is_grad_enabled() and not frozen):
+                y, new_state[name] = self.stages[name](inp, state[name])
             outs[name] = y
             if name == only:
                 break

@@ -214,7 +214,8 @@ class Trainer:
         if augment and self.cfg.train.acc_noise > 0:
             idx = torch.tensor([s * 15 + k for s in range(n_sites) for k in range(3)])
             xt[..., idx] += self.cfg.train.acc_noise * torch.from_numpy(
-                self.rng.standard_normal((*xt.shape[:2], len(idx))).astype(np.float32))
+                self.rng.standard_normal((*xt.shape[:2], len(idx))).astype(np.float32)
+            )
         return xt, yt
 
     def losses(self, x: torch.Tensor, y: dict[str, torch.Tensor],
@@ -274,8 +275,12 @@ class Trainer:
                 if progress is not None:
                     progress({"phase": phase, "loss": total.item()})
             val = self.validate()
-            record = {"epoch": self.epoch, "phase": phase,
-                      "train": {k: v / tc.steps_per_epoch for k, v in sums.items()}, "val": val}
+            record = {
+                "epoch": self.epoch,
+                "phase": phase,
+                "train": {k: v / tc.steps_per_epoch for k, v in sums.items()},
+                "val": val,
+            }
             self.history.append(record)
             if writer is not None:
                 for k, v in record["train"].items():
@@ -351,6 +356,23 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     if missing:
         raise ValueError(f"{path}: checkpoint lacks {missing}")
     return ck
+
+
+def export_for_inference(src: str | os.PathLike, dst: str | os.PathLike, half: bool = True) -> int:
+    """Write a small inference-only copy of a training checkpoint (no optimiser state).
+
+    Weights are stored as float16 with ``half`` (they are cast back to float32 on load); the
+    normaliser, the configuration and the training history stay. Returns the file size, bytes.
+    """
+    ck = load_checkpoint(src)
+    model = {k: (v.half() if half and v.is_floating_point() else v) for k, v in ck["model"].items()}
+    out = {k: ck[k] for k in ("version", "config", "norm_mean", "norm_std", "epoch", "history")
+           if k in ck}  # fmt: skip
+    out["model"] = model
+    buf = io.BytesIO()
+    torch.save(out, buf)
+    atomic_write(dst, lambda f: f.write(buf.getvalue()))
+    return len(buf.getvalue())
 
 
 def write_run_config(run_dir: Path, cfg: KinematicsRunConfig, extra: dict) -> None:

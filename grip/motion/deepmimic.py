@@ -94,7 +94,6 @@ class DeepMimicSkeleton:
         return 1 + sum(_DOF_SIZE[t] for t in self.types)
 
 
-
 def _read_json(path: str | os.PathLike) -> object:
     """Parse a JSON file; failures become :class:`MotionImportError` naming the file."""
     path_s = str(path)
@@ -104,6 +103,7 @@ def _read_json(path: str | os.PathLike) -> object:
         raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
     except json.JSONDecodeError as exc:
         raise MotionImportError(path_s, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+
 
 def _end_site(
     shape: str, attach: np.ndarray, params: np.ndarray, joint_offset: np.ndarray

@@ -165,3 +165,32 @@ def test_sensor_sweep_trains_each_configuration_and_tabulates(
     assert "imu3_press" in capsys.readouterr().err
     assert main(["train-kin", "--data", str(built), "--out", str(sweep), "--sweep",
                  "--imus", "2,9"]) == 2  # fmt: skip
+
+
+def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> None:
+    run = tmp_path / "run"
+    main(["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+          "--set", "hidden=8", "--set", "layers=1", "--set", "init_hidden=8",
+          "--set", "train.window_frames=20", "--set", "train.batch_size=2",
+          "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
+          "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"])  # fmt: skip
+    small = tmp_path / "kin16.pt"
+    assert main(["kin-export", str(run / "last.pt"), "--out", str(small)]) == 0
+    assert small.stat().st_size < (run / "last.pt").stat().st_size
+    ref = tmp_path / "ref.npz"
+    assert main(["data", "reference", "--data", str(built), "--split", "all", "--kin", str(small),
+                 "--max-frames", "120", "--out", str(ref)]) == 0  # fmt: skip
+    from grip.core.reference import ReferenceSet
+
+    rs = ReferenceSet.load(ref)
+    assert len(rs) >= 1 and max(c.n_frames for c in rs.clips) <= 120
+    js = tmp_path / "bench.json"
+    assert main(["bench-env", "--reference", str(ref), "--steps", "20", "--repeats", "1",
+                 "--json", str(js)]) == 0  # fmt: skip
+    res = json.loads(js.read_text())
+    assert res["substeps"] == 2 and res["env_steps_per_s"] > 0 and res["raw_mj_steps_per_s"] > 0
+    assert main(["data", "reference", "--out", str(ref)]) == 2  # neither files nor --data
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"garbage")
+    assert main(["bench-env", "--reference", str(bad), "--steps", "2"]) == 2
+    assert "bad.npz" in capsys.readouterr().err

@@ -175,3 +175,20 @@ def test_stairs_show_up_in_the_height_map(walk_reference) -> None:
     np.testing.assert_allclose(hm[12, 12], 0.30, atol=0.02)  # under the pelvis
     assert hm[12, -1] > hm[12, 12] + 0.1 > hm[12, 0] + 0.2  # higher ahead, lower behind
     np.testing.assert_allclose(hm[0, 12], hm[-1, 12], atol=1e-6)  # level across the stairs
+
+
+def test_split_substeps_follow_mj_step_bit_for_bit(walk_reference) -> None:
+    import mujoco
+
+    env = _env(walk_reference, random_start=False, termination_dist_m=0.0)
+    env.reset(seed=0)
+    m = env.model
+    twin = mujoco.MjData(m)
+    mujoco.mj_copyData(twin, m, env.data)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        env.step(rng.uniform(-0.2, 0.2, 69).astype(np.float32))
+        twin.ctrl[:] = env.data.ctrl
+        mujoco.mj_step(m, twin, nstep=2)
+        np.testing.assert_array_equal(env.data.qpos, twin.qpos)
+        np.testing.assert_array_equal(env.data.qvel, twin.qvel)

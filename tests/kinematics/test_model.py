@@ -61,3 +61,17 @@ def test_initial_state_depends_on_the_first_frame():
     other = {k: v + 1.0 for k, v in _first(1).items()}
     b = net.initial_state(other)
     assert not torch.allclose(a["lp"][0], b["lp"][0])
+
+
+def test_stage_wise_training_leaves_earlier_stages_untouched():
+    cfg = KinematicsNetConfig(n_inputs=7, hidden=8, layers=1, init_hidden=4)
+    net = KinematicsNet(cfg)
+    x = torch.randn(2, 5, 7)
+    first = {k: torch.zeros(2, s.head.out_features) for k, s in net.stages.items()}
+    out, _ = net(x, net.initial_state(first), only="fa")
+    out["fa"].pow(2).mean().backward()
+    for name in ("lp", "fp"):
+        assert all(p.grad is None for p in net.stages[name].lstm.parameters())
+    assert any(p.grad is not None and p.grad.abs().sum() > 0
+               for p in net.stages["fa"].parameters())  # fmt: skip
+    assert "lv" not in out
