@@ -18,13 +18,13 @@ def _env(ref, **kw) -> GripTrackingEnv:
     return GripTrackingEnv(TrackingEnvConfig(**kw), reference=ref)
 
 
-def test_gymnasium_and_sb3_check_env(walk_reference) -> None:
+def test_gymnasium_and_sb3_check_env(reference) -> None:
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = _env(walk_reference)
+    env = _env(reference)
     check_env(env, skip_render_check=True)
-    sb3_check_env(_env(walk_reference), warn=True)
+    sb3_check_env(_env(reference), warn=True)
 
 
 def test_make_with_no_arguments_uses_the_bundled_sample() -> None:
@@ -48,20 +48,20 @@ def _rollout(env, seed: int, n: int = 15):
     return out
 
 
-def test_same_seed_gives_identical_trajectories(walk_reference) -> None:
-    a = _rollout(_env(walk_reference), seed=7)
-    b = _rollout(_env(walk_reference), seed=7)
+def test_same_seed_gives_identical_trajectories(reference) -> None:
+    a = _rollout(_env(reference), seed=7)
+    b = _rollout(_env(reference), seed=7)
     assert len(a) == len(b)
     for x, y in zip(a[1:], b[1:], strict=True):
         for k in x[0]:
             np.testing.assert_array_equal(x[0][k], y[0][k])
         assert x[1:] == y[1:]
-    c = _rollout(_env(walk_reference), seed=8)
+    c = _rollout(_env(reference), seed=8)
     assert any(not np.array_equal(a[0][k], c[0][k]) for k in a[0])  # random start differs
 
 
-def test_observations_lie_in_the_space_and_share_no_memory(walk_reference) -> None:
-    env = _env(walk_reference)
+def test_observations_lie_in_the_space_and_share_no_memory(reference) -> None:
+    env = _env(reference)
     obs0, _ = env.reset(seed=1)
     obs1, *_ = env.step(np.zeros(69, dtype=np.float32))
     for k, space in env.observation_space.spaces.items():
@@ -75,8 +75,8 @@ def test_observations_lie_in_the_space_and_share_no_memory(walk_reference) -> No
     assert before["sensor"].shape == obs2["sensor"].shape
 
 
-def test_reward_is_the_weighted_sum_of_its_terms(walk_reference) -> None:
-    env = _env(walk_reference)
+def test_reward_is_the_weighted_sum_of_its_terms(reference) -> None:
+    env = _env(reference)
     env.reset(seed=2)
     w = env.cfg.reward.weights
     for _ in range(6):
@@ -91,8 +91,8 @@ def test_reward_is_the_weighted_sum_of_its_terms(walk_reference) -> None:
 
 
 @pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel"])
-def test_ablation_flags_set_the_kinematic_observation(walk_reference, variant) -> None:
-    env = _env(walk_reference, kinematic_obs=variant)
+def test_ablation_flags_set_the_kinematic_observation(reference, variant) -> None:
+    env = _env(reference, kinematic_obs=variant)
     obs, _ = env.reset(seed=0)
     assert obs["kinematic"].shape == (kinematic_dim(variant),)
 
@@ -133,22 +133,22 @@ def test_without_a_policy_the_humanoid_falls(walk_reference) -> None:
     assert min(heights) < 0.5  # the standing pelvis is at ~0.9 m
 
 
-def test_early_termination_and_truncation(walk_reference) -> None:
-    env = _env(walk_reference, action_mode="absolute")
+def test_early_termination_and_truncation(reference) -> None:
+    env = _env(reference, action_mode="absolute")
     env.reset(seed=0)
     for _ in range(200):
         _, _, term, trunc, info = env.step(np.ones(69, np.float32))  # limbs to their limits
         if term or trunc:
             break
     assert term and not trunc and info["max_joint_err_m"] > 0.25
-    env = _env(walk_reference, max_episode_frames=5, termination_dist_m=0.0)
+    env = _env(reference, max_episode_frames=5, termination_dist_m=0.0)
     env.reset(seed=0)
     dones = [env.step(np.zeros(69, np.float32))[3] for _ in range(5)]
     assert dones == [False] * 4 + [True]
 
 
-def test_a_blow_up_ends_the_episode_cleanly_and_is_counted(walk_reference) -> None:
-    env = _env(walk_reference)
+def test_a_blow_up_ends_the_episode_cleanly_and_is_counted(reference) -> None:
+    env = _env(reference)
     obs, _ = env.reset(seed=0)
     env.data.qvel[:] = 1e12  # a state MuJoCo cannot integrate
     obs, r, term, _trunc, info = env.step(np.zeros(69, np.float32))
@@ -159,11 +159,11 @@ def test_a_blow_up_ends_the_episode_cleanly_and_is_counted(walk_reference) -> No
     assert not info["sim_unstable"] and info["blowups"] == 1
 
 
-def test_stairs_show_up_in_the_height_map(walk_reference) -> None:
+def test_stairs_show_up_in_the_height_map(reference) -> None:
     from grip.core.body import CANONICAL_TO_WORLD
     from grip.core.rotations import matrix_to_quat
 
-    env = _env(walk_reference, terrain="stairs", random_start=False)
+    env = _env(reference, terrain="stairs", random_start=False)
     env.reset(seed=0)
     # put the pelvis above the second tread (y = 1.1-1.4 m, 0.3 m high), facing +y: up the stairs
     env.data.qpos[:3] = (0.0, 1.25, 1.3)
@@ -177,10 +177,10 @@ def test_stairs_show_up_in_the_height_map(walk_reference) -> None:
     np.testing.assert_allclose(hm[0, 12], hm[-1, 12], atol=1e-6)  # level across the stairs
 
 
-def test_split_substeps_follow_mj_step_bit_for_bit(walk_reference) -> None:
+def test_split_substeps_follow_mj_step_bit_for_bit(reference) -> None:
     import mujoco
 
-    env = _env(walk_reference, random_start=False, termination_dist_m=0.0)
+    env = _env(reference, random_start=False, termination_dist_m=0.0)
     env.reset(seed=0)
     m = env.model
     twin = mujoco.MjData(m)
