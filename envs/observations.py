@@ -21,9 +21,6 @@ IMU_JOINTS: tuple[int, ...] = (
 )  # fmt: skip
 """Bodies carrying GRIP's four IMUs (ankles, forearms): where D_leaf's rotation terms live."""
 
-VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
-"""Joints of the linear-velocity difference d_v: wrists, ankles, head, pelvis (KinematicsNet LV)."""
-
 SELF_DIM = 1 + 3 * (sk.N_JOINTS - 1) + 6 * sk.N_JOINTS + 3 * sk.N_JOINTS + 3 * sk.N_JOINTS
 
 
@@ -31,14 +28,14 @@ def kinematic_dim(variant: str) -> int:
     """Length of the state difference for a GRIP Table 4 variant."""
     n = len(IMU_JOINTS) * (6 + 3 + 6)  # d_theta, d_omega, theta_leaf
     if variant != "OA":
-        n += 3 * len(VELOCITY_JOINTS)  # d_v
+        n += 3 * len(sk.VELOCITY_JOINTS)  # d_v
     if variant in ("OAV_Jglo", "OAV_Jrel"):
         n += 2 * 3 * sk.N_JOINTS  # d_p and p
     return n
 
 
 _IMU = np.array(IMU_JOINTS)
-_VEL = np.array(VELOCITY_JOINTS)
+_VEL = np.array(sk.VELOCITY_JOINTS)
 _N_IMU = len(IMU_JOINTS)
 _N_SELF_VEC = (sk.N_JOINTS - 1) + 2 * sk.N_JOINTS  # rows of 3-vectors in O^self
 
@@ -57,9 +54,9 @@ def observation_parts(
     sim_pvw: np.ndarray,
     sim_rot: np.ndarray,
     est_pos: np.ndarray,
-    est_rot: np.ndarray,
+    est_leaf_rot: np.ndarray,
     est_vel: np.ndarray,
-    est_angvel: np.ndarray,
+    est_leaf_angvel: np.ndarray,
     est_root_pos: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """O^kin (GRIP's State Difference) and O^self, in the simulated heading frame.
@@ -74,9 +71,11 @@ def observation_parts(
             (rad/s) velocities.
         sim_rot: ``(J, 3, 3)`` simulated global joint rotations.
         est_pos: ``(J, 3)`` estimated joints minus the root (world axes), m.
-        est_rot: ``(J, 3, 3)`` estimated global rotations.
-        est_vel: ``(6, 3)`` estimated world velocities of :data:`VELOCITY_JOINTS`, m/s.
-        est_angvel: ``(J, 3)`` estimated world angular velocities, rad/s.
+        est_leaf_rot: ``(4, 3, 3)`` estimated global rotations of :data:`IMU_JOINTS`.
+        est_vel: ``(6, 3)`` estimated world velocities of the velocity joints
+            (:data:`grip.core.skeleton.VELOCITY_JOINTS`), m/s.
+        est_leaf_angvel: ``(4, 3)`` estimated world angular velocities of :data:`IMU_JOINTS`,
+            rad/s.
         est_root_pos: ``(3,)`` root integrated from the estimated pelvis velocity (J_glo), m.
 
     Returns:
@@ -90,7 +89,7 @@ def observation_parts(
     """
     pos, vel, w = sim_pvw
     rel = pos - pos[0]
-    rows = [rel[1:], vel, w, est_angvel[_IMU] - w[_IMU]]
+    rows = [rel[1:], vel, w, est_leaf_angvel - w[_IMU]]
     if variant != "OA":
         rows.append(est_vel - vel[_VEL])
     if variant == "OAV_Jrel":
@@ -98,7 +97,7 @@ def observation_parts(
     elif variant == "OAV_Jglo":
         rows += [(est_root_pos + est_pos) - pos, est_pos]
     vecs = np.concatenate(rows) @ h
-    e_leaf = est_rot[_IMU]
+    e_leaf = est_leaf_rot
     d_rot = e_leaf @ np.swapaxes(sim_rot[_IMU], -1, -2)
     # Only the first two columns of each rotation are needed (6D). H.T @ R[:, :2] for every R
     # is one (2M x 3) @ (3 x 3) product on the transposed columns; d_theta = H.T d_rot H.

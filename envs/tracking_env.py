@@ -38,7 +38,7 @@ from grip.core import skeleton as sk
 from grip.core.body import BodyParams
 from grip.core.mjcf import build_mjcf
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
-from grip.sim.model import HumanoidIndex
+from grip.sim.model import HumanoidIndex, write_pose_vector, write_velocity_vector
 
 SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_reference.npz"
 """The small bundled reference set used when the env is made without a reference."""
@@ -61,7 +61,7 @@ _INFO_KEYS = tuple((k, f"reward/{k}") for k in R.TERMS)
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
 
 
-@dataclass
+@dataclass(eq=False)
 class _Sim:
     """A compiled humanoid (one body and scene) with its data and index arrays."""
 
@@ -73,6 +73,7 @@ class _Sim:
     hi: np.ndarray
     pelvis_body: int
     kd_over_kp: np.ndarray  # (69,) s
+    half: np.ndarray  # (69,) half the hinge ranges, rad
     # views of MjData arrays, taken once (attribute access through the bindings is slow)
     xpos: np.ndarray
     xmat: np.ndarray
@@ -121,11 +122,14 @@ class GripTrackingEnv(gym.Env):
             raise ValueError(f"render_mode {render_mode!r}: use None or 'rgb_array'")
         self.render_mode = render_mode
         fps = 1.0 / cfg.control_dt_s
+        lengths = np.empty(len(reference))
         for i in range(len(reference)):
             c = reference.clip(i)
             if abs(c.fps - fps) > 1e-6 * fps:
                 raise ValueError(f"clip {c.name!r} runs at {c.fps} Hz but the env controls at "
                                  f"{fps:g} Hz (substeps x timestep)")  # fmt: skip
+            lengths[i] = c.n_frames
+        self._clip_p = lengths / lengths.sum()  # random starts pick clips by length
         self._sims: dict[tuple, _Sim] = {}
         self._grid = heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m)
         self._hm = np.zeros(len(self._grid))
@@ -149,8 +153,12 @@ class GripTrackingEnv(gym.Env):
         self._last_obs: dict[str, np.ndarray] | None = None
         self._renderer = None
         self._renderer_model = None
-        self._gt_pvw: np.ndarray = np.zeros(0)  # (T, 3, J, 3) of the current clip
-        self._gt_pvw_clip: ReferenceClip | None = None
+        self._cache_key: tuple | None = None  # (clip, sim) of the per-clip arrays below
+        self._gt_pvw = np.zeros(0)  # (T, 3, J, 3) ground-truth positions and velocities
+        self._est_leaf_rot = np.zeros(0)  # (T, 4, 3, 3) estimated rotations of the IMU bodies
+        self._est_leaf_angvel = np.zeros(0)  # (T, 4, 3)
+        self._ref_target = np.zeros(0)  # (T, 69) relative-action reference (+ feed-forward)
+        self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._n_bad = 0
         self._weights = tuple((k, float(getattr(cfg.reward.weights, k))) for k in R.TERMS)
 
@@ -185,6 +193,7 @@ class GripTrackingEnv(gym.Env):
         d = mujoco.MjData(model)
         pelvis = int(index.body_ids[0])
         sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis, kd / kp,
+                   0.5 * (rng[:, 1] - rng[:, 0]),
                    d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel,
                    d.actuator_force, d.warning.number, _as_slice(act))  # fmt: skip
         if len(self._sims) >= 16:  # bounded cache: drop the oldest compiled model
@@ -228,8 +237,7 @@ class GripTrackingEnv(gym.Env):
         elif cfg.clip_index >= 0:
             i = cfg.clip_index
         elif cfg.random_start:
-            lengths = np.array([self.reference.clip(k).n_frames for k in range(n)], dtype=float)
-            i = int(self.np_random.choice(n, p=lengths / lengths.sum()))
+            i = int(self.np_random.choice(n, p=self._clip_p))
         else:
             i = self._next_clip
             self._next_clip = (self._next_clip + 1) % n
@@ -250,23 +258,32 @@ class GripTrackingEnv(gym.Env):
         self._t = start
         self._steps = 0
         self._set_state(clip, start)
-        if self._gt_pvw_clip is not clip:
-            self._gt_pvw = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1)
-            self._gt_pvw_clip = clip
+        self._per_clip_arrays(clip)
         obs = self._observe(*self._sim_state())
         self._last_obs = obs
         return obs, {"clip": clip.name, "clip_index": i, "frame": start}
+
+    def _per_clip_arrays(self, clip: ReferenceClip) -> None:
+        """Per-clip arrays laid out for the step (gathered once per episode, not per step)."""
+        sim, cfg = self._sim, self.cfg
+        if self._cache_key != (clip, sim):
+            self._cache_key = (clip, sim)
+            self._gt_pvw = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1)
+            self._est_leaf_rot = clip.est_rot[:, O.IMU_JOINTS]
+            self._est_leaf_angvel = clip.est_angvel[:, O.IMU_JOINTS]
+            ref = clip.est_hinge
+            if cfg.velocity_feedforward:
+                ref = ref + sim.kd_over_kp * clip.est_hinge_vel
+            self._ref_target = ref  # PD target of a relative action of 0
+            self._action_gain = cfg.action_scale * sim.half
 
     def _set_state(self, clip: ReferenceClip, t: int) -> None:
         sim = self._sim
         m, d, ix = sim.model, sim.data, sim.index
         mujoco.mj_resetData(m, d)
-        q, v = clip.gt_qpos[t], clip.gt_qvel[t]
-        r, rv = ix.root_qpos_adr, ix.root_dof_adr
-        d.qpos[r : r + 7] = q[:7]
-        d.qpos[ix.hinge_qpos_adr] = q[7:]
-        d.qvel[rv : rv + 6] = v[:6]
-        d.qvel[ix.hinge_dof_adr] = v[6:]
+        q = clip.gt_qpos[t]
+        write_pose_vector(q, ix, d.qpos)
+        write_velocity_vector(clip.gt_qvel[t], ix, d.qvel)
         d.ctrl[ix.actuator_ids] = np.clip(q[7:], sim.lo, sim.hi)
         mujoco.mj_forward(m, d)
         self._n_bad = int(sim.warnings[_UNSTABLE].sum())
@@ -293,32 +310,34 @@ class GripTrackingEnv(gym.Env):
         root = pvw[0, 0]
         h = O.heading_matrix(rot[0])
         kin, self_vec = O.observation_parts(
-            cfg.kinematic_obs, h, pvw, rot, clip.est_pos[t], clip.est_rot[t], clip.est_vel[t],
-            clip.est_angvel[t], clip.est_root_pos[t],
+            cfg.kinematic_obs, h, pvw, rot, clip.est_pos[t], self._est_leaf_rot[t],
+            clip.est_vel[t], self._est_leaf_angvel[t], clip.est_root_pos[t],
         )  # fmt: skip
-        hm = sample_heightmap(self._sim.hfield, root[:2], h[:2, :2], self._grid, out=self._hm)
+        if self._sim.hfield is None:  # flat floor: the height map is the pelvis height
+            hm = np.full(self._grid.shape[0], -root[2], dtype=np.float32)
+        else:
+            hf = sample_heightmap(self._sim.hfield, root[:2], h[:2, :2], self._grid, out=self._hm)
+            hm = (hf - root[2]).astype(np.float32)
         return {
             "sensor": clip.sensor[t].astype(np.float32),
             "kinematic": kin.astype(np.float32),
             "self": self_vec.astype(np.float32),
-            "environment": (hm - root[2]).astype(np.float32),
+            "environment": hm,
         }
 
     def step(self, action):
         cfg, sim, clip = self.cfg, self._sim, self._clip
         m, d, ix = sim.model, sim.data, sim.index
         a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (ix.actuator_ids.size,) or not np.isfinite(a).all():
+            raise ValueError(f"action must be ({ix.actuator_ids.size},) finite values, got "
+                             f"shape {a.shape}")  # fmt: skip
         a = np.minimum(np.maximum(a, -1.0), 1.0)  # (np.clip's dispatch costs more per step)
-        if a.shape != (ix.actuator_ids.size,):
-            raise ValueError(f"action must have shape ({ix.actuator_ids.size},), got {a.shape}")
         t = self._t + 1
-        half = 0.5 * (sim.hi - sim.lo)
         if cfg.action_mode == "relative":
-            target = clip.est_hinge[t] + a * (cfg.action_scale * half)
-            if cfg.velocity_feedforward:
-                target += sim.kd_over_kp * clip.est_hinge_vel[t]
+            target = self._ref_target[t] + a * self._action_gain
         else:
-            target = sim.lo + (a + 1.0) * half
+            target = sim.lo + (a + 1.0) * sim.half
         sim.ctrl[sim.act] = np.minimum(np.maximum(target, sim.lo), sim.hi)
         if cfg.pin_root:
             self._step_pinned(t)

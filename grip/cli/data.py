@@ -219,13 +219,12 @@ def cmd_reference(args: argparse.Namespace) -> int:
     if bool(args.files) == (args.data is not None):
         raise CliError("give recording files or --data DIR (one of them)")
     if args.data is not None:
-        split_path = args.data / "split.json"
+        from grip.kinematics.dataset import split_files
+
         try:
-            split = json.loads(split_path.read_text())
-            ids = split["train"] + split["test"] if args.split == "all" else split[args.split]
-        except (OSError, ValueError, KeyError) as e:
-            raise CliError(f"{split_path}: {e}") from e
-        files = [args.data / "sequences" / f"{i}.npz" for i in ids]
+            files = split_files(args.data, args.split)
+        except (OSError, ValueError) as e:
+            raise CliError(str(e)) from e
     else:
         files = list(args.files)
     recs = []

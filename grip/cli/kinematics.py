@@ -235,9 +235,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise CliError(str(e)) from e
     recs = _load_split(args.data, args.split)
-    with tqdm(total=len(recs), unit="seq", desc="evaluating") as bar:
-        rows = evaluate_recordings(est, recs, args.segment_frames)
-        bar.update(len(recs))
+    with tqdm(unit="segment", desc="evaluating") as bar:
+        rows = evaluate_recordings(est, recs, args.segment_frames, progress=bar.update)
     agg = aggregate(rows)
     table = markdown_table(agg)
     print(table)
@@ -259,19 +258,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _load_split(data: Path, split: str) -> list:
-    import json
-
     from grip.cli.main import CliError
+    from grip.kinematics.dataset import split_files
     from prism_tools.io import load_recording
 
-    split_path = data / "split.json"
     try:
-        ids = json.loads(split_path.read_text())[split]
-        recs = [load_recording(data / "sequences" / f"{i}.npz") for i in ids]
-    except (OSError, ValueError, KeyError) as e:
-        raise CliError(f"{split_path}: {e}") from e
+        recs = [load_recording(f) for f in split_files(data, split)]
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
     if not recs:
-        raise CliError(f"{split_path}: the {split} split is empty")
+        raise CliError(f"{data / 'split.json'}: the {split} split is empty")
     return recs
 
 

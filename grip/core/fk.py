@@ -89,3 +89,25 @@ def rest_pose(n_frames: int = 1, world: bool = True) -> tuple[np.ndarray, np.nda
     if world:
         rot[:, 0] = CANONICAL_TO_WORLD
     return rot, np.zeros((n_frames, 3))
+
+
+def integrate_root(root0: np.ndarray, root_vel: np.ndarray, fps: float) -> np.ndarray:
+    """Root trajectory from a start position and per-frame world velocities (forward Euler).
+
+    Frame t's position is ``root0`` plus the velocities of frames 0..t-1 over ``fps``: how
+    GRIP turns KinematicsNet's pelvis velocity into a global trajectory.
+
+    Args:
+        root0: ``(3,)`` position at frame 0, m.
+        root_vel: ``(T, 3)`` world velocity per frame, m/s.
+        fps: Frame rate, Hz.
+
+    Returns:
+        ``(T, 3)`` positions, m.
+    """
+    root_vel = np.asarray(root_vel, dtype=np.float64)
+    pos = np.empty_like(root_vel)
+    pos[0] = root0
+    np.cumsum(root_vel[:-1] / fps, axis=0, out=pos[1:])
+    pos[1:] += root0
+    return pos

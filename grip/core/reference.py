@@ -36,19 +36,17 @@ import numpy as np
 
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams, build_body
-from grip.core.fk import forward_kinematics
+from grip.core.fk import forward_kinematics, integrate_root
 from grip.core.rotations import (
     angular_velocity,
     euler_xyz_to_matrix,
     matrix_to_euler_xyz,
+    matrix_to_quat,
     quat_to_matrix,
     sixd_to_matrix,
 )
 
 FORMAT_VERSION = 1
-
-VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
-"""Joints of ``est_vel``: wrists, ankles, head (GRIP's leaves), then the pelvis."""
 
 N_HINGES = 3 * (sk.N_JOINTS - 1)
 
@@ -57,7 +55,7 @@ PRIMARY: dict[str, tuple[int, ...]] = {
     "gt_qpos": (7 + N_HINGES,),
     "est_pos": (sk.N_JOINTS, 3),
     "est_rot6d": (sk.N_JOINTS, 6),
-    "est_vel": (len(VELOCITY_JOINTS), 3),
+    "est_vel": (len(sk.VELOCITY_JOINTS), 3),
     "sensor": (-1,),
 }
 
@@ -66,9 +64,21 @@ class ReferenceError(ValueError):
     """A reference file or clip is malformed (the message names the file and the key)."""
 
 
+def pose_vector(local_rot: np.ndarray, root_pos: np.ndarray) -> np.ndarray:
+    """``(..., 24, 3, 3)`` local rotations (row 0 = root world rotation) and ``(..., 3)`` root
+    position -> ``(..., 76)`` ``[root_pos, root_quat_wxyz, 69 hinge angles (SMPL order)]``.
+    Hinge angles are the intrinsic X-Y-Z Euler angles of the MuJoCo humanoid's hinges."""
+    local_rot = np.asarray(local_rot, dtype=np.float64)
+    lead = local_rot.shape[:-3]
+    out = np.empty((*lead, 7 + N_HINGES))
+    out[..., :3] = root_pos
+    out[..., 3:7] = matrix_to_quat(local_rot[..., 0, :, :])
+    out[..., 7:] = matrix_to_euler_xyz(local_rot[..., 1:, :, :]).reshape(*lead, N_HINGES)
+    return out
+
+
 def local_rot_from_qpos(qpos: np.ndarray) -> np.ndarray:
-    """``(T, 76)`` reference ``qpos`` (hinges in SMPL order) -> ``(T, 24, 3, 3)`` local rotations
-    (row 0 = the root's world rotation)."""
+    """Inverse of :func:`pose_vector`: ``(T, 76)`` -> ``(T, 24, 3, 3)`` local rotations."""
     t = qpos.shape[0]
     local = np.empty((t, sk.N_JOINTS, 3, 3))
     local[:, 0] = quat_to_matrix(qpos[:, 3:7])
@@ -96,7 +106,8 @@ class ReferenceClip:
         gt_qpos: ``(T, 76)`` ground-truth ``[root_pos_world, root_quat_wxyz, 69 hinges]``.
         est_pos: ``(T, 24, 3)`` KinematicsNet joint positions minus the root, world axes, m.
         est_rot6d: ``(T, 24, 6)`` KinematicsNet global joint rotations, 6D.
-        est_vel: ``(T, 6, 3)`` KinematicsNet world velocities of :data:`VELOCITY_JOINTS`, m/s.
+        est_vel: ``(T, 6, 3)`` KinematicsNet world velocities of the velocity joints
+            (:data:`grip.core.skeleton.VELOCITY_JOINTS`), m/s.
         sensor: ``(T, F)`` the KinematicsNet input features (unnormalised).
         objects: Scene meshes ``{name: (vertices (V, 3), faces (F, 3))}`` or ``None``.
 
@@ -159,8 +170,6 @@ class ReferenceClip:
         qvel[:, 6:] = np.gradient(np.unwrap(q[:, 7:], axis=0), axis=0) * fps
         est_rot = sixd_to_matrix(self.est_rot6d)
         est_hinge = hinge_angles(est_rot)
-        root0 = q[0, :3]
-        disp = np.concatenate([np.zeros((1, 3)), np.cumsum(self.est_vel[:-1, -1], axis=0) / fps])
         derived = {
             "gt_qvel": qvel,
             "gt_pos": gt_pos,
@@ -171,7 +180,7 @@ class ReferenceClip:
             "est_angvel": angular_velocity(est_rot, fps),
             "est_hinge": est_hinge,
             "est_hinge_vel": np.gradient(est_hinge, axis=0) * fps,
-            "est_root_pos": root0 + disp,
+            "est_root_pos": integrate_root(q[0, :3], self.est_vel[:, -1], fps),
         }
         for k, v in derived.items():
             setattr(self, k, v)

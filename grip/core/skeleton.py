@@ -34,6 +34,10 @@ MIRROR: np.ndarray = np.array(
 LEAF_JOINTS: tuple[int, ...] = (20, 21, 7, 8, 15)
 """GRIP's leaf joints (wrists, ankles, head): LP stage output."""
 
+VELOCITY_JOINTS: tuple[int, ...] = (*LEAF_JOINTS, 0)
+"""Joints whose world velocity KinematicsNet's LV stage estimates: the leaves, then the pelvis
+(GRIP's d^v at wrists, ankles, head and pelvis)."""
+
 FOOT_JOINTS: tuple[int, int] = (10, 11)
 """SMPL foot joints (toe bases) used by foot-sliding metrics."""
 

@@ -6,7 +6,6 @@ as float32; a typical dataset built from the shared clips (~125k frames) takes ~
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +50,25 @@ def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
     )
 
 
+def split_files(data_dir: str | os.PathLike, split: str) -> list[Path]:
+    """Recording files of ``split`` ("train", "test" or "all") of a ``grip data build`` folder.
+
+    Raises:
+        FileNotFoundError / ValueError naming the folder or the split file.
+    """
+    from prism_tools.chunking import load_split
+
+    root = Path(data_dir)
+    split_path = root / "split.json"
+    if not split_path.is_file():
+        raise FileNotFoundError(f"{root}: no split.json (build the folder with 'grip data build')")
+    lists = load_split(split_path)
+    if split not in ("train", "test", "all"):
+        raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+    ids = lists["train"] + lists["test"] if split == "all" else lists[split]
+    return [root / "sequences" / f"{sid}.npz" for sid in ids]
+
+
 def load_split_sequences(
     data_dir: str | os.PathLike, split: str, cfg: FeatureConfig, limit: int | None = None
 ) -> list[SequenceArrays]:
@@ -61,19 +79,11 @@ def load_split_sequences(
     """
     from prism_tools.io import load_recording
 
-    root = Path(data_dir)
-    split_path = root / "split.json"
-    if not split_path.is_file():
-        raise FileNotFoundError(f"{root}: no split.json (build the folder with 'grip data build')")
-    try:
-        ids = json.loads(split_path.read_text())[split]
-    except (ValueError, KeyError) as e:
-        raise ValueError(f"{split_path}: no readable {split!r} list ({e})") from e
+    files = split_files(data_dir, split)
     if limit is not None:
-        ids = ids[:limit]
+        files = files[:limit]
     out = []
-    for sid in ids:
-        path = root / "sequences" / f"{sid}.npz"
+    for path in files:
         try:
             out.append(sequence_arrays(load_recording(path), cfg))
         except (KeyError, ValueError) as e:

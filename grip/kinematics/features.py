@@ -26,9 +26,6 @@ from grip.core.rotations import angular_velocity, axis_angle_to_matrix, matrix_t
 DEFAULT_SITES: tuple[str, ...] = ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist")
 """GRIP's 4 wearables, in its channel order."""
 
-VELOCITY_JOINTS: tuple[int, ...] = (*sk.LEAF_JOINTS, 0)
-"""LV stage joints: wrists, ankles, head (GRIP's leaves) and the pelvis."""
-
 
 @dataclass(frozen=True)
 class FeatureConfig:
@@ -150,7 +147,7 @@ def targets(rec) -> Targets:
     body = build_body(recording_body(rec))
     g_rot, pos = forward_kinematics(local, root, body.offsets)
     rel = pos - pos[:, :1]
-    vel = np.gradient(pos[:, list(VELOCITY_JOINTS)], axis=0) * float(rec.fps)
+    vel = np.gradient(pos[:, list(sk.VELOCITY_JOINTS)], axis=0) * float(rec.fps)
     return Targets(
         leaf_pos=rel[:, list(sk.LEAF_JOINTS)],
         joint_pos=rel,

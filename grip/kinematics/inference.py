@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from grip.core.fk import integrate_root
 from grip.core.rotations import sixd_to_matrix
 from grip.kinematics.dataset import TARGET_KEYS, Normalizer
 from grip.kinematics.features import input_features, targets
@@ -91,13 +92,12 @@ class KinematicsEstimator:
         vel = o["lv"].reshape(n, 6, 3)
         root0 = np.asarray(rec.smpl_params.trans[0], dtype=np.float64) + np.asarray(
             rec.smpl_params.root_offset, dtype=np.float64)  # fmt: skip
-        disp = np.concatenate([np.zeros((1, 3)), np.cumsum(vel[:-1, -1], axis=0) / rec.fps])
         return KinematicEstimate(
             leaf_pos=o["lp"].reshape(n, 5, 3),
             joint_pos=o["fp"].reshape(n, 24, 3),
             global_rot=sixd_to_matrix(o["fa"].reshape(n, 24, 6)),
             velocity=vel,
-            root_pos=root0 + disp,
+            root_pos=integrate_root(root0, vel[:, -1], rec.fps),
         )
 
     # ------------------------------------------------------------------ streaming

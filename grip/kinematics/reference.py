@@ -11,13 +11,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from grip.core.reference import ReferenceClip, ReferenceSet
-from grip.core.rotations import (
-    axis_angle_to_matrix,
-    matrix_to_6d,
-    matrix_to_euler_xyz,
-    matrix_to_quat,
-)
+from grip.core.reference import ReferenceClip, ReferenceSet, pose_vector
+from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
 from grip.kinematics.features import FeatureConfig, input_features, recording_body, targets
 
 
@@ -26,16 +21,20 @@ def gt_qpos(rec) -> np.ndarray:
     sp = rec.smpl_params
     local = axis_angle_to_matrix(np.asarray(sp.poses, dtype=np.float64).reshape(-1, 24, 3))
     root = np.asarray(sp.trans, dtype=np.float64) + np.asarray(sp.root_offset, dtype=np.float64)
-    t = local.shape[0]
-    q = np.empty((t, 76))
-    q[:, :3] = root
-    q[:, 3:7] = matrix_to_quat(local[:, 0])
-    q[:, 7:] = matrix_to_euler_xyz(local[:, 1:]).reshape(t, 69)
-    return q
+    return pose_vector(local, root)
 
 
-def reference_clip(rec, est, features: np.ndarray) -> ReferenceClip:
-    """One :class:`ReferenceClip` from a recording and its :class:`KinematicEstimate`."""
+def reference_clip(rec, joint_pos: np.ndarray, global_rot: np.ndarray, velocity: np.ndarray,
+                   features: np.ndarray) -> ReferenceClip:  # fmt: skip
+    """One :class:`ReferenceClip` from a recording and an estimate of it.
+
+    Args:
+        rec: The recording (ground truth, subject, scene objects).
+        joint_pos: ``(T, 24, 3)`` estimated joints minus the root, world axes, m.
+        global_rot: ``(T, 24, 3, 3)`` estimated global rotations.
+        velocity: ``(T, 6, 3)`` estimated world velocities of the leaves and the pelvis, m/s.
+        features: ``(T, F)`` the KinematicsNet inputs of the recording.
+    """
     objects = None
     if rec.objects:
         objects = {n: (np.asarray(o.vertices), np.asarray(o.faces)) for n, o in rec.objects.items()}
@@ -45,9 +44,9 @@ def reference_clip(rec, est, features: np.ndarray) -> ReferenceClip:
         fps=float(rec.fps),
         body=recording_body(rec),
         gt_qpos=gt_qpos(rec),
-        est_pos=est.joint_pos,
-        est_rot6d=matrix_to_6d(est.global_rot),
-        est_vel=est.velocity,
+        est_pos=joint_pos,
+        est_rot6d=matrix_to_6d(global_rot),
+        est_vel=velocity,
         sensor=features,
         objects=objects,
     )
@@ -57,14 +56,11 @@ def oracle_reference_clip(rec, features: FeatureConfig | None = None) -> Referen
     """A clip whose "estimate" is the ground truth itself (numpy only, no network).
 
     The upper bound of what a controller can do with a perfect KinematicsNet; used by the
-    environment's tests and for debugging policies.
+    environment's tests and benchmarks and for debugging policies.
     """
     t = targets(rec)
-
-    class _Perfect:
-        joint_pos, global_rot, velocity = t.joint_pos, t.global_rot, t.velocity
-
-    return reference_clip(rec, _Perfect, input_features(rec, features or FeatureConfig()))
+    feats = input_features(rec, features or FeatureConfig())
+    return reference_clip(rec, t.joint_pos, t.global_rot, t.velocity, feats)
 
 
 def build_reference_set(
@@ -89,7 +85,8 @@ def build_reference_set(
     for i in range(0, len(recs), batch):
         part = list(recs[i : i + batch])
         for rec, est in zip(part, estimator.predict(part), strict=True):
-            clips.append(reference_clip(rec, est, input_features(rec, cfg)))
+            clips.append(reference_clip(rec, est.joint_pos, est.global_rot, est.velocity,
+                                        input_features(rec, cfg)))  # fmt: skip
         if progress is not None:
             progress(len(part))
     return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)

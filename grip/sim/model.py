@@ -23,7 +23,7 @@ from grip.core.mjcf import (
     insole_site_names,
     touch_sensor_names,
 )
-from grip.core.rotations import matrix_to_euler_xyz, matrix_to_quat
+from grip.core.reference import pose_vector
 
 
 def load_model(
@@ -113,10 +113,24 @@ def pose_to_qpos(local_rot: np.ndarray, root_pos: np.ndarray, index: HumanoidInd
     local_rot = np.asarray(local_rot, dtype=np.float64)
     if local_rot.shape != (sk.N_JOINTS, 3, 3):
         raise ValueError(f"local_rot must have shape (24, 3, 3), got {local_rot.shape}")
+    root_pos = np.asarray(root_pos, dtype=np.float64).reshape(3)
+    write_pose_vector(pose_vector(local_rot, root_pos), index, qpos)
+
+
+def write_pose_vector(pose: np.ndarray, index: HumanoidIndex, qpos: np.ndarray) -> None:
+    """Scatter a ``(76,)`` pose vector (:func:`grip.core.reference.pose_vector`: root position,
+    root quaternion, hinges in SMPL order) into MuJoCo's ``qpos`` order, in place."""
     r = index.root_qpos_adr
-    qpos[r : r + 3] = np.asarray(root_pos, dtype=np.float64).reshape(3)
-    qpos[r + 3 : r + 7] = matrix_to_quat(local_rot[0])
-    qpos[index.hinge_qpos_adr] = matrix_to_euler_xyz(local_rot[1:]).reshape(-1)
+    qpos[r : r + 7] = pose[:7]
+    qpos[index.hinge_qpos_adr] = pose[7:]
+
+
+def write_velocity_vector(vel: np.ndarray, index: HumanoidIndex, qvel: np.ndarray) -> None:
+    """Scatter a ``(75,)`` velocity vector (root linear velocity in the world, root angular
+    velocity in the root frame, hinge rates in SMPL order) into MuJoCo's ``qvel``, in place."""
+    r = index.root_dof_adr
+    qvel[r : r + 6] = vel[:6]
+    qvel[index.hinge_dof_adr] = vel[6:]
 
 
 def set_pose(

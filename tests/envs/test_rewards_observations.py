@@ -4,6 +4,7 @@ import pytest
 from envs import observations as O
 from envs.config import RewardConfig
 from envs.rewards import imitation_terms, mechanical_power, rotation_angles
+from grip.core import skeleton as sk
 from grip.core.rotations import rot_x, rot_z
 
 
@@ -58,8 +59,9 @@ def test_state_difference_vanishes_when_the_estimate_equals_the_simulation(varia
     pvw, rot = _state()
     pos, vel, w = pvw
     h = O.heading_matrix(rot[0])
-    kin, self_vec = O.observation_parts(variant, h, pvw, rot, pos - pos[0], rot,
-                                        vel[list(O.VELOCITY_JOINTS)], w, pos[0])  # fmt: skip
+    imu = list(O.IMU_JOINTS)
+    kin, self_vec = O.observation_parts(variant, h, pvw, rot, pos - pos[0], rot[imu],
+                                        vel[list(sk.VELOCITY_JOINTS)], w[imu], pos[0])  # fmt: skip
     assert kin.shape == (O.kinematic_dim(variant),) and self_vec.shape == (O.SELF_DIM,)
     n_imu = len(O.IMU_JOINTS)
     d_rot = kin[: 6 * n_imu].reshape(n_imu, 6)
@@ -78,9 +80,10 @@ def test_observations_are_invariant_to_a_yaw_of_the_whole_scene() -> None:
     def parts(r):
         rw = lambda v: v @ r.T  # noqa: E731
         rr = r @ rot
+        imu = list(O.IMU_JOINTS)
         kin, self_vec = O.observation_parts(
-            "OAV_Jglo", O.heading_matrix(rr[0]), rw(pvw), rr, rw(est_pos), r @ est_rot,
-            rw(est_vel), rw(est_w), rw(pvw[0, 0] + 0.1),
+            "OAV_Jglo", O.heading_matrix(rr[0]), rw(pvw), rr, rw(est_pos), (r @ est_rot)[imu],
+            rw(est_vel), rw(est_w)[imu], rw(pvw[0, 0] + 0.1),
         )  # fmt: skip
         return np.concatenate([kin, self_vec[1:]])
 

@@ -147,6 +147,15 @@ def test_early_termination_and_truncation(reference) -> None:
     assert dones == [False] * 4 + [True]
 
 
+def test_bad_actions_are_refused(reference) -> None:
+    env = _env(reference)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.full(69, np.nan, np.float32))
+    with pytest.raises(ValueError, match="69"):
+        env.step(np.zeros(68, np.float32))
+
+
 def test_a_blow_up_ends_the_episode_cleanly_and_is_counted(reference) -> None:
     env = _env(reference)
     obs, _ = env.reset(seed=0)

@@ -1,0 +1,58 @@
+"""PD tracking of a mocap clip with the pelvis pinned to the ground truth (no policy).
+
+Plays a clip through ``GripTrackingEnv`` with ``pin_root=True``, relative actions of 0 and a
+perfect estimate (the ground truth), with and without the velocity feed-forward, and prints the
+MPJPE and the mean per-frame worst joint error against the ground truth. This is the number the
+README quotes for the environment's PD control.
+
+    python benchmarks/env_pd_tracking.py [--clip ../shared/data/motions/cmu/bvh/07_05.bvh]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from envs.config import TrackingEnvConfig
+from envs.tracking_env import GripTrackingEnv
+from grip.cli.paths import default_motions_dir
+from grip.core.reference import ReferenceSet
+from grip.kinematics.reference import oracle_reference_clip
+from grip.motion.catalog import load_clip
+from grip.motion.retarget import retarget
+from prism_tools.synth import SynthConfig, recording_from_motion
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    root = default_motions_dir()
+    ap.add_argument("--clip", default=str(root / "cmu/bvh/07_05.bvh") if root else None,
+                    help="motion clip (default: CMU 07_05, a slow walk)")  # fmt: skip
+    args = ap.parse_args()
+    if not args.clip:
+        ap.error("no shared motion data found: pass --clip")
+    rec = recording_from_motion(retarget(load_clip(args.clip)), SynthConfig(), seed=0, noise=False)
+    ref = ReferenceSet([oracle_reference_clip(rec)], ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist"),
+                       True)  # fmt: skip
+    for ff in (True, False):
+        env = GripTrackingEnv(TrackingEnvConfig(pin_root=True, random_start=False,
+                                                termination_dist_m=0.0, velocity_feedforward=ff),
+                              reference=ref)  # fmt: skip
+        env.reset(seed=0)
+        mpjpe, worst = [], []
+        while True:
+            _, _, term, trunc, info = env.step(np.zeros(69, np.float32))
+            mpjpe.append(info["mpjpe_m"])
+            worst.append(info["max_joint_err_m"])
+            if term or trunc:
+                break
+        print(
+            f"velocity feed-forward {'on ' if ff else 'off'}: {len(mpjpe)} frames, "
+            f"MPJPE {1e3 * np.mean(mpjpe):.1f} mm, "
+            f"mean worst joint {1e3 * np.mean(worst):.1f} mm"
+        )
+
+
+if __name__ == "__main__":
+    main()
