@@ -77,11 +77,14 @@ class TrackingEnvConfig:
         heightfield_cell_m: Resolution of the terrain height field, m.
         termination_dist_m: End an episode when any joint is farther than this from the ground
             truth, m (GRIP stage 1: 0.25); 0 turns early termination off (stage 2).
+        fall_height_m: End an episode when the pelvis is below this height, m (0 = never).
         random_start: Reference state initialisation: start at a random frame of a random clip
             (training). Off: play one clip from its first frame (inference).
         clip_index: Play this clip (>= 0) instead of sampling one.
         max_episode_frames: Truncate episodes after this many steps (0: run to the clip's end).
         min_episode_frames: Random starts leave at least this many frames to play.
+        amp_window: AMP frames in ``info["amp_obs"]`` (the discriminator's input, see
+            :mod:`envs.amp`); 0 leaves it out.
         pin_root: Drive the pelvis along the ground-truth root trajectory (position and
             orientation written before every substep): a physics check of the PD tracking, not
             a training mode.
@@ -100,11 +103,13 @@ class TrackingEnvConfig:
     terrain: str = "auto"
     heightfield_cell_m: float = 0.02
     termination_dist_m: float = 0.25
+    fall_height_m: float = 0.0
     random_start: bool = True
     clip_index: int = -1
     max_episode_frames: int = 0
     min_episode_frames: int = 10
     pin_root: bool = False
+    amp_window: int = 10
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
 
@@ -117,6 +122,7 @@ class TrackingEnvConfig:
             (self.substeps >= 1, "substeps must be >= 1"),
             (self.heightmap_size >= 1, "heightmap_size must be >= 1"),
             (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),
+            (self.amp_window >= 0, "amp_window must be >= 0 (0 = no AMP observation)"),
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
         )
         for ok, msg in checks:

@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from envs import amp as A
 from envs import observations as O
 from envs import rewards as R
 from envs.config import TrackingEnvConfig
@@ -58,6 +59,7 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
 
 _INFO_KEYS = tuple((k, f"reward/{k}") for k in R.TERMS)
 
+_KEY = np.array(A.KEY_JOINTS)
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
 
 
@@ -103,8 +105,10 @@ class GripTrackingEnv(gym.Env):
 
     ``info`` holds every reward term as ``"reward/<name>"``, the clip name and frame,
     ``"max_joint_err_m"`` and ``"mpjpe_m"`` (against the ground truth), ``"sim_unstable"``
-    (this step blew up) and ``"blowups"`` (count over
-    the env's life).
+    (this step blew up), ``"blowups"`` (count over the env's life), ``"root_height_m"`` and,
+    with ``cfg.amp_window > 0``, ``"amp_obs"``: the last ``amp_window`` AMP frames of the
+    simulated humanoid (:mod:`envs.amp`; after a reset the window holds the ground truth of
+    the frames before the start).
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 100}
@@ -160,6 +164,9 @@ class GripTrackingEnv(gym.Env):
         self._ref_target = np.zeros(0)  # (T, 69) relative-action reference (+ feed-forward)
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._n_bad = 0
+        self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
+        self._amp_buf = np.empty(A.FRAME_DIM)
+        self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
         self._weights = tuple((k, float(getattr(cfg.reward.weights, k))) for k in R.TERMS)
 
     # ------------------------------------------------------------------ models
@@ -259,9 +266,36 @@ class GripTrackingEnv(gym.Env):
         self._steps = 0
         self._set_state(clip, start)
         self._per_clip_arrays(clip)
-        obs = self._observe(*self._sim_state())
+        pvw, rot = self._sim_state()
+        obs = self._observe(pvw, rot)
         self._last_obs = obs
-        return obs, {"clip": clip.name, "clip_index": i, "frame": start}
+        info = {"clip": clip.name, "clip_index": i, "frame": start,
+                "root_height_m": float(pvw[0, 0, 2])}  # fmt: skip
+        if self._amp is not None:
+            ref = self._amp_ref.get(i)
+            if ref is None:
+                if len(self._amp_ref) >= 64:
+                    self._amp_ref.pop(next(iter(self._amp_ref)))
+                ref = self._amp_ref[i] = A.reference_amp_features(clip)
+            self._amp.reset(ref[max(0, start - self._amp.window + 1) : start + 1])
+            info["amp_obs"] = self._amp.vector()
+        return obs, info
+
+    def _amp_frame(self, pvw: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """The AMP frame of the simulated state: :func:`envs.amp.amp_features` for one frame,
+        written out (the batched version's einsums cost more than the physics of a step)."""
+        sim = self._sim
+        ix = sim.index
+        h = O.heading_matrix(rot[0])
+        f = self._amp_buf
+        f[0] = pvw[0, 0, 2]
+        f[1:7] = (h.T @ rot[0])[:, :2].T.reshape(6)
+        f[7:10] = pvw[1, 0] @ h
+        f[10:13] = pvw[2, 0] @ h
+        f[13 : 13 + A.N_HINGES] = sim.data.qpos[ix.hinge_qpos_adr]
+        f[13 + A.N_HINGES : 13 + 2 * A.N_HINGES] = sim.qvel[ix.hinge_dof_adr]
+        f[13 + 2 * A.N_HINGES :] = ((pvw[0, _KEY] - pvw[0, 0]) @ h).reshape(-1)
+        return f
 
     def _per_clip_arrays(self, clip: ReferenceClip) -> None:
         """Per-clip arrays laid out for the step (gathered once per episode, not per step)."""
@@ -358,7 +392,10 @@ class GripTrackingEnv(gym.Env):
             self.blowups += 1
             info = {f"reward/{k}": 0.0 for k in R.TERMS}
             info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=np.inf,
-                        mpjpe_m=np.inf, sim_unstable=True, blowups=self.blowups)  # fmt: skip
+                        mpjpe_m=np.inf, sim_unstable=True, blowups=self.blowups,
+                        root_height_m=0.0)  # fmt: skip
+            if self._amp is not None:
+                info["amp_obs"] = self._amp.vector()
             return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
         pvw, rot = self._sim_state()
         terms, sq = R.imitation_terms(pvw, rot, self._gt_pvw[t], clip.gt_rot[t], cfg.reward)
@@ -370,7 +407,9 @@ class GripTrackingEnv(gym.Env):
             reward += wk * terms[k]
         dist = np.sqrt(sq[0])
         err = float(dist.max())  # (the unstable check above also makes this never NaN)
-        terminated = cfg.termination_dist_m > 0 and err > cfg.termination_dist_m
+        terminated = (cfg.termination_dist_m > 0 and err > cfg.termination_dist_m) or (
+            pvw[0, 0, 2] < cfg.fall_height_m
+        )
         truncated = t >= clip.n_frames - 1 or (
             cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
         )
@@ -379,7 +418,10 @@ class GripTrackingEnv(gym.Env):
         info = {key: terms[k] for k, key in _INFO_KEYS}
         info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=err,
                     mpjpe_m=float(dist.sum()) / dist.size, sim_unstable=False,
-                    blowups=self.blowups)  # fmt: skip
+                    blowups=self.blowups, root_height_m=float(pvw[0, 0, 2]))  # fmt: skip
+        if self._amp is not None:
+            self._amp.push(self._amp_frame(pvw, rot))
+            info["amp_obs"] = self._amp.vector()
         return obs, reward, bool(terminated), bool(truncated and not terminated), info
 
     def _step_pinned(self, t: int) -> None:

@@ -79,12 +79,17 @@ def load_config(path: str | os.PathLike | None, default: Any,
         except tomllib.TOMLDecodeError as e:
             raise ConfigError(f"{p}: invalid TOML ({e})") from e
         cfg = apply_dict(cfg, data, str(p))
+    # all overrides at once: checks that tie several settings together see the final values
+    nested: dict = {}
     for text in overrides:
         keys, value = parse_override(text)
-        nested: dict = {}
         cur = nested
         for k in keys[:-1]:
-            cur = cur.setdefault(k, {})
+            nxt = cur.setdefault(k, {})
+            if not isinstance(nxt, dict):
+                raise ConfigError(f"--set {text}: {k!r} is set as a value elsewhere")
+            cur = nxt
         cur[keys[-1]] = value
-        cfg = apply_dict(cfg, nested, f"--set {text}")
+    if nested:
+        cfg = apply_dict(cfg, nested, "--set " + " ".join(overrides))
     return cfg

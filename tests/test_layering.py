@@ -24,6 +24,10 @@ FORBIDDEN = {
     "grip.sim": ("torch", "gymnasium", "stable_baselines3", "envs", "policies"),
     "envs": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs.tracking_env": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
+    "envs.amp": ("torch", "mujoco", "stable_baselines3", "policies", "grip.kinematics"),
+    "policies.amp": ("mujoco", "stable_baselines3", "grip.kinematics", "grip.eval"),
+    "policies.runner": ("stable_baselines3", "grip.kinematics", "grip.eval"),
+    "policies.train": ("grip.kinematics", "grip.eval"),
 }  # fmt: skip
 
 _PROBE = """

@@ -11,7 +11,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from grip.cli import bench_env, body, data, demo, kinematics
+from grip.cli import bench_env, body, data, demo, kinematics, policy
 
 
 class CliError(Exception):
@@ -29,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
     sub.required = True
-    for module in (data, body, kinematics, bench_env, demo):
+    for module in (data, body, kinematics, policy, bench_env, demo):
         module.add_parser(sub)
     return parser
 

@@ -194,3 +194,31 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
     bad.write_bytes(b"garbage")
     assert main(["bench-env", "--reference", str(bad), "--steps", "2"]) == 2
     assert "bad.npz" in capsys.readouterr().err
+
+
+def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys) -> None:
+    run = tmp_path / "policy"
+    args = ["train-policy", "--data", str(built), "--out", str(run),
+            "--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo.batch_size=64",
+            "--set", "ppo.n_epochs=1", "--set", "ppo.net_arch=[16]", "--set", "amp.hidden=[16]",
+            "--set", "amp.window=2", "--set", "amp.batch_size=16", "--set", "amp.replay_size=256",
+            "--set", "stage1.timesteps=64", "--set", "stage1.categories=[]",
+            "--set", "stage2.timesteps=64"]  # fmt: skip
+    assert main(args) == 0
+    cfg = json.loads((run / "config.json").read_text())
+    assert cfg["config"]["ppo"]["net_arch"] == [16] and "git" in cfg and "kin" in cfg
+    assert (run / "policy.pt").is_file() and (run / "curves.png").is_file()
+    assert main([*args, "--set", "stage2.timesteps=128"]) == 0  # extends the finished run
+    assert main([*args[:-2], "--set", "ppo.n_epochs=2"]) == 2  # other settings: refused
+    assert "ppo.n_epochs" in capsys.readouterr().err
+    exported = tmp_path / "small.pt"
+    assert main(["policy-export", str(run), "--out", str(exported)]) == 0
+    js = tmp_path / "eval.json"
+    assert main(["eval-policy", "--policy", str(exported), "--data", str(built), "--split", "all",
+                 "--segment-frames", "100", "--segments", "2", "--json", str(js),
+                 "--out", str(tmp_path / "ev")]) == 0  # fmt: skip
+    res = json.loads(js.read_text())
+    for key in ("success_rate", "MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N"):
+        assert key in res
+    assert res["segments"] == 2
+    assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2

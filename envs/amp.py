@@ -1,0 +1,129 @@
+"""AMP observations: the humanoid state the discriminator judges (numpy only).
+
+One AMP frame (BASELINES_AND_METRICS 5.2, PHC's layout adapted to our hinge body), all in the
+pelvis' heading frame (:func:`envs.observations.heading_matrix`):
+
+====================  ====  ===========================================================
+root height           1     pelvis z, m
+root rotation         6     pelvis rotation in the heading frame, tan-norm 6D (first two
+                            columns)
+root linear velocity  3     world velocity of the pelvis, heading frame, m/s
+root angular velocity 3     world angular velocity of the pelvis, heading frame, rad/s
+hinge angles          69    rad (our joints are 3 hinges each, so raw angles are continuous:
+                            no 6D per joint is needed)
+hinge velocities      69    rad/s
+key bodies            12    wrists and ankles minus the pelvis, heading frame, m
+====================  ====  ===========================================================
+
+The discriminator sees ``window`` consecutive frames, oldest first (:class:`AmpHistory`).
+The same function computes the features of the simulated humanoid (in the environment) and of
+the ground-truth motion (the discriminator's real samples), so both sides match by
+construction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grip.core import skeleton as sk
+
+KEY_JOINTS: tuple[int, ...] = (20, 21, 7, 8)
+"""L_Wrist, R_Wrist, L_Ankle, R_Ankle (PHC's key bodies: hands and feet)."""
+
+N_HINGES = 3 * (sk.N_JOINTS - 1)
+FRAME_DIM = 1 + 6 + 3 + 3 + 2 * N_HINGES + 3 * len(KEY_JOINTS)
+"""Length of one AMP frame (163)."""
+
+
+def heading_matrices(root_rot: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` yaw rotations whose x axis is the pelvis' facing direction (vectorised
+    :func:`envs.observations.heading_matrix`)."""
+    fx, fy = root_rot[..., 0, 2], root_rot[..., 1, 2]
+    n = np.hypot(fx, fy)
+    ok = n > 1e-9
+    c = np.where(ok, fx / np.where(ok, n, 1.0), 1.0)
+    s = np.where(ok, fy / np.where(ok, n, 1.0), 0.0)
+    h = np.zeros((*root_rot.shape[:-2], 3, 3))
+    h[..., 0, 0], h[..., 0, 1], h[..., 1, 0], h[..., 1, 1] = c, -s, s, c
+    h[..., 2, 2] = 1.0
+    return h
+
+
+def amp_features(
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    root_vel: np.ndarray,
+    root_angvel: np.ndarray,
+    hinge_q: np.ndarray,
+    hinge_qd: np.ndarray,
+    key_pos: np.ndarray,
+) -> np.ndarray:
+    """AMP frames of T states (the module docstring lists the layout).
+
+    Args:
+        root_pos: ``(T, 3)`` pelvis position, world, m.
+        root_rot: ``(T, 3, 3)`` pelvis rotation, world.
+        root_vel: ``(T, 3)`` pelvis linear velocity, world, m/s.
+        root_angvel: ``(T, 3)`` pelvis angular velocity, world, rad/s.
+        hinge_q: ``(T, 69)`` hinge angles, SMPL order, rad.
+        hinge_qd: ``(T, 69)`` hinge velocities, rad/s.
+        key_pos: ``(T, 4, 3)`` world positions of :data:`KEY_JOINTS`, m.
+
+    Returns:
+        ``(T, FRAME_DIM)`` float64.
+    """
+    t = root_pos.shape[0]
+    h = heading_matrices(root_rot)  # (T, 3, 3); world row vector v -> v @ h
+    local_rot = np.swapaxes(h, -1, -2) @ root_rot
+    out = np.empty((t, FRAME_DIM))
+    out[:, 0] = root_pos[:, 2]
+    out[:, 1:7] = np.swapaxes(local_rot[..., :, :2], -1, -2).reshape(t, 6)
+    out[:, 7:10] = np.einsum("ti,tij->tj", root_vel, h)
+    out[:, 10:13] = np.einsum("ti,tij->tj", root_angvel, h)
+    a = 13 + N_HINGES
+    out[:, 13:a] = hinge_q
+    out[:, a : a + N_HINGES] = hinge_qd
+    rel = key_pos - root_pos[:, None]
+    out[:, a + N_HINGES :] = np.einsum("tki,tij->tkj", rel, h).reshape(t, -1)
+    return out
+
+
+def reference_amp_features(clip) -> np.ndarray:
+    """``(T, FRAME_DIM)`` AMP frames of a reference clip's ground truth (real samples)."""
+    return amp_features(
+        clip.gt_pos[:, 0], clip.gt_rot[:, 0], clip.gt_vel[:, 0], clip.gt_angvel[:, 0],
+        clip.gt_qpos[:, 7:], clip.gt_qvel[:, 6:], clip.gt_pos[:, list(KEY_JOINTS)],
+    )  # fmt: skip
+
+
+def windows(frames: np.ndarray, window: int) -> np.ndarray:
+    """``(T, window * FRAME_DIM)``: for every frame t, frames ``t - window + 1 .. t`` (the
+    clip's first frame repeated before its start), oldest first."""
+    t = frames.shape[0]
+    idx = np.arange(t)[:, None] + np.arange(-window + 1, 1)[None, :]
+    return frames[np.maximum(idx, 0)].reshape(t, -1)
+
+
+class AmpHistory:
+    """The last ``window`` AMP frames of one episode, as one flat vector (oldest first)."""
+
+    def __init__(self, window: int) -> None:
+        if window < 1:
+            raise ValueError(f"AMP window must be >= 1, got {window}")
+        self.window = window
+        self._buf = np.zeros((window, FRAME_DIM))
+
+    def reset(self, past: np.ndarray) -> None:
+        """Fill the window from ``(k, FRAME_DIM)`` past frames (the newest last); the oldest
+        is repeated where ``k < window``."""
+        k = min(len(past), self.window)
+        self._buf[self.window - k :] = past[len(past) - k :]
+        self._buf[: self.window - k] = past[len(past) - k]
+
+    def push(self, frame: np.ndarray) -> None:
+        self._buf[:-1] = self._buf[1:]
+        self._buf[-1] = frame
+
+    def vector(self) -> np.ndarray:
+        """``(window * FRAME_DIM,)`` float32 copy."""
+        return self._buf.reshape(-1).astype(np.float32)

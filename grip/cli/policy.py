@@ -1,0 +1,268 @@
+"""``grip train-policy``, ``grip eval-policy`` and ``grip policy-export``: DynamicsNet."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+SHIPPED_POLICY = "grip/assets/policy_default.pt"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train-policy",
+        help="train the DynamicsNet controller (PPO + AMP) on a dataset",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Train the controller that drives the torque-actuated humanoid to follow the\n"
+            "KinematicsNet estimate: PPO (stable-baselines3) with GRIP's reward\n"
+            "0.5 r_amp + 0.5 r_imit + r_energy, an AMP discriminator trained from each rollout,\n"
+            "and GRIP's two stages (early termination at 0.25 m, then without, on longer\n"
+            "episodes). The training motions are the dataset's train split with KinematicsNet\n"
+            "estimates (made once, RUN/reference_train.npz). Checkpoints every few rollouts to\n"
+            "RUN/checkpoint/; running the same command again resumes (a larger stage2.timesteps\n"
+            "extends a finished run). At the end RUN/policy.pt is exported.\n"
+            "TensorBoard: tensorboard --logdir RUN/tb"
+        ),
+        epilog="example: grip train-policy --data data/prism_synth --out runs/policy\n"
+        "         grip train-policy --data data/prism_synth --out runs/p "
+        "--set stage1.timesteps=500000\n"
+        "         grip train-policy --data data/prism_synth --out runs/grip_size "
+        "--set 'ppo.net_arch=[2048,1536,1024,1024,512,512]'",
+    )
+    p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
+    p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
+    p.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    p.add_argument("--config", type=Path, default=None,
+                   help="TOML overrides (default: configs/policy/default.toml)")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting, e.g. --set ppo.n_envs=16 (repeatable)")  # fmt: skip
+    p.set_defaults(func=cmd_train)
+
+    e = sub.add_parser(
+        "eval-policy",
+        help="evaluate a DynamicsNet policy on the test split (success rate, MPJPE, ...)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Run full episodes of the controller on test segments (500 frames by default),\n"
+            "each started from the ground truth at its first frame and following the\n"
+            "KinematicsNet estimate, without fall recovery. A segment fails when the fall\n"
+            "detector fires (pelvis below 0.30 m and discriminator probability below 0.7).\n"
+            "Reports success rate, MPJPE, PA-MPJPE, foot sliding, foot penetration and vGRF\n"
+            "error (the keys of 'grip bench'), and the kinematics-only MPJPE on the same\n"
+            "segments."
+        ),
+        epilog="example: grip eval-policy --data data/prism_synth --json policy_eval.json\n"
+        "         grip eval-policy --policy runs/policy/policy.pt --data data/prism_synth "
+        "--category 'walk*' --category 'run*'",
+    )
+    e.add_argument("--policy", type=Path, default=None,
+                   help="exported policy (default: the shipped one)")  # fmt: skip
+    e.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    e.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
+    e.add_argument("--split", default="test", choices=("train", "test", "all"))
+    e.add_argument("--category", action="append", default=[], metavar="GLOB",
+                   help="only these motion categories (glob, repeatable)")  # fmt: skip
+    e.add_argument("--segment-frames", type=int, default=500, help="frames per segment")
+    e.add_argument("--segments", type=int, default=0, help="at most this many segments (0: all)")
+    e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
+    e.add_argument("--out", type=Path, default=None,
+                   help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
+    e.set_defaults(func=cmd_eval)
+
+    x = sub.add_parser(
+        "policy-export",
+        help="write the small inference file of a train-policy run",
+        description="Policy MLP (fp16), observation normaliser and AMP discriminator in one "
+        "file loaded with torch.load(weights_only=True): the form in which the default policy "
+        "ships (grip/assets/policy_default.pt).",
+        epilog="example: grip policy-export runs/policy --out grip/assets/policy_default.pt",
+    )
+    x.add_argument("run", type=Path, help="train-policy run folder")
+    x.add_argument("--out", required=True, type=Path, help="output .pt")
+    x.add_argument("--fp32", action="store_true", help="keep float32 weights")
+    x.set_defaults(func=cmd_export)
+
+
+RESUMABLE: tuple[str, ...] = ("stage2.", "checkpoint_every", "ppo.threads", "ppo.device")
+"""Settings (dotted prefixes) that may differ when a run is resumed."""
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def changed_settings(old: dict, new: dict) -> list[str]:
+    """Dotted keys whose values differ between two config dicts, except :data:`RESUMABLE`."""
+    a, b = _flatten(json.loads(json.dumps(old))), _flatten(json.loads(json.dumps(new)))
+    keys = sorted(set(a) | set(b))
+    return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(RESUMABLE)]
+
+
+def _kin_path(arg: Path | None) -> Path:
+    from grip.cli.kinematics import SHIPPED_KIN
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+
+    kin = arg or REPO_ROOT / SHIPPED_KIN
+    if not Path(kin).is_file():
+        raise CliError(f"{kin}: no such KinematicsNet checkpoint (pass --kin RUN/best.pt)")
+    return Path(kin)
+
+
+def load_recordings(data: Path, split: str, categories=(), segment_frames: int = 0, limit: int = 0):
+    """Recordings of a dataset split (optionally by category glob, cut into segments)."""
+    import fnmatch
+
+    from grip.cli.main import CliError
+    from grip.kinematics.dataset import split_files
+    from prism_tools.chunking import segments
+    from prism_tools.io import load_recording
+
+    try:
+        files = split_files(data, split)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+    recs = []
+    for f in files:
+        try:
+            rec = load_recording(f)
+        except (OSError, ValueError) as e:
+            raise CliError(str(e)) from e
+        cat = rec.category or "unknown"
+        if categories and not any(fnmatch.fnmatch(cat, c) for c in categories):
+            continue
+        if segment_frames:
+            for sl in segments(rec.n_frames, segment_frames, min_length=segment_frames):
+                recs.append(rec.slice_frames(sl.start, sl.stop))
+        else:
+            recs.append(rec)
+        if limit and len(recs) >= limit:
+            return recs[:limit]
+    if not recs:
+        raise CliError(f"{data}: no {split} recordings selected")
+    return recs
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+    from grip.config import ConfigError, load_config
+    from grip.core.atomic import atomic_write_text
+    from grip.kinematics.train import git_hash
+    from policies.config import PolicyRunConfig
+    from policies.train import PolicyTrainer, run_config_dict
+
+    cfg_path = args.config
+    if cfg_path is None:
+        default = REPO_ROOT / "configs" / "policy" / "default.toml"
+        cfg_path = default if default.is_file() else None
+    try:
+        cfg = load_config(cfg_path, PolicyRunConfig(), args.set)
+    except (ConfigError, ValueError) as e:
+        raise CliError(str(e)) from e
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    kin = _kin_path(args.kin)
+    ref_path = out / "reference_train.npz"
+    if not ref_path.is_file():
+        from grip.kinematics.inference import KinematicsEstimator
+        from grip.kinematics.reference import build_reference_set
+
+        recs = load_recordings(args.data, "train")
+        try:
+            est = KinematicsEstimator.from_checkpoint(kin)
+        except ValueError as e:
+            raise CliError(str(e)) from e
+        with tqdm(total=len(recs), unit="rec", desc="KinematicsNet estimates") as bar:
+            ref = build_reference_set(recs, est, progress=bar.update, source=str(ref_path))
+        ref.save(ref_path)
+        print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
+    prev = out / "config.json"
+    if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
+        changed = changed_settings(json.loads(prev.read_text())["config"], run_config_dict(cfg))
+        if changed:
+            raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
+                           f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip
+    atomic_write_text(prev, json.dumps({"config": run_config_dict(cfg), "git": git_hash(),
+                                        "data": str(args.data.resolve()),
+                                        "kin": str(kin.resolve())}, indent=1))  # fmt: skip
+    try:
+        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm)
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    t0 = time.perf_counter()
+    trainer.train()
+    dt = time.perf_counter() - t0
+    print(f"trained to {trainer.total_done()} steps ({trainer.wall_s():.0f} s of training in all; "
+          f"this call {dt:.0f} s)")  # fmt: skip
+    from policies.report import plot_curves
+    from policies.runner import export_policy
+
+    plot_curves(trainer.history, out / "curves.png")
+    info = {"timesteps": trainer.total_done(), "wall_s": trainer.wall_s()}
+    size = export_policy(out, out / "policy.pt", info=info)
+    print(f"wrote {out / 'policy.pt'} ({size / 1e6:.1f} MB) and {out / 'curves.png'}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from policies.runner import export_policy
+
+    try:
+        state = json.loads((args.run / "checkpoint" / "state.json").read_text())
+        hist = state.get("history") or [{}]
+        size = export_policy(args.run, args.out, half=not args.fp32,
+                             info={"timesteps": hist[-1].get("timesteps"),
+                                   "wall_s": state.get("wall_s")})  # fmt: skip
+    except (FileNotFoundError, ValueError, OSError) as e:
+        raise CliError(str(e)) from e
+    print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+    from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
+    from grip.kinematics.inference import KinematicsEstimator
+    from policies.runner import PolicyRunner
+
+    pol = args.policy or REPO_ROOT / SHIPPED_POLICY
+    if not Path(pol).is_file():
+        raise CliError(f"{pol}: no such policy file (train one with 'grip train-policy')")
+    try:
+        runner = PolicyRunner.load(pol)
+        est = KinematicsEstimator.from_checkpoint(_kin_path(args.kin))
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    recs = load_recordings(args.data, args.split, args.category, args.segment_frames,
+                           args.segments)  # fmt: skip
+    with tqdm(total=len(recs), unit="seg", desc="episodes") as bar:
+        rows = evaluate_policy(runner, est, recs, progress=bar.update)
+    summary = summarize_rows(rows)
+    print(markdown_table(summary))
+    if args.out is not None:
+        write_rows(rows, summary, args.out)
+        print(f"wrote {args.out}/segments.csv and {args.out}/summary.md")
+    if args.json is not None:
+        from grip.core.atomic import atomic_write_text
+
+        atomic_write_text(args.json, json.dumps(summary["overall"], indent=1))
+        print(f"wrote {args.json}")
+    return 0

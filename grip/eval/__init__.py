@@ -1,0 +1,1 @@
+"""The edge where the models, the simulation and the metrics meet: evaluations."""

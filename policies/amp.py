@@ -1,0 +1,217 @@
+"""The AMP discriminator: style reward for PPO and the fall detector's probability.
+
+Real samples are windows of ground-truth AMP frames of the training motions
+(:func:`envs.amp.reference_amp_features`); fake samples are the simulated humanoid's windows
+(``info["amp_obs"]`` of the environment), kept in a replay buffer. Both are normalised by a
+running mean and variance of the real samples and the policy's samples.
+
+Loss forms (:attr:`policies.config.AmpConfig.loss`):
+
+- ``lsgan`` (default; the AMP paper): ``L = E_real (D - 1)^2 + E_fake (D + 1)^2
+  + w_gp / 2 E_real ||grad_x D||^2``; reward ``max(0, 1 - (D - 1)^2 / 4)`` in [0, 1];
+  probability of "real" ``clip((D + 1) / 2, 0, 1)``.
+- ``bce`` (PHC's code): logits with binary cross-entropy and the same gradient penalty; reward
+  ``-log(max(1 - sigmoid(D), 1e-4))``; probability ``sigmoid(D)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from envs import amp as A
+from policies.config import AmpConfig
+
+
+class RunningNorm(nn.Module):
+    """Running mean and variance of inputs (parallel Welford), stored as buffers."""
+
+    def __init__(self, dim: int, eps: float = 1e-5, clip: float = 10.0) -> None:
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(dim, dtype=torch.float64))
+        self.register_buffer("var", torch.ones(dim, dtype=torch.float64))
+        self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
+        self.eps, self.clip = eps, clip
+
+    @torch.no_grad()
+    def update(self, x: torch.Tensor) -> None:
+        x = x.to(torch.float64)
+        n = x.shape[0]
+        if n == 0:
+            return
+        m, v = x.mean(0), x.var(0, unbiased=False)
+        tot = self.count + n
+        delta = m - self.mean
+        self.mean += delta * n / tot
+        self.var.copy_((self.var * self.count + v * n + delta**2 * self.count * n / tot) / tot)
+        self.count.fill_(float(tot))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = (x - self.mean.to(x.dtype)) / torch.sqrt(self.var.to(x.dtype) + self.eps)
+        return y.clamp(-self.clip, self.clip)
+
+
+class Discriminator(nn.Module):
+    """MLP over normalised AMP windows; one output (LSGAN score or BCE logit)."""
+
+    def __init__(self, in_dim: int, hidden: Sequence[int], loss: str = "lsgan") -> None:
+        super().__init__()
+        self.in_dim, self.loss = in_dim, loss
+        self.norm = RunningNorm(in_dim)
+        layers: list[nn.Module] = []
+        d = in_dim
+        for h in hidden:
+            layers += [nn.Linear(d, h), nn.ReLU()]
+            d = h
+        self.trunk = nn.Sequential(*layers)
+        self.head = nn.Linear(d, 1)
+        nn.init.uniform_(self.head.weight, -1.0, 1.0)  # PHC: small logit layer at start
+        self.head.weight.data.mul_(0.01)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(N,)`` raw scores of raw (unnormalised) windows ``(N, in_dim)``."""
+        return self.head(self.trunk(self.norm(x))).squeeze(-1)
+
+    @torch.no_grad()
+    def reward(self, x: np.ndarray) -> np.ndarray:
+        """``(N,)`` style reward of raw windows (see the module docstring)."""
+        d = self(torch.as_tensor(x, dtype=torch.float32)).double()
+        if self.loss == "lsgan":
+            r = torch.clamp(1.0 - 0.25 * (d - 1.0) ** 2, min=0.0)
+        else:
+            r = -torch.log(torch.clamp(1.0 - torch.sigmoid(d), min=1e-4))
+        return r.numpy()
+
+    @torch.no_grad()
+    def probability(self, x: np.ndarray) -> np.ndarray:
+        """``(N,)`` probability that windows are real motion (the fall detector's rho)."""
+        d = self(torch.as_tensor(x, dtype=torch.float32)).double()
+        p = torch.clamp((d + 1.0) / 2.0, 0.0, 1.0) if self.loss == "lsgan" else torch.sigmoid(d)
+        return p.numpy()
+
+
+class RealSampler:
+    """Random windows of ground-truth AMP frames from several clips (never across clips)."""
+
+    def __init__(self, clip_frames: Sequence[np.ndarray], window: int) -> None:
+        if not clip_frames:
+            raise ValueError("RealSampler needs at least one clip")
+        self.frames = np.concatenate(clip_frames).astype(np.float32)
+        starts = np.concatenate([[0], np.cumsum([len(f) for f in clip_frames])[:-1]])
+        self.clip_start = np.repeat(starts, [len(f) for f in clip_frames])
+        self.window = window
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``(n, window * FRAME_DIM)`` float32."""
+        t = rng.integers(0, len(self.frames), n)
+        idx = t[:, None] + np.arange(-self.window + 1, 1)[None, :]
+        idx = np.maximum(idx, self.clip_start[t][:, None])
+        return self.frames[idx].reshape(n, -1)
+
+
+class ReplayBuffer:
+    """Ring buffer of the policy's AMP windows."""
+
+    def __init__(self, size: int, dim: int) -> None:
+        self.data = np.zeros((size, dim), dtype=np.float32)
+        self.n = 0
+        self.pos = 0
+
+    def __len__(self) -> int:
+        return self.n
+
+    def add(self, x: np.ndarray) -> None:
+        size = len(self.data)
+        x = x[-size:]
+        k = len(x)
+        end = self.pos + k
+        if end <= size:
+            self.data[self.pos : end] = x
+        else:
+            first = size - self.pos
+            self.data[self.pos :] = x[:first]
+            self.data[: k - first] = x[first:]
+        self.pos = end % size
+        self.n = min(self.n + k, size)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        return self.data[rng.integers(0, self.n, n)]
+
+
+class AmpTrainer:
+    """Discriminator, optimiser, real sampler and replay buffer; one :meth:`update` per rollout."""
+
+    def __init__(self, cfg: AmpConfig, real: RealSampler, seed: int = 0) -> None:
+        self.cfg = cfg
+        dim = cfg.window * A.FRAME_DIM
+        self.disc = Discriminator(dim, cfg.hidden, cfg.loss)
+        self.opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr,
+                                    weight_decay=cfg.weight_decay)  # fmt: skip
+        self.real = real
+        self.replay = ReplayBuffer(cfg.replay_size, dim)
+        self.rng = np.random.default_rng(seed)
+        self.disc.norm.update(torch.as_tensor(real.sample(min(len(real), 20000), self.rng)))
+
+    def reward(self, x: np.ndarray) -> np.ndarray:
+        return self.cfg.reward_scale * self.disc.reward(x)
+
+    def _loss(self, d_real: torch.Tensor, d_fake: torch.Tensor) -> torch.Tensor:
+        if self.cfg.loss == "lsgan":
+            return ((d_real - 1.0) ** 2).mean() + ((d_fake + 1.0) ** 2).mean()
+        bce = nn.functional.binary_cross_entropy_with_logits
+        return bce(d_real, torch.ones_like(d_real)) + bce(d_fake, torch.zeros_like(d_fake))
+
+    def update(self, fake: np.ndarray) -> dict[str, float]:
+        """Add the rollout's policy windows to the replay buffer and train the discriminator.
+
+        Returns mean loss, gradient penalty, accuracy on real and fake samples and the mean
+        score of each (for TensorBoard).
+        """
+        cfg = self.cfg
+        if len(fake):
+            self.replay.add(fake)
+            self.disc.norm.update(torch.as_tensor(fake))
+        stats = {"loss": 0.0, "grad_penalty": 0.0, "acc_real": 0.0, "acc_fake": 0.0,
+                 "score_real": 0.0, "score_fake": 0.0}  # fmt: skip
+        if len(self.replay) == 0:
+            return stats
+        n = cfg.updates_per_rollout
+        thr = 0.0
+        for _ in range(n):
+            real = torch.as_tensor(self.real.sample(cfg.batch_size, self.rng))
+            fk = torch.as_tensor(self.replay.sample(cfg.batch_size, self.rng))
+            real.requires_grad_(True)
+            d_real, d_fake = self.disc(real), self.disc(fk)
+            loss = self._loss(d_real, d_fake)
+            (grad,) = torch.autograd.grad(d_real.sum(), real, create_graph=True)
+            gp = grad.pow(2).sum(-1).mean()
+            total = loss + 0.5 * cfg.grad_penalty * gp
+            if cfg.logit_reg > 0:
+                total = total + cfg.logit_reg * self.disc.head.weight.pow(2).sum()
+            self.opt.zero_grad(set_to_none=True)
+            total.backward()
+            self.opt.step()
+            with torch.no_grad():
+                stats["loss"] += float(loss) / n
+                stats["grad_penalty"] += float(gp) / n
+                stats["acc_real"] += float((d_real > thr).float().mean()) / n
+                stats["acc_fake"] += float((d_fake < thr).float().mean()) / n
+                stats["score_real"] += float(d_real.mean()) / n
+                stats["score_fake"] += float(d_fake.mean()) / n
+        return stats
+
+    def state_dict(self) -> dict:
+        return {"disc": self.disc.state_dict(), "opt": self.opt.state_dict(),
+                "rng": self.rng.bit_generator.state}  # fmt: skip
+
+    def load_state_dict(self, state: dict) -> None:
+        self.disc.load_state_dict(state["disc"])
+        self.opt.load_state_dict(state["opt"])
+        self.rng.bit_generator.state = state["rng"]

@@ -1,0 +1,172 @@
+"""Settings of DynamicsNet training (frozen dataclasses; ``configs/policy/*.toml`` hold overrides).
+
+GRIP's values (paper, supplement, BASELINES_AND_METRICS section 5) are noted where the CPU
+default differs; the defaults were chosen by measurement on a 2-core machine (README,
+"DynamicsNet").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from envs.config import TrackingEnvConfig
+
+ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
+AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
+VEC_ENVS: tuple[str, ...] = ("subproc", "dummy")
+
+GRIP_NET_ARCH: tuple[int, ...] = (2048, 1536, 1024, 1024, 512, 512)
+"""GRIP's policy MLP (8.6M parameters); ``--set ppo.net_arch=[2048,1536,1024,1024,512,512]``."""
+
+
+@dataclass(frozen=True)
+class AmpConfig:
+    """The AMP discriminator (BASELINES_AND_METRICS 5.2).
+
+    Attributes:
+        window: Consecutive AMP frames per sample (PHC: 10; the AMP paper: 2).
+        hidden: Hidden layer sizes of the discriminator MLP (PHC: 1024, 512).
+        loss: ``"lsgan"`` (the AMP paper: targets +-1, r = max(0, 1 - (D - 1)^2 / 4),
+            probability rho = clip((D + 1) / 2, 0, 1)) or ``"bce"`` (PHC's code: logits,
+            r = -log(max(1 - sigmoid(D), 1e-4)), rho = sigmoid(D)).
+        grad_penalty: Weight of the gradient penalty on real samples (AMP paper: 10, applied
+            as w / 2 E ||grad D||^2).
+        logit_reg: Weight of the L2 penalty on the last layer's weights (PHC: 0.01).
+        weight_decay: Adam weight decay (PHC: 1e-4).
+        lr: Adam learning rate.
+        batch_size: Real and fake samples per discriminator update (each).
+        updates_per_rollout: Discriminator updates after each PPO rollout.
+        replay_size: Policy samples kept for the discriminator (oldest replaced first).
+        reward_scale: Multiplies the AMP reward before its weight (PHC: 2 with BCE).
+    """
+
+    window: int = 10
+    hidden: tuple[int, ...] = (512, 256)
+    loss: str = "lsgan"
+    grad_penalty: float = 10.0
+    logit_reg: float = 0.01
+    weight_decay: float = 1e-4
+    lr: float = 1e-4
+    batch_size: int = 512
+    updates_per_rollout: int = 8
+    replay_size: int = 20000
+    reward_scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO (stable-baselines3) and the policy network.
+
+    Attributes:
+        net_arch: Hidden sizes of the policy MLP (the value MLP has the same); GRIP:
+            :data:`GRIP_NET_ARCH`.
+        activation: :data:`ACTIVATIONS` (GRIP: SiLU).
+        log_std_init: Initial log standard deviation of the Gaussian actions (PHC: -2.9).
+        fixed_std: Keep the standard deviation at its initial value (PHC) instead of learning it.
+        n_envs: Environments; stepped in parallel processes with ``vec_env = "subproc"``.
+        vec_env: ``"subproc"`` (one process per environment) or ``"dummy"`` (all in the learner).
+        n_steps: Steps per environment per rollout.
+        batch_size: Minibatch size.
+        n_epochs: Passes over each rollout.
+        learning_rate: Adam learning rate.
+        gamma, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm: PPO as in SB3.
+        normalize_reward: Scale rewards by a running return std (SB3 VecNormalize).
+        clip_obs: Normalised observations are clipped to +- this.
+        threads: Torch threads of the learner (0: all cores).
+        device: Torch device of the learner (``"cpu"``, ``"cuda"``, ``"auto"``).
+    """
+
+    net_arch: tuple[int, ...] = (512, 256, 256)
+    activation: str = "silu"
+    log_std_init: float = -1.6
+    fixed_std: bool = False
+    n_envs: int = 8
+    vec_env: str = "subproc"
+    n_steps: int = 256
+    batch_size: int = 1024
+    n_epochs: int = 5
+    learning_rate: float = 2e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 1.0
+    normalize_reward: bool = True
+    clip_obs: float = 10.0
+    threads: int = 0
+    device: str = "cpu"
+
+
+@dataclass(frozen=True)
+class StageConfig:
+    """One stage of GRIP's curriculum.
+
+    Attributes:
+        timesteps: Environment steps of this stage (all environments together).
+        termination_dist_m: Early termination when any joint is this far from the ground
+            truth (GRIP stage 1: 0.25 m; stage 2: off = 0).
+        fall_height_m: End the episode when the pelvis is below this height, m (0: never); in
+            stage 2 a fallen body otherwise lies on the floor until the clip ends.
+        max_episode_frames: Truncate episodes after this many steps (0: the clip's end).
+        categories: Train on clips of these motion categories only (empty: all).
+    """
+
+    timesteps: int = 0
+    termination_dist_m: float = 0.25
+    fall_height_m: float = 0.0
+    max_episode_frames: int = 300
+    categories: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PolicyRunConfig:
+    """Everything ``grip train-policy`` needs (written to ``config.json``)."""
+
+    env: TrackingEnvConfig = field(default_factory=TrackingEnvConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    amp: AmpConfig = field(default_factory=AmpConfig)
+    stage1: StageConfig = field(default_factory=lambda: StageConfig(timesteps=2_000_000))
+    stage2: StageConfig = field(default_factory=lambda: StageConfig(
+        timesteps=1_000_000, termination_dist_m=0.0, fall_height_m=0.3, max_episode_frames=1000,
+    ))  # fmt: skip
+    checkpoint_every: int = 10
+    """Rollouts between checkpoints."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        checks = (
+            (self.ppo.activation in ACTIVATIONS, f"ppo.activation must be one of {ACTIVATIONS}"),
+            (self.ppo.vec_env in VEC_ENVS, f"ppo.vec_env must be one of {VEC_ENVS}"),
+            (self.amp.loss in AMP_LOSSES, f"amp.loss must be one of {AMP_LOSSES}"),
+            (self.amp.window >= 1, "amp.window must be >= 1"),
+            (self.ppo.n_envs >= 1, "ppo.n_envs must be >= 1"),
+            (self.ppo.n_steps * self.ppo.n_envs >= self.ppo.batch_size,
+             "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
+            (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
+        )  # fmt: skip
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(f"PolicyRunConfig: {msg}")
+
+    def stages(self) -> list[tuple[str, StageConfig]]:
+        return [("stage1", self.stage1), ("stage2", self.stage2)]
+
+    def total_timesteps(self) -> int:
+        return self.stage1.timesteps + self.stage2.timesteps
+
+    def env_config(self, stage: StageConfig, reference: str = "") -> TrackingEnvConfig:
+        """The environment settings of one stage (random starts, the stage's termination)."""
+        return dataclasses.replace(
+            self.env, reference=reference or self.env.reference, random_start=True,
+            termination_dist_m=stage.termination_dist_m, fall_height_m=stage.fall_height_m,
+            max_episode_frames=stage.max_episode_frames, amp_window=self.amp.window,
+        )  # fmt: skip
+
+
+def run_config_from_dict(d: dict) -> PolicyRunConfig:
+    """Inverse of ``dataclasses.asdict`` for :class:`PolicyRunConfig`."""
+    from grip.config import apply_dict
+
+    return apply_dict(PolicyRunConfig(), d, "policy config")

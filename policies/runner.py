@@ -1,0 +1,161 @@
+"""The trained controller for inference: a plain torch MLP, its observation normaliser and the
+AMP discriminator, in one small file (no stable-baselines3 pickle at load time).
+
+``export_policy(run_dir, out)`` writes it from a training run's checkpoint;
+``PolicyRunner.load(path)`` reads it with ``torch.load(weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from envs.config import TrackingEnvConfig
+from grip.config import apply_dict
+from grip.core.atomic import atomic_write
+from policies.amp import Discriminator
+from policies.config import PolicyRunConfig
+
+FORMAT = "grip-policy"
+VERSION = 1
+_ACT = {"silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
+
+
+def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(_ACT[activation]())
+    return nn.Sequential(*layers)
+
+
+class PolicyRunner:
+    """Deterministic actions of a trained DynamicsNet, and the discriminator's probability.
+
+    Attributes:
+        env_cfg: The environment settings the policy was trained with (observation variant,
+            action mode, gains...): build the inference environment from them.
+        obs_keys: Observation parts in the order the network concatenates them.
+    """
+
+    def __init__(self, actor: nn.Sequential, obs_keys: list[str], obs_mean: dict, obs_var: dict,
+                 clip_obs: float, env_cfg: TrackingEnvConfig, disc: Discriminator | None,
+                 amp_window: int, info: dict | None = None) -> None:  # fmt: skip
+        self.actor = actor.eval()
+        self.obs_keys = list(obs_keys)
+        self._mean = np.concatenate([np.asarray(obs_mean[k], np.float64) for k in obs_keys])
+        self._std = np.sqrt(np.concatenate([np.asarray(obs_var[k], np.float64) for k in obs_keys])
+                            + 1e-8)  # fmt: skip
+        self.clip_obs = clip_obs
+        self.env_cfg = env_cfg
+        self.disc = disc.eval() if disc is not None else None
+        self.amp_window = amp_window
+        self.info = info or {}
+
+    def _flat(self, obs: dict) -> np.ndarray:
+        parts = [np.asarray(obs[k], np.float64) for k in self.obs_keys]
+        x = np.concatenate([p.reshape(*p.shape[:-1], -1) for p in parts], axis=-1)
+        return np.clip((x - self._mean) / self._std, -self.clip_obs, self.clip_obs)
+
+    @torch.no_grad()
+    def act(self, obs: dict) -> np.ndarray:
+        """Action(s) in [-1, 1] for one observation dict (or a batch with a leading axis)."""
+        x = torch.as_tensor(self._flat(obs), dtype=torch.float32)
+        return np.clip(self.actor(x).numpy(), -1.0, 1.0)
+
+    def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
+        """The discriminator's probability that AMP windows are real motion."""
+        if self.disc is None:
+            raise ValueError("this policy file has no discriminator")
+        return self.disc.probability(np.atleast_2d(amp_obs))
+
+    # ------------------------------------------------------------------ file
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> PolicyRunner:
+        """Read an exported policy; errors name the file and the problem."""
+        path = Path(path)
+        try:
+            ck = torch.load(path, map_location="cpu", weights_only=True)
+        except FileNotFoundError:
+            raise
+        except Exception as e:  # corrupt or hostile files raise many types
+            raise ValueError(f"{path}: not a readable policy file ({e})") from e
+        if not isinstance(ck, dict) or ck.get("format") != FORMAT:
+            raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
+        missing = [k for k in ("config", "actor", "obs_keys", "obs_mean", "obs_var") if k not in ck]
+        if missing:
+            raise ValueError(f"{path}: policy file lacks {missing}")
+        try:
+            cfg = apply_dict(PolicyRunConfig(), json.loads(ck["config"]), f"{path}: config")
+            sizes = [int(s) for s in ck["actor_sizes"]]
+            actor = _mlp(sizes, cfg.ppo.activation)
+            actor.load_state_dict({k: v.float() for k, v in ck["actor"].items()})
+            disc = None
+            if "disc" in ck:
+                disc = Discriminator(cfg.amp.window * int(ck["amp_frame_dim"]), cfg.amp.hidden,
+                                     cfg.amp.loss)  # fmt: skip
+                disc.load_state_dict({k: (v.float() if k.startswith(("trunk", "head")) else v)
+                                      for k, v in ck["disc"].items()})  # fmt: skip
+        except (KeyError, RuntimeError, ValueError, TypeError) as e:
+            raise ValueError(f"{path}: inconsistent policy file ({e})") from e
+        env_cfg = dataclasses.replace(cfg.env, amp_window=cfg.amp.window)
+        return cls(actor, ck["obs_keys"], ck["obs_mean"], ck["obs_var"], float(ck["clip_obs"]),
+                   env_cfg, disc, cfg.amp.window, json.loads(ck.get("info", "{}")))  # fmt: skip
+
+
+def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool = True,
+                  info: dict | None = None) -> int:  # fmt: skip
+    """Write the inference file of a training run's checkpoint; returns its size in bytes.
+
+    Weights are float16 with ``half`` (cast back on load); normaliser statistics stay float64.
+    """
+    from stable_baselines3 import PPO
+
+    from policies.amp import AmpTrainer  # noqa: F401  (state layout)
+
+    run_dir = Path(run_dir)
+    ck_dir = run_dir / "checkpoint"
+    cfg_path = run_dir / "config.json"
+    if not (ck_dir / "model.zip").is_file() or not cfg_path.is_file():
+        raise FileNotFoundError(f"{run_dir}: no checkpoint/model.zip and config.json (a "
+                                "train-policy run folder expected)")  # fmt: skip
+    cfg_d = json.loads(cfg_path.read_text())["config"]
+    cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
+    model = PPO.load(ck_dir / "model.zip", device="cpu")
+    pol = model.policy
+    linears = [m for m in pol.mlp_extractor.policy_net if isinstance(m, nn.Linear)]
+    linears.append(pol.action_net)
+    sizes = [linears[0].in_features] + [m.out_features for m in linears]
+    actor = _mlp(sizes, cfg.ppo.activation)
+    for dst, src in zip([m for m in actor if isinstance(m, nn.Linear)], linears, strict=True):
+        dst.load_state_dict(src.state_dict())
+    cast = (lambda v: v.half()) if half else (lambda v: v)
+    with np.load(ck_dir / "vecnorm.npz", allow_pickle=False) as z:
+        norm = dict(z)
+    keys = list(model.observation_space.spaces.keys())
+    amp_ck = torch.load(ck_dir / "amp.pt", map_location="cpu", weights_only=True)
+    from envs.amp import FRAME_DIM
+
+    payload = {
+        "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
+        "actor_sizes": sizes, "actor": {k: cast(v) for k, v in actor.state_dict().items()},
+        "obs_keys": keys,
+        "obs_mean": {k: torch.as_tensor(norm[f"obs/{k}/mean"]) for k in keys},
+        "obs_var": {k: torch.as_tensor(norm[f"obs/{k}/var"]) for k in keys},
+        "clip_obs": cfg.ppo.clip_obs, "amp_frame_dim": FRAME_DIM,
+        "disc": {k: (cast(v) if k.startswith(("trunk", "head")) else v)
+                 for k, v in amp_ck["disc"].items()},
+        "info": json.dumps(info or {}),
+    }  # fmt: skip
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    atomic_write(out, lambda f: f.write(buf.getvalue()))
+    return len(buf.getvalue())

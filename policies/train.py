@@ -1,0 +1,391 @@
+"""DynamicsNet training: PPO (stable-baselines3) with the AMP style reward, GRIP's two stages.
+
+A run folder holds::
+
+    config.json            resolved settings, git hash, data and KinematicsNet paths
+    reference_train.npz    the training motions with KinematicsNet estimates (made once)
+    checkpoint/            model.zip (SB3), vecnorm.npz, amp.pt, state.json (atomic swap)
+    policy.pt              the inference export (:mod:`policies.runner`), after training
+    tb/                    TensorBoard scalars
+    curves.png             learning curves
+
+Running the same command again resumes from ``checkpoint/`` (stage, steps, optimiser,
+normaliser and discriminator); the replay buffer of policy samples is not saved (it refills
+within a few rollouts).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fnmatch
+import json
+import os
+import shutil
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import (
+    DummyVecEnv,
+    SubprocVecEnv,
+    VecEnv,
+    VecEnvWrapper,
+    VecMonitor,
+    VecNormalize,
+)
+
+from envs import amp as A
+from envs.config import TrackingEnvConfig
+from grip.config import apply_dict
+from grip.core.reference import ReferenceSet
+from policies.amp import AmpTrainer, RealSampler
+from policies.config import PolicyRunConfig, StageConfig
+
+ACTIVATION_FNS: dict[str, type[torch.nn.Module]] = {
+    "silu": torch.nn.SiLU, "relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
+}  # fmt: skip
+
+INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy", "amp")
+
+
+def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
+    """The clips whose category matches one of the glob ``patterns`` (all when empty)."""
+    if not patterns:
+        return ref
+    clips = [c for c in ref.clips if any(fnmatch.fnmatch(c.category, p) for p in patterns)]
+    if not clips:
+        cats = sorted({c.category for c in ref.clips})
+        raise ValueError(f"{ref.source}: no clip matches categories {list(patterns)} "
+                         f"(categories present: {cats})")  # fmt: skip
+    return ReferenceSet(clips, ref.sensor_sites, ref.insoles, ref.source)
+
+
+_REFERENCES: dict[tuple, ReferenceSet] = {}
+
+
+class EnvFactory:
+    """Picklable constructor of one training environment (for subprocess vector envs)."""
+
+    def __init__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int) -> None:
+        self.env_cfg, self.categories, self.seed = env_cfg, categories, seed
+
+    def __call__(self):
+        from envs.tracking_env import GripTrackingEnv
+
+        key = (self.env_cfg.reference, self.categories)
+        ref = _REFERENCES.get(key)
+        if ref is None:  # one copy per process, shared by its environments
+            ref = select_clips(ReferenceSet.load(self.env_cfg.reference), self.categories)
+            _REFERENCES.clear()
+            _REFERENCES[key] = ref
+        env = GripTrackingEnv(self.env_cfg, ref)
+        env.reset(seed=self.seed)
+        return env
+
+
+class AmpReward(VecEnvWrapper):
+    """Adds ``weight x r_amp`` of the discriminator to the environment reward and keeps the
+    rollout's AMP windows for the discriminator's next update (``info["reward/amp"]`` is set)."""
+
+    def __init__(self, venv: VecEnv, amp: AmpTrainer, weight: float) -> None:
+        super().__init__(venv)
+        self.amp, self.weight = amp, weight
+        self._samples: list[np.ndarray] = []
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_wait(self):
+        obs, rew, dones, infos = self.venv.step_wait()
+        x = np.stack([info["amp_obs"] for info in infos])
+        r = self.amp.reward(x)
+        for info, ri in zip(infos, r, strict=True):
+            info["reward/amp"] = float(ri)
+        self._samples.append(x)
+        return obs, rew + (self.weight * r).astype(rew.dtype), dones, infos
+
+    def pop_samples(self) -> np.ndarray:
+        x = np.concatenate(self._samples) if self._samples else np.zeros((0, 1), np.float32)
+        self._samples = []
+        return x
+
+
+def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int) -> VecEnv:
+    env_cfg = cfg.env_config(stage, reference)
+    fns = [EnvFactory(env_cfg, stage.categories, seed + 1000 * i) for i in range(cfg.ppo.n_envs)]
+    if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:
+        return SubprocVecEnv(fns, start_method="forkserver")
+    return DummyVecEnv(fns)
+
+
+# -------------------------------------------------------------------- normaliser state
+def vecnorm_state(vn: VecNormalize) -> dict[str, np.ndarray]:
+    """VecNormalize statistics as plain arrays (saved as npz, not as a pickle)."""
+    out = {"ret_mean": vn.ret_rms.mean, "ret_var": vn.ret_rms.var, "ret_count": vn.ret_rms.count}
+    for k, rms in vn.obs_rms.items():
+        out[f"obs/{k}/mean"], out[f"obs/{k}/var"] = rms.mean, rms.var
+        out[f"obs/{k}/count"] = np.array(rms.count)
+    return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
+
+
+def load_vecnorm_state(vn: VecNormalize, state: dict[str, np.ndarray]) -> None:
+    vn.ret_rms.mean, vn.ret_rms.var = state["ret_mean"], state["ret_var"]
+    vn.ret_rms.count = float(state["ret_count"])
+    for k, rms in vn.obs_rms.items():
+        rms.mean, rms.var = state[f"obs/{k}/mean"], state[f"obs/{k}/var"]
+        rms.count = float(state[f"obs/{k}/count"])
+
+
+# ------------------------------------------------------------------------ callback
+class TrainingCallback(BaseCallback):
+    """Discriminator updates, logging, progress bar and checkpoints of a training run."""
+
+    def __init__(self, trainer: PolicyTrainer, stage_name: str, stage_steps: int,
+                 bar) -> None:  # fmt: skip
+        super().__init__()
+        self.trainer, self.stage_name, self.bar = trainer, stage_name, bar
+        self.stage_steps = stage_steps
+        self.sums: dict[str, float] = defaultdict(float)
+        self.n = 0
+        self.episodes: list[tuple[bool, float]] = []  # (success, mean MPJPE m)
+        self.ep_err = np.zeros(0)
+        self.ep_len = np.zeros(0)
+        self.rollouts = 0
+        self.start_steps = 0
+
+    def _on_training_start(self) -> None:
+        n = self.training_env.num_envs
+        self.ep_err, self.ep_len = np.zeros(n), np.zeros(n)
+        self.start_steps = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        for i, (info, done) in enumerate(zip(infos, dones, strict=True)):
+            for k in INFO_TERMS:
+                self.sums[k] += info.get(f"reward/{k}", 0.0)
+            err = info.get("mpjpe_m", np.inf)
+            if np.isfinite(err):
+                self.ep_err[i] += err
+                self.ep_len[i] += 1
+            if done:
+                ok = bool(info.get("TimeLimit.truncated", False))
+                self.episodes.append((ok, self.ep_err[i] / max(self.ep_len[i], 1)))
+                self.ep_err[i] = self.ep_len[i] = 0
+        self.n += len(infos)
+        self.bar.update(len(infos))
+        self.trainer.stage_done = self.num_timesteps - self.start_steps + self.trainer.stage_done0
+        return True
+
+    def _on_rollout_end(self) -> None:
+        tr = self.trainer
+        stats = tr.amp.update(tr.amp_wrapper.pop_samples())
+        log = self.logger.record
+        for k, v in stats.items():
+            log(f"amp/{k}", v)
+        for k in INFO_TERMS:
+            log(f"reward/{k}", self.sums[k] / max(self.n, 1))
+        if self.episodes:
+            ok = np.array([e[0] for e in self.episodes])
+            log("episode/success_rate", float(ok.mean()))
+            log("episode/mpjpe_mm", 1000 * float(np.mean([e[1] for e in self.episodes])))
+            log("episode/count", len(self.episodes))
+        row = {"timesteps": int(tr.total_done()), "stage": self.stage_name,
+               "wall_s": tr.wall_s(), **{f"reward/{k}": self.sums[k] / max(self.n, 1)
+                                         for k in INFO_TERMS},
+               **{f"amp/{k}": v for k, v in stats.items()}}  # fmt: skip
+        if self.episodes:
+            row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
+            row["mpjpe_mm"] = 1000 * float(np.mean([e[1] for e in self.episodes]))
+        tr.history.append(row)
+        d_acc = (stats["acc_real"] + stats["acc_fake"]) / 2
+        succ, err = row.get("success_rate", 0.0), row.get("mpjpe_mm", 0.0)
+        self.bar.set_postfix(stage=self.stage_name, succ=f"{succ:.2f}", mpjpe=f"{err:.0f}mm",
+                             d_acc=f"{d_acc:.2f}")  # fmt: skip
+        self.sums.clear()
+        self.n = 0
+        self.episodes = []
+        self.rollouts += 1
+        if self.rollouts % tr.cfg.checkpoint_every == 0:
+            tr.save_checkpoint()
+
+
+# ------------------------------------------------------------------------ trainer
+class PolicyTrainer:
+    """A resumable DynamicsNet training run in ``run_dir``.
+
+    Args:
+        cfg: Settings.
+        run_dir: Run folder (created or resumed).
+        reference: Training reference set (``.npz``); copied into the run on first use.
+        progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
+    """
+
+    def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
+                 reference: str | os.PathLike,
+                 progress: Callable | None = None) -> None:  # fmt: skip
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        self.reference = str(reference)
+        self.progress = progress
+        self.stage_index = 0
+        self.stage_done = 0
+        self.stage_done0 = 0
+        self.history: list[dict] = []
+        self._wall0 = 0.0
+        self._t0 = time.time()
+        self.model: PPO | None = None
+        self.venv: VecNormalize | None = None
+        self.amp_wrapper: AmpReward | None = None
+        ref = select_clips(ReferenceSet.load(self.reference), ())
+        real = RealSampler([A.reference_amp_features(c) for c in ref.clips], cfg.amp.window)
+        self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed)
+
+    # -------------------------------------------------------------- bookkeeping
+    @property
+    def ckpt_dir(self) -> Path:
+        return self.run_dir / "checkpoint"
+
+    def wall_s(self) -> float:
+        return self._wall0 + time.time() - self._t0
+
+    def total_done(self) -> int:
+        stages = self.cfg.stages()
+        return sum(s.timesteps for _, s in stages[: self.stage_index]) + self.stage_done
+
+    def save_checkpoint(self) -> None:
+        """Write ``checkpoint/`` atomically (a new folder swapped in by rename)."""
+        tmp = self.run_dir / "checkpoint.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        self.model.save(tmp / "model.zip")
+        np.savez(tmp / "vecnorm.npz", **vecnorm_state(self.venv))
+        amp_state = self.amp.state_dict()
+        amp_state["rng"] = json.dumps(amp_state["rng"])  # (weights_only loads plain types)
+        torch.save(amp_state, tmp / "amp.pt")
+        state = {"stage_index": self.stage_index, "stage_done": self.stage_done,
+                 "wall_s": self.wall_s(), "history": self.history}  # fmt: skip
+        (tmp / "state.json").write_text(json.dumps(state))
+        old = self.run_dir / "checkpoint.old"
+        shutil.rmtree(old, ignore_errors=True)
+        if self.ckpt_dir.exists():
+            self.ckpt_dir.rename(old)
+        tmp.rename(self.ckpt_dir)
+        shutil.rmtree(old, ignore_errors=True)
+
+    def _load_state(self) -> dict | None:
+        p = self.ckpt_dir / "state.json"
+        if not p.is_file():
+            return None
+        try:
+            return json.loads(p.read_text())
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{p}: unreadable training state ({e})") from e
+
+    # -------------------------------------------------------------- model
+    def _policy_kwargs(self) -> dict:
+        p = self.cfg.ppo
+        arch = list(p.net_arch)
+        return {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": ACTIVATION_FNS[p.activation],
+                "log_std_init": p.log_std_init}  # fmt: skip
+
+    def _build_env(self, stage: StageConfig) -> VecNormalize:
+        p = self.cfg.ppo
+        seed = self.cfg.seed + 7919 * self.stage_index + self.stage_done
+        base = make_vec_env(self.cfg, stage, self.reference, seed)
+        self.amp_wrapper = AmpReward(base, self.amp, self.cfg.env.reward.weights.amp)
+        mon = VecMonitor(self.amp_wrapper)
+        return VecNormalize(mon, norm_obs=True, norm_reward=p.normalize_reward,
+                            clip_obs=p.clip_obs, gamma=p.gamma)  # fmt: skip
+
+    def _new_model(self, venv: VecNormalize) -> PPO:
+        p = self.cfg.ppo
+        return PPO("MultiInputPolicy", venv, learning_rate=p.learning_rate, n_steps=p.n_steps,
+                   batch_size=p.batch_size, n_epochs=p.n_epochs, gamma=p.gamma,
+                   gae_lambda=p.gae_lambda, clip_range=p.clip_range, ent_coef=p.ent_coef,
+                   vf_coef=p.vf_coef, max_grad_norm=p.max_grad_norm,
+                   policy_kwargs=self._policy_kwargs(), tensorboard_log=str(self.run_dir / "tb"),
+                   seed=self.cfg.seed, device=p.device, verbose=0)  # fmt: skip
+
+    def _apply_fixed_std(self) -> None:
+        if self.cfg.ppo.fixed_std:
+            self.model.policy.log_std.requires_grad_(False)
+
+    # -------------------------------------------------------------- run
+    def train(self) -> None:
+        """Train (or resume) both stages, checkpointing as configured; then export."""
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        if self.cfg.ppo.threads:
+            torch.set_num_threads(self.cfg.ppo.threads)
+        state = self._load_state()
+        if state is not None:
+            self.stage_index, self.stage_done = state["stage_index"], state["stage_done"]
+            self._wall0, self.history = state["wall_s"], state["history"]
+            ck = torch.load(self.ckpt_dir / "amp.pt", map_location="cpu", weights_only=True)
+            ck["rng"] = json.loads(ck["rng"])
+            self.amp.load_state_dict(ck)
+        stages = self.cfg.stages()
+        bar = None
+        if self.progress is not None:
+            bar = self.progress(total=self.cfg.total_timesteps(), initial=self.total_done(),
+                                unit="step", smoothing=0.05)  # fmt: skip
+        try:
+            while self.stage_index < len(stages):
+                name, stage = stages[self.stage_index]
+                remaining = stage.timesteps - self.stage_done
+                if remaining > 0:
+                    self._run_stage(name, stage, remaining, state, bar)
+                    state = None
+                    self.save_checkpoint()
+                if self.stage_index == len(stages) - 1:
+                    break  # the last stage stays current, so a longer one can resume
+                self.stage_index += 1
+                self.stage_done = 0
+        finally:
+            if bar is not None:
+                bar.close()
+            if self.venv is not None:
+                self.venv.close()
+
+    def _run_stage(self, name: str, stage: StageConfig, remaining: int, state: dict | None,
+                   bar) -> None:  # fmt: skip
+        old_norm = vecnorm_state(self.venv) if self.venv is not None else None
+        if self.venv is not None:
+            self.venv.close()
+        self.venv = self._build_env(stage)
+        if state is not None and (self.ckpt_dir / "model.zip").is_file():
+            with np.load(self.ckpt_dir / "vecnorm.npz", allow_pickle=False) as z:
+                load_vecnorm_state(self.venv, dict(z))
+            self.model = PPO.load(self.ckpt_dir / "model.zip", env=self.venv,
+                                  device=self.cfg.ppo.device)  # fmt: skip
+        elif self.model is None:
+            self.model = self._new_model(self.venv)
+        else:
+            load_vecnorm_state(self.venv, old_norm)
+            self.model.set_env(self.venv)
+        self._apply_fixed_std()
+        self.stage_done0 = self.stage_done
+        cb = TrainingCallback(self, name, stage.timesteps, bar if bar is not None else _NoBar())
+        self.model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False,
+                         tb_log_name="ppo", progress_bar=False)  # fmt: skip
+        self.stage_done = stage.timesteps
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def set_postfix(self, **kw) -> None:
+        pass
+
+
+def run_config_dict(cfg: PolicyRunConfig) -> dict:
+    return dataclasses.asdict(cfg)
+
+
+def load_run_config(d: dict) -> PolicyRunConfig:
+    return apply_dict(PolicyRunConfig(), d, "config.json")

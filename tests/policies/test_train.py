@@ -1,0 +1,139 @@
+"""A tiny DynamicsNet run on the bundled sample: train, checkpoint, resume, export, load."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+from policies.config import AmpConfig, PolicyRunConfig, PPOConfig, StageConfig
+from policies.runner import PolicyRunner, export_policy
+from policies.train import PolicyTrainer, run_config_dict, select_clips
+
+
+def _tiny() -> PolicyRunConfig:
+    return PolicyRunConfig(
+        ppo=PPOConfig(n_envs=2, vec_env="dummy", n_steps=32, batch_size=64, n_epochs=1,
+                      net_arch=(32, 32)),
+        amp=AmpConfig(window=3, hidden=(32,), batch_size=32, updates_per_rollout=1,
+                      replay_size=500),
+        stage1=StageConfig(timesteps=128, max_episode_frames=40, categories=("walk*",)),
+        stage2=StageConfig(timesteps=64, termination_dist_m=0.0, fall_height_m=0.3,
+                           max_episode_frames=50),
+        checkpoint_every=1,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("policy_run")
+    cfg = _tiny()
+    (run / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
+    tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE)
+    tr.train()
+    return run, tr
+
+
+def test_training_runs_both_stages_and_logs_every_term(run):
+    path, tr = run
+    assert tr.total_done() >= 192
+    stages = [h["stage"] for h in tr.history]
+    assert stages[0] == "stage1" and stages[-1] == "stage2"
+    for key in ("reward/imit_pos", "reward/amp", "reward/energy", "amp/acc_real", "amp/loss"):
+        assert all(np.isfinite(h[key]) for h in tr.history), key
+    state = json.loads((path / "checkpoint" / "state.json").read_text())
+    assert state["stage_index"] == 1 and state["stage_done"] == 64
+    assert (path / "tb").is_dir()
+
+
+def test_resume_extends_the_last_stage(run, tmp_path):
+    path, tr = run
+    import shutil
+
+    copy = tmp_path / "resumed"
+    shutil.copytree(path, copy)
+    cfg = _tiny()
+    longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=128))
+    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE)
+    tr2.train()
+    assert tr2.total_done() == 128 + 128
+    assert len(tr2.history) > len(tr.history)
+
+
+def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
+    path, _ = run
+    from stable_baselines3 import PPO
+
+    out = tmp_path / "policy.pt"
+    export_policy(path, out, half=False)
+    runner = PolicyRunner.load(out)
+    env = GripTrackingEnv(runner.env_cfg)
+    obs, info = env.reset(seed=3)
+    model = PPO.load(path / "checkpoint" / "model.zip", device="cpu")
+    with np.load(path / "checkpoint" / "vecnorm.npz") as z:
+        norm = dict(z)
+    nobs = {k: np.clip((v - norm[f"obs/{k}/mean"]) / np.sqrt(norm[f"obs/{k}/var"] + 1e-8),
+                       -10, 10).astype(np.float32) for k, v in obs.items()}  # fmt: skip
+    expected, _ = model.predict(nobs, deterministic=True)
+    np.testing.assert_allclose(runner.act(obs), expected, atol=1e-5)
+    p = runner.fall_probability(info["amp_obs"])
+    assert p.shape == (1,) and 0 <= p[0] <= 1
+    half = tmp_path / "half.pt"
+    assert export_policy(path, half) < out.stat().st_size
+    np.testing.assert_allclose(PolicyRunner.load(half).act(obs), expected, atol=2e-2)
+
+
+def test_bad_policy_files_are_refused(tmp_path):
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match=r"junk\.pt"):
+        PolicyRunner.load(junk)
+    import torch
+
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else"}, other)
+    with pytest.raises(ValueError, match="not a GRIP policy"):
+        PolicyRunner.load(other)
+
+
+def test_category_selection_and_config_checks():
+    from grip.core.reference import ReferenceSet
+
+    ref = ReferenceSet.load(SAMPLE_REFERENCE)
+    assert {c.category for c in select_clips(ref, ("run*",)).clips} == {"run"}
+    with pytest.raises(ValueError, match="categories present"):
+        select_clips(ref, ("swim",))
+    with pytest.raises(ValueError, match="batch_size"):
+        PolicyRunConfig(ppo=PPOConfig(n_envs=1, n_steps=8, batch_size=64))
+    with pytest.raises(ValueError, match=r"amp\.loss"):
+        PolicyRunConfig(amp=AmpConfig(loss="wgan"))
+
+
+def test_eval_policy_rows_summary_and_files(run, tmp_path):
+    from grip.cli.kinematics import SHIPPED_KIN
+    from grip.cli.paths import REPO_ROOT
+    from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.synthetic import make_recording
+
+    path, _ = run
+    export_policy(path, tmp_path / "p.pt")
+    runner = PolicyRunner.load(tmp_path / "p.pt")
+    est = KinematicsEstimator.from_checkpoint(REPO_ROOT / SHIPPED_KIN)
+    recs = [make_recording(120, seed=s) for s in (0, 1)]
+    rows = evaluate_policy(runner, est, recs)
+    assert len(rows) == 2
+    for r in rows:
+        assert 2 <= r["frames"] <= 120
+        assert r["fell"] == (r["frames"] < 120)
+        for k in ("MPJPE_mm", "PA_MPJPE_mm", "kin_MPJPE_mm", "FP_mm"):
+            assert np.isfinite(r[k]) and r[k] >= 0, k
+    s = summarize_rows(rows)
+    assert s["overall"]["segments"] == 2
+    assert s["overall"]["success_rate"] == 100.0 * np.mean([not r["fell"] for r in rows])
+    assert "| **all** |" in markdown_table(s)
+    write_rows(rows, s, tmp_path / "out")
+    assert (tmp_path / "out" / "segments.csv").read_text().count("\n") == 3
