@@ -86,18 +86,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
     from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
-    from grip.config import ConfigError, load_config
+    from grip.cli.paths import load_run_config
     from grip.kinematics.train import KinematicsRunConfig
 
-    cfg_path = args.config
-    if cfg_path is None:
-        default = REPO_ROOT / "configs" / "kinematics" / "default.toml"
-        cfg_path = default if default.is_file() else None
-    try:
-        cfg = load_config(cfg_path, KinematicsRunConfig(), args.set)
-    except ConfigError as e:
-        raise CliError(str(e)) from e
+    cfg = load_run_config(args.config, "kinematics", KinematicsRunConfig(), args.set)
     if args.threads:
         torch.set_num_threads(args.threads)
     if not args.sweep:

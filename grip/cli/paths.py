@@ -19,3 +19,19 @@ def default_motions_dir() -> Path | None:
         if c.is_dir():
             return c.resolve()
     return None
+
+
+def load_run_config(path: Path | None, kind: str, default, overrides):
+    """Settings of a run: ``default`` updated by the TOML at ``path`` (else
+    ``configs/<kind>/default.toml`` when it exists) and ``--set`` overrides; errors become
+    :class:`grip.cli.main.CliError`."""
+    from grip.cli.main import CliError
+    from grip.config import ConfigError, load_config
+
+    if path is None:
+        candidate = REPO_ROOT / "configs" / kind / "default.toml"
+        path = candidate if candidate.is_file() else None
+    try:
+        return load_config(path, default, overrides)
+    except (ConfigError, ValueError) as e:
+        raise CliError(str(e)) from e

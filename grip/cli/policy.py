@@ -158,21 +158,13 @@ def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
-    from grip.config import ConfigError, load_config
+    from grip.cli.paths import load_run_config
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.train import git_hash
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer, run_config_dict
 
-    cfg_path = args.config
-    if cfg_path is None:
-        default = REPO_ROOT / "configs" / "policy" / "default.toml"
-        cfg_path = default if default.is_file() else None
-    try:
-        cfg = load_config(cfg_path, PolicyRunConfig(), args.set)
-    except (ConfigError, ValueError) as e:
-        raise CliError(str(e)) from e
+    cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     kin = _kin_path(args.kin)
