@@ -2,8 +2,9 @@
 
 Plays a clip through ``GripTrackingEnv`` with ``pin_root=True``, relative actions of 0 and a
 perfect estimate (the ground truth), with and without the velocity feed-forward, and prints the
-MPJPE and the mean per-frame worst joint error against the ground truth. This is the number the
-README quotes for the environment's PD control.
+MPJPE, the mean per-frame worst joint error against the ground truth and the mean mechanical
+power of the actuators (the raw energy term of the reward, W). These are the numbers the README
+quotes for the environment's PD control and for the energy weight of configs/policy.
 
     python benchmarks/env_pd_tracking.py [--clip ../shared/data/motions/cmu/bvh/07_05.bvh]
 """
@@ -40,17 +41,19 @@ def main() -> None:
                                                 termination_dist_m=0.0, velocity_feedforward=ff),
                               reference=ref)  # fmt: skip
         env.reset(seed=0)
-        mpjpe, worst = [], []
+        mpjpe, worst, power = [], [], []
         while True:
             _, _, term, trunc, info = env.step(np.zeros(69, np.float32))
             mpjpe.append(info["mpjpe_m"])
             worst.append(info["max_joint_err_m"])
+            power.append(info["reward/energy"])
             if term or trunc:
                 break
         print(
             f"velocity feed-forward {'on ' if ff else 'off'}: {len(mpjpe)} frames, "
             f"MPJPE {1e3 * np.mean(mpjpe):.1f} mm, "
-            f"mean worst joint {1e3 * np.mean(worst):.1f} mm"
+            f"mean worst joint {1e3 * np.mean(worst):.1f} mm, "
+            f"mechanical power {np.mean(power[3:]):.0f} W"
         )
 
 

@@ -163,10 +163,3 @@ class PolicyRunConfig:
             termination_dist_m=stage.termination_dist_m, fall_height_m=stage.fall_height_m,
             max_episode_frames=stage.max_episode_frames, amp_window=self.amp.window,
         )  # fmt: skip
-
-
-def run_config_from_dict(d: dict) -> PolicyRunConfig:
-    """Inverse of ``dataclasses.asdict`` for :class:`PolicyRunConfig`."""
-    from grip.config import apply_dict
-
-    return apply_dict(PolicyRunConfig(), d, "policy config")

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from envs.amp import FRAME_DIM
 from envs.config import TrackingEnvConfig
 from grip.config import apply_dict
 from grip.core.atomic import atomic_write
@@ -25,7 +26,10 @@ from policies.config import PolicyRunConfig
 
 FORMAT = "grip-policy"
 VERSION = 1
-_ACT = {"silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
+ACTIVATION_FNS: dict[str, type[nn.Module]] = {
+    "silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU,
+}  # fmt: skip
+"""The activations of :data:`policies.config.ACTIVATIONS`."""
 
 
 def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
@@ -33,7 +37,7 @@ def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
     for i in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
         if i < len(sizes) - 2:
-            layers.append(_ACT[activation]())
+            layers.append(ACTIVATION_FNS[activation]())
     return nn.Sequential(*layers)
 
 
@@ -119,8 +123,6 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     """
     from stable_baselines3 import PPO
 
-    from policies.amp import AmpTrainer  # noqa: F401  (state layout)
-
     run_dir = Path(run_dir)
     ck_dir = run_dir / "checkpoint"
     cfg_path = run_dir / "config.json"
@@ -142,8 +144,6 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         norm = dict(z)
     keys = list(model.observation_space.spaces.keys())
     amp_ck = torch.load(ck_dir / "amp.pt", map_location="cpu", weights_only=True)
-    from envs.amp import FRAME_DIM
-
     payload = {
         "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
         "actor_sizes": sizes, "actor": {k: cast(v) for k, v in actor.state_dict().items()},

@@ -38,17 +38,14 @@ from stable_baselines3.common.vec_env import (
     VecMonitor,
     VecNormalize,
 )
+from tqdm import tqdm
 
 from envs import amp as A
 from envs.config import TrackingEnvConfig
-from grip.config import apply_dict
 from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
 from policies.config import PolicyRunConfig, StageConfig
-
-ACTIVATION_FNS: dict[str, type[torch.nn.Module]] = {
-    "silu": torch.nn.SiLU, "relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
-}  # fmt: skip
+from policies.runner import ACTIVATION_FNS
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy", "amp")
 
@@ -65,7 +62,17 @@ def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
     return ReferenceSet(clips, ref.sensor_sites, ref.insoles, ref.source)
 
 
-_REFERENCES: dict[tuple, ReferenceSet] = {}
+_REFERENCE: dict[str, ReferenceSet] = {}
+
+
+def load_reference(path: str) -> ReferenceSet:
+    """The reference set at ``path``, loaded once per process (the trainer's real samples and
+    every in-process environment share one copy)."""
+    ref = _REFERENCE.get(path)
+    if ref is None:
+        _REFERENCE.clear()
+        ref = _REFERENCE[path] = ReferenceSet.load(path)
+    return ref
 
 
 class EnvFactory:
@@ -77,12 +84,7 @@ class EnvFactory:
     def __call__(self):
         from envs.tracking_env import GripTrackingEnv
 
-        key = (self.env_cfg.reference, self.categories)
-        ref = _REFERENCES.get(key)
-        if ref is None:  # one copy per process, shared by its environments
-            ref = select_clips(ReferenceSet.load(self.env_cfg.reference), self.categories)
-            _REFERENCES.clear()
-            _REFERENCES[key] = ref
+        ref = select_clips(load_reference(self.env_cfg.reference), self.categories)
         env = GripTrackingEnv(self.env_cfg, ref)
         env.reset(seed=self.seed)
         return env
@@ -145,11 +147,9 @@ def load_vecnorm_state(vn: VecNormalize, state: dict[str, np.ndarray]) -> None:
 class TrainingCallback(BaseCallback):
     """Discriminator updates, logging, progress bar and checkpoints of a training run."""
 
-    def __init__(self, trainer: PolicyTrainer, stage_name: str, stage_steps: int,
-                 bar) -> None:  # fmt: skip
+    def __init__(self, trainer: PolicyTrainer, stage_name: str, bar) -> None:
         super().__init__()
         self.trainer, self.stage_name, self.bar = trainer, stage_name, bar
-        self.stage_steps = stage_steps
         self.sums: dict[str, float] = defaultdict(float)
         self.n = 0
         self.episodes: list[tuple[bool, float]] = []  # (success, mean MPJPE m)
@@ -241,7 +241,7 @@ class PolicyTrainer:
         self.model: PPO | None = None
         self.venv: VecNormalize | None = None
         self.amp_wrapper: AmpReward | None = None
-        ref = select_clips(ReferenceSet.load(self.reference), ())
+        ref = load_reference(self.reference)
         real = RealSampler([A.reference_amp_features(c) for c in ref.clips], cfg.amp.window)
         self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed)
 
@@ -369,23 +369,11 @@ class PolicyTrainer:
             self.model.set_env(self.venv)
         self._apply_fixed_std()
         self.stage_done0 = self.stage_done
-        cb = TrainingCallback(self, name, stage.timesteps, bar if bar is not None else _NoBar())
+        cb = TrainingCallback(self, name, bar if bar is not None else tqdm(disable=True))
         self.model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False,
                          tb_log_name="ppo", progress_bar=False)  # fmt: skip
         self.stage_done = stage.timesteps
 
 
-class _NoBar:
-    def update(self, n: int) -> None:
-        pass
-
-    def set_postfix(self, **kw) -> None:
-        pass
-
-
 def run_config_dict(cfg: PolicyRunConfig) -> dict:
     return dataclasses.asdict(cfg)
-
-
-def load_run_config(d: dict) -> PolicyRunConfig:
-    return apply_dict(PolicyRunConfig(), d, "config.json")

@@ -24,11 +24,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", type=Path, default=None,
                    help="reference-set file (default: the bundled sample)")  # fmt: skip
     p.add_argument("--repeats", type=int, default=5, help="best of N timings (default 5)")
+    p.add_argument("--amp-window", type=int, default=10,
+                   help="AMP frames kept for the discriminator (0: none; default 10)")  # fmt: skip
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     p.set_defaults(func=cmd_bench_env)
 
 
-def bench_env(steps: int, reference: str | None = None, repeats: int = 5) -> dict:
+def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
+              amp_window: int = 10) -> dict:  # fmt: skip
     """Env steps/s and raw mj_step/s (best of ``repeats``), single process, single thread."""
     import time
 
@@ -38,7 +41,7 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5) -> dic
     from envs.config import TrackingEnvConfig
     from envs.tracking_env import GripTrackingEnv
 
-    env = GripTrackingEnv(TrackingEnvConfig(reference=reference or ""))
+    env = GripTrackingEnv(TrackingEnvConfig(reference=reference or "", amp_window=amp_window))
     action = np.zeros(env.action_space.shape, dtype=np.float32)
 
     def run_env() -> float:
@@ -89,7 +92,8 @@ def cmd_bench_env(args: argparse.Namespace) -> int:
     if args.steps < 1 or args.repeats < 1:
         raise CliError("--steps and --repeats must be >= 1")
     try:
-        res = bench_env(args.steps, str(args.reference) if args.reference else None, args.repeats)
+        res = bench_env(args.steps, str(args.reference) if args.reference else None, args.repeats,
+                        args.amp_window)  # fmt: skip
     except (OSError, ReferenceError) as e:
         raise CliError(str(e)) from e
     for k, v in res.items():

@@ -105,7 +105,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
     r.add_argument("--out", required=True, type=Path, help="output .npz")
     r.add_argument("--category", action="append", default=[],
-                   help="keep only recordings of this category (repeatable)")  # fmt: skip
+                   help="keep only recordings of this category (glob, repeatable)")  # fmt: skip
     r.add_argument("--limit", type=int, default=None, help="at most this many recordings")
     r.add_argument("--max-frames", type=int, default=None,
                    help="crop each recording to its first N frames")  # fmt: skip
@@ -209,42 +209,17 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def cmd_reference(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.kinematics import SHIPPED_KIN
     from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
+    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set
-    from prism_tools.io import load_recording
 
     if bool(args.files) == (args.data is not None):
         raise CliError("give recording files or --data DIR (one of them)")
-    if args.data is not None:
-        from grip.kinematics.dataset import split_files
-
-        try:
-            files = split_files(args.data, args.split)
-        except (OSError, ValueError) as e:
-            raise CliError(str(e)) from e
-    else:
-        files = list(args.files)
-    recs = []
-    for f in files:
-        try:
-            rec = load_recording(f)
-        except (OSError, ValueError) as e:
-            raise CliError(str(e)) from e
-        if args.category and rec.category not in args.category:
-            continue
-        if args.max_frames and rec.n_frames > args.max_frames:
-            rec = rec.slice_frames(0, args.max_frames)
-        recs.append(rec)
-        if args.limit and len(recs) >= args.limit:
-            break
-    if not recs:
-        raise CliError("no recordings selected")
-    kin = args.kin or REPO_ROOT / SHIPPED_KIN
-    if not Path(kin).is_file():
-        raise CliError(f"{kin}: no such checkpoint (pass --kin RUN/best.pt)")
+    files = split_paths(args.data, args.split) if args.data is not None else list(args.files)
+    recs = load_recordings(files, args.category, max_frames=args.max_frames or 0,
+                           limit=args.limit or 0)  # fmt: skip
+    kin = kin_checkpoint(args.kin)
     try:
         est = KinematicsEstimator.from_checkpoint(kin)
     except ValueError as e:

@@ -162,9 +162,6 @@ def _train_one(data: Path, out: Path, cfg) -> int:
     return 0
 
 
-SHIPPED_KIN = "grip/assets/kinematics_default.pt"
-
-
 def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "eval-kin",
@@ -181,7 +178,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         "--json kin.json --out runs/kin/eval",
     )
     p.add_argument("--model", type=Path, default=None,
-                   help=f"checkpoint (default: the shipped {SHIPPED_KIN})")  # fmt: skip
+                   help="checkpoint (default: the shipped one in grip/assets)")  # fmt: skip
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--split", default="test", choices=("train", "test"), help="split to use")
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
@@ -204,7 +201,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
+    from grip.cli.recordings import kin_checkpoint
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.evaluate import (
         aggregate,
@@ -218,10 +215,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         if args.model is not None:
             raise CliError("give --model or --sweep, not both")
         return _eval_sweep(args)
-    model = args.model or REPO_ROOT / SHIPPED_KIN
-    if not Path(model).is_file():
-        raise CliError(f"{model}: no such checkpoint (train one with 'grip train-kin' and pass "
-                       "--model RUN/best.pt)")  # fmt: skip
+    model = kin_checkpoint(args.model, "--model")
     try:
         est = KinematicsEstimator.from_checkpoint(model)
     except ValueError as e:
@@ -250,17 +244,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _load_split(data: Path, split: str) -> list:
-    from grip.cli.main import CliError
-    from grip.kinematics.dataset import split_files
-    from prism_tools.io import load_recording
+    from grip.cli.recordings import load_recordings, split_paths
 
-    try:
-        recs = [load_recording(f) for f in split_files(data, split)]
-    except (OSError, ValueError) as e:
-        raise CliError(str(e)) from e
-    if not recs:
-        raise CliError(f"{data / 'split.json'}: the {split} split is empty")
-    return recs
+    return load_recordings(split_paths(data, split))
 
 
 def _eval_sweep(args: argparse.Namespace) -> int:

@@ -109,56 +109,12 @@ def changed_settings(old: dict, new: dict) -> list[str]:
     return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(RESUMABLE)]
 
 
-def _kin_path(arg: Path | None) -> Path:
-    from grip.cli.kinematics import SHIPPED_KIN
-    from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
-
-    kin = arg or REPO_ROOT / SHIPPED_KIN
-    if not Path(kin).is_file():
-        raise CliError(f"{kin}: no such KinematicsNet checkpoint (pass --kin RUN/best.pt)")
-    return Path(kin)
-
-
-def load_recordings(data: Path, split: str, categories=(), segment_frames: int = 0, limit: int = 0):
-    """Recordings of a dataset split (optionally by category glob, cut into segments)."""
-    import fnmatch
-
-    from grip.cli.main import CliError
-    from grip.kinematics.dataset import split_files
-    from prism_tools.chunking import segments
-    from prism_tools.io import load_recording
-
-    try:
-        files = split_files(data, split)
-    except (OSError, ValueError) as e:
-        raise CliError(str(e)) from e
-    recs = []
-    for f in files:
-        try:
-            rec = load_recording(f)
-        except (OSError, ValueError) as e:
-            raise CliError(str(e)) from e
-        cat = rec.category or "unknown"
-        if categories and not any(fnmatch.fnmatch(cat, c) for c in categories):
-            continue
-        if segment_frames:
-            for sl in segments(rec.n_frames, segment_frames, min_length=segment_frames):
-                recs.append(rec.slice_frames(sl.start, sl.stop))
-        else:
-            recs.append(rec)
-        if limit and len(recs) >= limit:
-            return recs[:limit]
-    if not recs:
-        raise CliError(f"{data}: no {split} recordings selected")
-    return recs
-
-
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
     from grip.cli.paths import load_run_config
+    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.train import git_hash
     from policies.config import PolicyRunConfig
@@ -167,13 +123,13 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    kin = _kin_path(args.kin)
+    kin = kin_checkpoint(args.kin)
     ref_path = out / "reference_train.npz"
     if not ref_path.is_file():
         from grip.kinematics.inference import KinematicsEstimator
         from grip.kinematics.reference import build_reference_set
 
-        recs = load_recordings(args.data, "train")
+        recs = load_recordings(split_paths(args.data, "train"))
         try:
             est = KinematicsEstimator.from_checkpoint(kin)
         except ValueError as e:
@@ -231,6 +187,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT
+    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
     from policies.runner import PolicyRunner
@@ -240,11 +197,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(f"{pol}: no such policy file (train one with 'grip train-policy')")
     try:
         runner = PolicyRunner.load(pol)
-        est = KinematicsEstimator.from_checkpoint(_kin_path(args.kin))
+        est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin))
     except ValueError as e:
         raise CliError(str(e)) from e
-    recs = load_recordings(args.data, args.split, args.category, args.segment_frames,
-                           args.segments)  # fmt: skip
+    recs = load_recordings(split_paths(args.data, args.split), args.category,
+                           args.segment_frames, limit=args.segments)  # fmt: skip
     with tqdm(total=len(recs), unit="seg", desc="episodes") as bar:
         rows = evaluate_policy(runner, est, recs, progress=bar.update)
     summary = summarize_rows(rows)

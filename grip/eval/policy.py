@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 from collections.abc import Callable
 from pathlib import Path
 
@@ -25,7 +26,7 @@ import numpy as np
 from envs.tracking_env import GripTrackingEnv
 from grip.core import metrics as M
 from grip.core import skeleton as sk
-from grip.core.body import build_body
+from grip.core.body import GRAVITY, build_body
 from grip.core.fk import sole_points
 from grip.core.reference import ReferenceSet
 from grip.sim.model import insole_forces
@@ -33,7 +34,6 @@ from prism_tools.schema import FEET
 
 FALL_HEIGHT_M = 0.30
 FALL_PROBABILITY = 0.7
-G = 9.81
 
 METRIC_KEYS: tuple[str, ...] = (
     "MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N", "success_rate", "kin_MPJPE_mm",
@@ -106,7 +106,7 @@ def segment_metrics(ep: Episode, clip, rec) -> dict[str, float]:
     out["FS_mps"] = M.foot_sliding(ep.pos, contact, clip.fps) if t >= 2 else float("nan")
     out["FP_mm"] = M.foot_penetration(sole_points(ep.rot, ep.pos, build_body(clip.body)))
     if all(f in rec.insole for f in FEET) and np.isfinite(ep.grf).all():
-        weight = clip.body.mass_kg * G
+        weight = clip.body.mass_kg * GRAVITY
         gt_f = np.stack([rec.insole[f].force[:t, 0] for f in FEET], axis=1) * weight
         out["vGRF_N"] = M.vgrf_error(ep.grf, gt_f)
     else:
@@ -184,8 +184,6 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = ["name", "category", "fell", "frames", *[k for k in METRIC_KEYS if k != "success_rate"]]
-    import io
-
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")
     w.writeheader()

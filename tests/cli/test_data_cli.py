@@ -186,7 +186,7 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
     assert len(rs) >= 1 and max(c.n_frames for c in rs.clips) <= 120
     js = tmp_path / "bench.json"
     assert main(["bench-env", "--reference", str(ref), "--steps", "20", "--repeats", "1",
-                 "--json", str(js)]) == 0  # fmt: skip
+                 "--amp-window", "0", "--json", str(js)]) == 0  # fmt: skip
     res = json.loads(js.read_text())
     assert res["substeps"] == 2 and res["env_steps_per_s"] > 0 and res["raw_mj_steps_per_s"] > 0
     assert main(["data", "reference", "--out", str(ref)]) == 2  # neither files nor --data

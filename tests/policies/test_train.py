@@ -113,8 +113,7 @@ def test_category_selection_and_config_checks():
 
 
 def test_eval_policy_rows_summary_and_files(run, tmp_path):
-    from grip.cli.kinematics import SHIPPED_KIN
-    from grip.cli.paths import REPO_ROOT
+    from grip.cli.recordings import kin_checkpoint
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
     from prism_tools.synthetic import make_recording
@@ -122,7 +121,7 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     path, _ = run
     export_policy(path, tmp_path / "p.pt")
     runner = PolicyRunner.load(tmp_path / "p.pt")
-    est = KinematicsEstimator.from_checkpoint(REPO_ROOT / SHIPPED_KIN)
+    est = KinematicsEstimator.from_checkpoint(kin_checkpoint(None))
     recs = [make_recording(120, seed=s) for s in (0, 1)]
     rows = evaluate_policy(runner, est, recs)
     assert len(rows) == 2

@@ -1,0 +1,76 @@
+"""Recordings and KinematicsNet checkpoints as the commands take them (errors -> CliError)."""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+SHIPPED_KIN = "grip/assets/kinematics_default.pt"
+"""The KinematicsNet checkpoint every command uses by default (relative to the repository)."""
+
+
+def split_paths(data: Path, split: str) -> list[Path]:
+    """The recording files of a dataset split."""
+    from grip.cli.main import CliError
+    from grip.kinematics.dataset import split_files
+
+    try:
+        return split_files(data, split)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+
+
+def load_recordings(
+    files: Sequence[str | os.PathLike],
+    categories: Sequence[str] = (),
+    segment_frames: int = 0,
+    max_frames: int = 0,
+    limit: int = 0,
+) -> list:
+    """Load recordings, keeping those whose category matches a glob of ``categories`` (all when
+    empty); crop each to ``max_frames``, or cut it into ``segment_frames``-frame segments (a
+    shorter tail is left out); stop at ``limit`` recordings or segments (0: no limit).
+
+    Raises:
+        CliError: A file cannot be read (the message names it), or nothing is selected.
+    """
+    from grip.cli.main import CliError
+    from prism_tools.chunking import segments
+    from prism_tools.io import load_recording
+
+    recs: list = []
+    for f in files:
+        try:
+            rec = load_recording(f)
+        except (OSError, ValueError) as e:
+            raise CliError(str(e)) from e
+        cat = rec.category or "unknown"
+        if categories and not any(fnmatch.fnmatch(cat, c) for c in categories):
+            continue
+        if max_frames and rec.n_frames > max_frames:
+            rec = rec.slice_frames(0, max_frames)
+        if segment_frames:
+            cuts = segments(rec.n_frames, segment_frames, min_length=segment_frames)
+            recs += [rec.slice_frames(sl.start, sl.stop) for sl in cuts]
+        else:
+            recs.append(rec)
+        if limit and len(recs) >= limit:
+            return recs[:limit]
+    if not recs:
+        what = f" of categories {list(categories)}" if categories else ""
+        raise CliError(f"no recordings{what} selected from {len(files)} file(s)")
+    return recs
+
+
+def kin_checkpoint(path: Path | None, flag: str = "--kin") -> Path:
+    """``path`` or the shipped KinematicsNet checkpoint, which must exist."""
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+
+    kin = Path(path) if path is not None else REPO_ROOT / SHIPPED_KIN
+    if not kin.is_file():
+        raise CliError(f"{kin}: no such KinematicsNet checkpoint (train one with 'grip train-kin' "
+                       f"and pass {flag} RUN/best.pt)")  # fmt: skip
+    return kin
