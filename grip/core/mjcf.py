@@ -9,11 +9,13 @@ Model layout
   The root ``Pelvis`` carries a free joint named ``"root"``; every other body sits at its rest
   offset with identity orientation (body frames are parallel to the SMPL canonical frame
   x = left, y = up, z = forward at rest) and carries three hinges ``<Joint>_x``, ``<Joint>_y``,
-  ``<Joint>_z`` about its local x, y, z axes. MuJoCo composes the hinges of one body as
-  ``Rx(a) @ Ry(b) @ Rz(c)``, i.e. :func:`grip.core.rotations.euler_xyz_to_matrix`.
+  ``<Joint>_z`` about its local x, y, z axes, listed in the joint's order
+  :data:`grip.core.skeleton.HINGE_ORDERS` (``xyz`` except shoulders ``yxz`` and elbows ``yzx``,
+  chosen to keep the hinges away from gimbal lock). MuJoCo composes the hinges of one body in
+  that order, e.g. ``Rx(a) @ Ry(b) @ Rz(c)``: :func:`grip.core.rotations.euler_to_matrix`.
 * ``qpos`` is ``[root_pos_world (3), root_quat_wxyz (4), 69 hinge angles]`` with the hinges in
   MuJoCo's depth-first body order, which is *not* SMPL order. Actuators are listed in SMPL order
-  (joint 1..23, then x, y, z), which is :func:`hinge_names`; map with the index arrays of
+  (joint 1..23, then its hinges in composition order), which is :func:`hinge_names`; map with the index arrays of
   :class:`grip.sim.model.HumanoidIndex`, never by position.
 * The standing pose (rest T-pose upright on the floor, facing world +y) is ``qpos0`` of the model
   and the keyframe ``"stand"``: root quaternion = :data:`grip.core.body.CANONICAL_TO_WORLD`,
@@ -69,7 +71,6 @@ STAND_KEY = "stand"
 FOOT_SIDES: tuple[str, str] = ("L", "R")
 """Insole side letters, in the order of ``BodyModel.insole_*`` rows."""
 
-HINGE_AXES: tuple[str, str, str] = ("x", "y", "z")
 
 # Collision bits, see the module docstring.
 _BIT_FLOOR = 1
@@ -169,8 +170,9 @@ class MjcfConfig:
 
 # --------------------------------------------------------------------------- names
 def hinge_names() -> list[str]:
-    """The 69 hinge (and actuator) names in SMPL order: joint 1..23, then x, y, z."""
-    return [f"{name}_{ax}" for name in sk.JOINT_NAMES[1:] for ax in HINGE_AXES]
+    """The 69 hinge (and actuator) names in SMPL order: joint 1..23, then its hinges in
+    composition order (:data:`grip.core.skeleton.HINGE_ORDERS`)."""
+    return [f"{sk.JOINT_NAMES[j]}_{ax}" for j in range(1, sk.N_JOINTS) for ax in sk.HINGE_ORDERS[j]]
 
 
 def imu_site_names() -> list[str]:
@@ -439,7 +441,8 @@ def build_mjcf(body: BodyModel | BodyParams | None = None, cfg: MjcfConfig | Non
         _sub(el, "inertial", pos=_vec(bm.com_local[j]), mass=_num(bm.masses[j]),
              fullinertia=_vec([i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]))  # fmt: skip
         if j > 0:
-            for a, ax in enumerate(HINGE_AXES):
+            for ax in sk.HINGE_ORDERS[j]:
+                a = "xyz".index(ax)
                 axis = np.eye(3)[a]
                 _sub(el, "joint", name=f"{name}_{ax}", class_="hinge", axis=_vec(axis),
                      range=_vec(bm.hinge_range[j, a]))  # fmt: skip
@@ -458,7 +461,8 @@ def build_mjcf(body: BodyModel | BodyParams | None = None, cfg: MjcfConfig | Non
     act = _sub(root, "actuator")
     for j in range(1, sk.N_JOINTS):
         kp, kv = bm.kp[j] * cfg.gain_scale, bm.kd[j] * cfg.gain_scale
-        for a, ax in enumerate(HINGE_AXES):
+        for ax in sk.HINGE_ORDERS[j]:
+            a = "xyz".index(ax)
             jn = f"{sk.JOINT_NAMES[j]}_{ax}"
             rng = _vec(bm.hinge_range[j, a])
             if cfg.actuator == "position":

@@ -20,7 +20,7 @@ Only primary arrays are stored (float32, compressed); derived arrays are compute
 numpy, so a file of a few seconds of motion stays small enough to bundle.
 
 Array conventions: world frame z up, metres, radians, w-first quaternions; hinge angles in SMPL
-order (joint 1..23 x hinge x, y, z), i.e. :func:`grip.core.mjcf.hinge_names` order, *not*
+order (joint 1..23 x its hinges in composition order), i.e. :func:`grip.core.mjcf.hinge_names` order, *not*
 MuJoCo's ``qpos`` order (the env maps them through its index arrays).
 """
 
@@ -39,14 +39,14 @@ from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics, integrate_root
 from grip.core.rotations import (
     angular_velocity,
-    euler_xyz_to_matrix,
-    matrix_to_euler_xyz,
+    euler_to_matrix,
+    matrix_to_euler,
     matrix_to_quat,
     quat_to_matrix,
     sixd_to_matrix,
 )
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: per-joint hinge orders (skeleton.HINGE_ORDERS)
 
 N_HINGES = 3 * (sk.N_JOINTS - 1)
 
@@ -64,16 +64,43 @@ class ReferenceError(ValueError):
     """A reference file or clip is malformed (the message names the file and the key)."""
 
 
+_ORDER_GROUPS: tuple[tuple[str, np.ndarray], ...] = tuple(
+    (o, np.array([j for j in range(1, sk.N_JOINTS) if sk.HINGE_ORDERS[j] == o]))
+    for o in sorted(set(sk.HINGE_ORDERS[1:]))
+)  # (order, joints 1..23 composed in that order)
+
+
+def hinges_from_local(local: np.ndarray) -> np.ndarray:
+    """``(..., 23, 3, 3)`` local rotations of joints 1..23 -> ``(..., 69)`` hinge angles in
+    :func:`grip.core.mjcf.hinge_names` order (each joint's Euler angles in its
+    :data:`grip.core.skeleton.HINGE_ORDERS` order)."""
+    local = np.asarray(local, dtype=np.float64)
+    out = np.empty((*local.shape[:-3], sk.N_JOINTS - 1, 3))
+    for order, joints in _ORDER_GROUPS:
+        out[..., joints - 1, :] = matrix_to_euler(local[..., joints - 1, :, :], order)
+    return out.reshape(*local.shape[:-3], N_HINGES)
+
+
+def local_from_hinges(hinges: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`hinges_from_local`: ``(..., 69)`` -> ``(..., 23, 3, 3)``."""
+    e = np.asarray(hinges, dtype=np.float64)
+    e = e.reshape(*e.shape[:-1], sk.N_JOINTS - 1, 3)
+    out = np.empty((*e.shape[:-1], 3, 3))
+    for order, joints in _ORDER_GROUPS:
+        out[..., joints - 1, :, :] = euler_to_matrix(e[..., joints - 1, :], order)
+    return out
+
+
 def pose_vector(local_rot: np.ndarray, root_pos: np.ndarray) -> np.ndarray:
     """``(..., 24, 3, 3)`` local rotations (row 0 = root world rotation) and ``(..., 3)`` root
     position -> ``(..., 76)`` ``[root_pos, root_quat_wxyz, 69 hinge angles (SMPL order)]``.
-    Hinge angles are the intrinsic X-Y-Z Euler angles of the MuJoCo humanoid's hinges."""
+    Hinge angles are the Euler angles of the MuJoCo humanoid's hinges (:func:`hinges_from_local`)."""
     local_rot = np.asarray(local_rot, dtype=np.float64)
     lead = local_rot.shape[:-3]
     out = np.empty((*lead, 7 + N_HINGES))
     out[..., :3] = root_pos
     out[..., 3:7] = matrix_to_quat(local_rot[..., 0, :, :])
-    out[..., 7:] = matrix_to_euler_xyz(local_rot[..., 1:, :, :]).reshape(*lead, N_HINGES)
+    out[..., 7:] = hinges_from_local(local_rot[..., 1:, :, :])
     return out
 
 
@@ -82,7 +109,7 @@ def local_rot_from_qpos(qpos: np.ndarray) -> np.ndarray:
     t = qpos.shape[0]
     local = np.empty((t, sk.N_JOINTS, 3, 3))
     local[:, 0] = quat_to_matrix(qpos[:, 3:7])
-    local[:, 1:] = euler_xyz_to_matrix(qpos[:, 7:].reshape(t, sk.N_JOINTS - 1, 3))
+    local[:, 1:] = local_from_hinges(qpos[:, 7:])
     return local
 
 
@@ -91,7 +118,7 @@ def hinge_angles(global_rot: np.ndarray) -> np.ndarray:
     over time so that finite differences stay small."""
     parent = global_rot[:, list(sk.PARENTS[1:])]
     local = np.swapaxes(parent, -1, -2) @ global_rot[:, 1:]
-    e = matrix_to_euler_xyz(local).reshape(global_rot.shape[0], -1)
+    e = hinges_from_local(local)
     return np.unwrap(e, axis=0)
 
 
@@ -288,7 +315,7 @@ class ReferenceSet:
             raise ReferenceError(f"{path}: not a grip reference file")
         if meta.get("version") != FORMAT_VERSION:
             raise ReferenceError(f"{path}: format version {meta.get('version')}, this code "
-                                 f"reads {FORMAT_VERSION}")  # fmt: skip
+                                 f"reads {FORMAT_VERSION}; rebuild it (grip data reference)")  # fmt: skip
         clips = []
         try:
             for i, cm in enumerate(meta["clips"]):

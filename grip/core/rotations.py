@@ -161,27 +161,46 @@ def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- Euler (MuJoCo hinges)
 def matrix_to_euler_xyz(m: np.ndarray) -> np.ndarray:
-    """Intrinsic X-Y-Z Euler angles ``(a, b, c)`` with ``R = Rx(a) @ Ry(b) @ Rz(c)``.
-
-    This is the order of three MuJoCo hinges x, y, z stacked in one body. ``b`` lies in
-    [-pi/2, pi/2]; at gimbal lock (|b| = pi/2) ``c`` is set to 0. ``(..., 3, 3) -> (..., 3)``.
-    """
-    m = _as_float(m)
-    sb = np.clip(m[..., 0, 2], -1.0, 1.0)
-    b = np.arcsin(sb)
-    cb = np.sqrt(np.maximum(1.0 - sb**2, 0.0))
-    lock = cb < 1e-9
-    a = np.where(
-        lock, np.arctan2(m[..., 2, 1], m[..., 1, 1]), np.arctan2(-m[..., 1, 2], m[..., 2, 2])
-    )
-    c = np.where(lock, 0.0, np.arctan2(-m[..., 0, 1], m[..., 0, 0]))
-    return np.stack([a, b, c], axis=-1)
+    """Intrinsic X-Y-Z Euler angles ``(a, b, c)`` with ``R = Rx(a) @ Ry(b) @ Rz(c)``
+    (:func:`matrix_to_euler` with order ``"xyz"``). ``(..., 3, 3) -> (..., 3)``."""
+    return matrix_to_euler(m, "xyz")
 
 
 def euler_xyz_to_matrix(e: np.ndarray) -> np.ndarray:
     """Inverse of :func:`matrix_to_euler_xyz`. ``(..., 3) -> (..., 3, 3)``."""
+    return euler_to_matrix(e, "xyz")
+
+
+def _tait_bryan(order: str) -> tuple[int, int, int, float]:
+    if sorted(order) != ["x", "y", "z"]:
+        raise ValueError(f"Euler order {order!r}: use a permutation of 'xyz'")
+    i, j, k = ("xyz".index(c) for c in order)
+    return i, j, k, (1.0 if (j - i) % 3 == 1 else -1.0)
+
+
+def matrix_to_euler(m: np.ndarray, order: str) -> np.ndarray:
+    """Intrinsic Tait-Bryan angles ``(a, b, c)`` with ``R = R_o0(a) @ R_o1(b) @ R_o2(c)`` for
+    ``order = o0 o1 o2`` (a permutation of ``"xyz"``): the composition of three MuJoCo hinges
+    stacked in one body in that order. ``b`` lies in [-pi/2, pi/2] (the gimbal lock is at
+    |b| = pi/2, where ``c`` is set to 0). ``(..., 3, 3) -> (..., 3)``.
+    """
+    m = _as_float(m)
+    i, j, k, s = _tait_bryan(order)
+    sb = np.clip(s * m[..., i, k], -1.0, 1.0)
+    b = np.arcsin(sb)
+    lock = np.sqrt(np.maximum(1.0 - sb**2, 0.0)) < 1e-9
+    a = np.where(lock, np.arctan2(s * m[..., k, j], m[..., j, j]),
+                 np.arctan2(-s * m[..., j, k], m[..., k, k]))  # fmt: skip
+    c = np.where(lock, 0.0, np.arctan2(-s * m[..., i, j], m[..., i, i]))
+    return np.stack([a, b, c], axis=-1)
+
+
+def euler_to_matrix(e: np.ndarray, order: str) -> np.ndarray:
+    """Inverse of :func:`matrix_to_euler`. ``(..., 3) -> (..., 3, 3)``."""
     e = _as_float(e)
-    return rot_x(e[..., 0]) @ rot_y(e[..., 1]) @ rot_z(e[..., 2])
+    _tait_bryan(order)
+    rots = {"x": rot_x, "y": rot_y, "z": rot_z}
+    return rots[order[0]](e[..., 0]) @ rots[order[1]](e[..., 1]) @ rots[order[2]](e[..., 2])
 
 
 def rot_x(a: np.ndarray) -> np.ndarray:

@@ -38,6 +38,8 @@ def test_hinge_names_follow_smpl_order() -> None:
     assert len(names) == 69
     assert names[:4] == ["L_Hip_x", "L_Hip_y", "L_Hip_z", "R_Hip_x"]
     assert names[-1] == "R_Hand_z"
+    assert names[15 * 3 : 16 * 3] == ["L_Shoulder_y", "L_Shoulder_x", "L_Shoulder_z"]
+    assert names[17 * 3 : 18 * 3] == ["L_Elbow_y", "L_Elbow_z", "L_Elbow_x"]
 
 
 def test_body_tree_matches_skeleton(root: ET.Element, body) -> None:
@@ -49,8 +51,9 @@ def test_body_tree_matches_skeleton(root: ET.Element, body) -> None:
         assert parent_of[name] == sk.JOINT_NAMES[sk.PARENTS[j]]
         np.testing.assert_allclose(np.fromstring(bodies[name].get("pos"), sep=" "), body.offsets[j])
         joints = bodies[name].findall("joint")
-        assert [jt.get("name") for jt in joints] == [f"{name}_{a}" for a in "xyz"]
-        for a, jt in enumerate(joints):
+        assert [jt.get("name") for jt in joints] == [f"{name}_{a}" for a in sk.HINGE_ORDERS[j]]
+        for ax, jt in zip(sk.HINGE_ORDERS[j], joints, strict=True):
+            a = "xyz".index(ax)
             np.testing.assert_array_equal(np.fromstring(jt.get("axis"), sep=" "), np.eye(3)[a])
             np.testing.assert_allclose(np.fromstring(jt.get("range"), sep=" "),
                                        body.hinge_range[j, a])  # fmt: skip
@@ -127,7 +130,7 @@ def test_actuator_gains_and_ranges(body) -> None:
         assert model.joint(int(act.trnid[0])).name == name
         assert act.gainprm[0] == pytest.approx(2.0 * body.kp[j])
         np.testing.assert_allclose(act.biasprm[:3], [0.0, -2.0 * body.kp[j], -2.0 * body.kd[j]])
-        np.testing.assert_allclose(act.ctrlrange, body.hinge_range[j, k % 3])
+        np.testing.assert_allclose(act.ctrlrange, body.hinge_range[j, "xyz".index(name[-1])])
 
 
 def test_general_and_position_actuators_give_the_same_torques(body) -> None:

@@ -48,6 +48,24 @@ def test_euler_xyz_is_intrinsic_xyz(rng):
     np.testing.assert_allclose(R.matrix_to_euler_xyz(m), e, atol=1e-9)
 
 
+@pytest.mark.parametrize("order", ["xyz", "xzy", "yxz", "yzx", "zxy", "zyx"])
+def test_euler_orders_are_intrinsic(rng, order):
+    e = rng.uniform(-1.4, 1.4, size=(50, 3))
+    m = R.euler_to_matrix(e, order)
+    np.testing.assert_allclose(m, Rotation.from_euler(order.upper(), e).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(R.matrix_to_euler(m, order), e, atol=1e-9)
+    # At the gimbal lock the angles are not unique, but they still give back the rotation.
+    locked = e.copy()
+    locked[:, 1] = np.pi / 2 * np.sign(e[:, 1])
+    m = R.euler_to_matrix(locked, order)
+    np.testing.assert_allclose(R.euler_to_matrix(R.matrix_to_euler(m, order), order), m, atol=1e-9)
+
+
+def test_euler_order_must_be_a_permutation():
+    with pytest.raises(ValueError, match="permutation"):
+        R.matrix_to_euler(np.eye(3), "xxy")
+
+
 def test_heading_of_yaw_rotation():
     yaw = np.array([0.3, -2.0])
     m = R.rot_z(yaw)

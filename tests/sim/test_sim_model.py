@@ -13,6 +13,7 @@ from grip.core import skeleton as sk
 from grip.core.body import GRAVITY, BodyParams, build_body
 from grip.core.fk import body_points, forward_kinematics
 from grip.core.mjcf import MjcfConfig, standing_qpos
+from grip.core.reference import local_from_hinges
 from grip.core.rotations import euler_xyz_to_matrix, matrix_to_quat, quat_normalize
 from grip.sim.model import (
     HumanoidIndex,
@@ -40,11 +41,14 @@ def index(model) -> HumanoidIndex:
 
 
 def _random_pose(body, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Local rotations ``(24, 3, 3)``, root position ``(3,)`` and hinge angles ``(23, 3)``."""
-    angles = rng.uniform(body.hinge_range[1:, :, 0], body.hinge_range[1:, :, 1])
+    """Local rotations ``(24, 3, 3)``, root position ``(3,)`` and hinge angles ``(23, 3)`` (each
+    joint's in its composition order)."""
+    axes = np.array([["xyz".index(a) for a in sk.HINGE_ORDERS[j]] for j in range(1, sk.N_JOINTS)])
+    rng_ordered = np.take_along_axis(body.hinge_range[1:], axes[..., None], axis=1)
+    angles = rng.uniform(rng_ordered[..., 0], rng_ordered[..., 1])
     local = np.empty((sk.N_JOINTS, 3, 3))
     local[0] = euler_xyz_to_matrix(rng.uniform(-np.pi, np.pi, 3))
-    local[1:] = euler_xyz_to_matrix(angles)
+    local[1:] = local_from_hinges(angles.reshape(-1))
     return local, rng.uniform(-2.0, 2.0, 3), angles
 
 
