@@ -424,6 +424,58 @@ class GripTrackingEnv(gym.Env):
             info["amp_obs"] = self._amp.vector()
         return obs, reward, bool(terminated), bool(truncated and not terminated), info
 
+    def teleport(self, qpos76: np.ndarray, qvel75: np.ndarray | None = None):
+        """Put the humanoid in a new state at the current frame and keep playing the clip
+        (GRIP's fall recovery): ``qpos76`` is a pose vector (:func:`grip.core.reference.
+        pose_vector`), ``qvel75`` a velocity vector (zeros if ``None``). The body is lifted so
+        that its lowest geom touches the ground, the AMP window restarts from the new state.
+
+        Returns:
+            ``(obs, info)`` of the new state, as :meth:`reset` does.
+        """
+        sim = self._sim
+        m, d, ix = sim.model, sim.data, sim.index
+        q = np.asarray(qpos76, dtype=np.float64).reshape(-1)
+        v = np.zeros(75) if qvel75 is None else np.asarray(qvel75, dtype=np.float64).reshape(-1)
+        if q.shape != (76,) or v.shape != (75,) or not (np.isfinite(q).all() and np.isfinite(v).all()):
+            raise ValueError(f"teleport needs finite (76,) qpos and (75,) qvel, got {q.shape}, "
+                             f"{v.shape}")  # fmt: skip
+        q = q.copy()
+        q[7:] = np.clip(q[7:], sim.lo, sim.hi)
+        write_pose_vector(q, ix, d.qpos)
+        write_velocity_vector(v, ix, d.qvel)
+        d.ctrl[ix.actuator_ids] = q[7:]
+        mujoco.mj_forward(m, d)
+        # lift (or lower) the body so that its lowest geom rests on the terrain under it
+        r = ix.root_qpos_adr
+        gap = self._lowest_clearance()
+        d.qpos[r + 2] -= gap
+        mujoco.mj_forward(m, d)
+        self._n_bad = int(sim.warnings[_UNSTABLE].sum())
+        pvw, rot = self._sim_state()
+        obs = self._observe(pvw, rot)
+        self._last_obs = obs
+        info = {"clip": self._clip.name, "clip_index": self._clip_i, "frame": self._t,
+                "root_height_m": float(pvw[0, 0, 2])}  # fmt: skip
+        if self._amp is not None:
+            frame = self._amp_frame(pvw, rot).copy()
+            self._amp.reset(np.repeat(frame[None], self._amp.window, axis=0))
+            info["amp_obs"] = self._amp.vector()
+        return obs, info
+
+    def _lowest_clearance(self) -> float:
+        """Height of the humanoid's lowest geom point (bounding box corner) above the terrain
+        under it, m."""
+        sim = self._sim
+        m, d = sim.model, sim.data
+        g = np.flatnonzero(m.geom_bodyid > 0)
+        rot = d.geom_xmat[g].reshape(-1, 3, 3)
+        centre = d.geom_xpos[g] + np.einsum("gij,gj->gi", rot, m.geom_aabb[g, :3])
+        z = centre[:, 2] - np.einsum("gj,gj->g", np.abs(rot[:, 2]), m.geom_aabb[g, 3:])
+        ground = sample_heightmap(sim.hfield, centre[:, :2].mean(axis=0), np.eye(2),
+                                  centre[:, :2] - centre[:, :2].mean(axis=0))  # fmt: skip
+        return float((z - ground).min())
+
     def _step_pinned(self, t: int) -> None:
         """Substeps with the root written from the ground truth before each (``pin_root``)."""
         m, d, ix, clip = self._sim.model, self._sim.data, self._sim.index, self._clip

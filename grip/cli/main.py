@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from grip.cli import bench_env, body, data, demo, kinematics, policy
+from grip.cli import reconstruct as reconstruct_cmd
 
 
 class CliError(Exception):
@@ -29,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
     sub.required = True
-    for module in (data, body, kinematics, policy, bench_env, demo):
+    for module in (data, body, kinematics, policy, reconstruct_cmd, bench_env, demo):
         module.add_parser(sub)
     return parser
 

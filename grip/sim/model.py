@@ -50,7 +50,8 @@ class HumanoidIndex:
         body_ids: ``(24,)`` MuJoCo body id of each SMPL joint's body.
         root_qpos_adr: First ``qpos`` address of the free root (position, then quaternion wxyz).
         root_dof_adr: First ``qvel`` address of the free root (linear, then angular velocity).
-        hinge_qpos_adr: ``(69,)`` ``qpos`` address of each hinge, SMPL order (joint 1..23 x y z).
+        hinge_qpos_adr: ``(69,)`` ``qpos`` address of each hinge, SMPL order (joint 1..23, then
+            its hinges in :data:`grip.core.skeleton.HINGE_ORDERS` order).
         hinge_dof_adr: ``(69,)`` ``qvel``/``qfrc`` address of each hinge, same order.
         actuator_ids: ``(69,)`` actuator id of each hinge, same order.
         imu_site_ids: ``(8,)`` site ids in :data:`grip.core.skeleton.IMU_PARTS` order.
@@ -143,8 +144,9 @@ def set_pose(
 ) -> None:
     """Put the humanoid in a pose (``qpos`` only; velocities are left as they are).
 
-    Hinge angles are the intrinsic X-Y-Z Euler angles of each local rotation; they are written
-    as they come, even outside the hinge limits.
+    Hinge angles are the Euler angles of each local rotation in the joint's hinge order
+    (:data:`grip.core.skeleton.HINGE_ORDERS`); they are written as they come, even outside the
+    hinge limits.
 
     Args:
         model: The humanoid model.
@@ -179,3 +181,57 @@ def insole_forces(data: mujoco.MjData, index: HumanoidIndex) -> np.ndarray:
     if index.touch_adr.size == 0:
         raise ValueError("the model has no insole touch sensors (MjcfConfig.insole_sensors)")
     return data.sensordata[index.touch_adr].copy()
+
+
+class FootContacts:
+    """Ground reaction force and centre of pressure of each foot from MuJoCo's contacts.
+
+    Resolves once which geoms belong to each foot (ankle and toe bodies), then per call sums
+    the forces of the foot-ground contacts (``mj_contactForce``, turned to the world frame)
+    acting on each foot; contacts with other body parts are not ground reaction forces.
+
+    Args:
+        model: The humanoid model.
+        index: Its :class:`HumanoidIndex`.
+    """
+
+    def __init__(self, model: mujoco.MjModel, index: HumanoidIndex) -> None:
+        self._side = np.full(model.ngeom, -1, dtype=np.int64)
+        for s, side in enumerate(("L_Foot", "R_Foot")):
+            for joint in (sk.FOOT_BODY[side], sk.TOE_BODY[side]):
+                body = int(index.body_ids[joint])
+                self._side[model.geom_bodyid == body] = s
+        self._ground = model.geom_bodyid == 0  # floor and terrain belong to the world body
+        self._model = model
+        self._f6 = np.zeros(6)
+
+    def __call__(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """``grf (2, 3)`` (N, world, the force the ground exerts on each foot) and ``cop (2, 3)``
+        (world, m; normal-force-weighted mean of the contact points, NaN without contact)."""
+        m = self._model
+        # After mj_step (or the env's step2 + step1) the contact list belongs to the new state
+        # but the constraint forces to the previous one: solve the forces of this state (the
+        # state itself is not changed, and the next step computes the same forces again).
+        mujoco.mj_fwdActuation(m, data)
+        mujoco.mj_fwdAcceleration(m, data)
+        mujoco.mj_fwdConstraint(m, data)
+        grf = np.zeros((2, 3))
+        moment = np.zeros((2, 3))
+        fz = np.zeros(2)
+        for i in range(data.ncon):
+            c = data.contact[i]
+            s1, s2 = self._side[c.geom1], self._side[c.geom2]
+            if not (s1 >= 0 and self._ground[c.geom2] or s2 >= 0 and self._ground[c.geom1]):
+                continue  # not a foot on the ground
+            mujoco.mj_contactForce(m, data, i, self._f6)
+            f = c.frame.reshape(3, 3).T @ self._f6[:3]  # world force on geom2
+            side = s2 if s2 >= 0 else s1
+            if s1 >= 0:
+                f = -f
+            grf[side] += f
+            moment[side] += abs(self._f6[0]) * c.pos
+            fz[side] += abs(self._f6[0])
+        cop = np.full((2, 3), np.nan)
+        on = fz > 1e-9
+        cop[on] = moment[on] / fz[on, None]
+        return grf, cop

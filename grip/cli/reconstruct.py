@@ -1,0 +1,174 @@
+"""``grip reconstruct``: recordings -> physically plausible motion (KinematicsNet + policy)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reconstruct",
+        help="reconstruct PRISM-format recordings with GRIP (KinematicsNet + policy + recovery)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Load PRISM-format recordings (real PRISM pickles or ours), run KinematicsNet,\n"
+            "drive the simulated humanoid with the policy in MuJoCo, recover from falls with\n"
+            "GRIP's history buffer, and write per recording OUT/<name>.npz (joint positions and\n"
+            "rotations, root trajectory, per-foot GRF and CoP, joint torques, contacts, fall\n"
+            "events; keys in grip/core/reconstruction.py) plus the exports of --formats, and\n"
+            "OUT/summary.json. Recordings already reconstructed in OUT are skipped (resume).\n"
+            "The recording's first frame is the calibration pose the humanoid starts from."
+        ),
+        epilog="example: grip reconstruct data/prism_synth/sequences/*walk*.npz --out recon\n"
+        "         grip reconstruct take.pkl --out recon --formats npz,bvh,png --workers 2",
+    )
+    p.add_argument("recordings", nargs="+", type=Path, help="recordings (.pkl/.npz)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--policy", type=Path, default=None,
+                   help="policy export (default: the shipped grip/assets/policy_default.pt)")
+    p.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="parallel processes, each on a share of the recordings (default 1)")
+    p.add_argument("--no-recovery", action="store_true",
+                   help="report falls but do not recover from them (the humanoid stays down)")
+    p.add_argument("--history", type=int, default=30,
+                   help="history buffer length N in frames (default 30 = 0.3 s)")
+    p.add_argument("--max-frames", type=int, default=0,
+                   help="crop each recording to its first N frames (0: all)")
+    p.add_argument("--formats", default="npz",
+                   help="comma-separated: npz (always), bvh, glb, mp4, png (default npz)")
+    p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
+    p.set_defaults(func=cmd_reconstruct)
+
+
+def safe_name(name: str) -> str:
+    """A file name for a recording name (path separators and odd characters replaced)."""
+    keep = "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name.replace("/", "__"))
+    return keep.strip(".") or "recording"
+
+
+def policy_checkpoint(path: Path | None) -> Path:
+    """``path`` or the shipped policy, which must exist."""
+    from grip.cli.main import CliError
+    from grip.cli.paths import REPO_ROOT
+    from grip.cli.policy import SHIPPED_POLICY
+
+    p = path or REPO_ROOT / SHIPPED_POLICY
+    if not Path(p).is_file():
+        hint = "" if path else " (no policy ships yet: pass --policy RUN/policy.pt)"
+        raise CliError(f"policy checkpoint {p} not found{hint}")
+    return Path(p)
+
+
+_LOADED: dict = {}
+
+
+def _work(job: tuple) -> list[dict]:
+    """One worker: reconstruct a share of the recordings and write their files."""
+    files, out, policy, kin, recovery, max_frames, formats = job
+    import torch
+
+    torch.set_num_threads(1)
+    from grip.cli.recordings import load_recordings
+    from grip.eval.reconstruct import GripReconstructor
+
+    key = (policy, kin, recovery)
+    g = _LOADED.get(key)
+    if g is None:  # each worker process loads the models once
+        _LOADED.clear()
+        g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
+    rows = []
+    for f in files:
+        (rec,) = load_recordings([f], max_frames=max_frames)
+        (recon,) = g.reconstruct([rec])
+        dst = Path(out) / f"{safe_name(rec.name)}.npz"
+        recon.save(dst)
+        written = [str(dst)]
+        written += _exports(recon, rec, Path(out), formats)
+        rows.append({"file": str(f), "name": rec.name, "frames": recon.n_frames,
+                     "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
+                     "blowups": recon.notes.get("blowups", 0), "written": written})  # fmt: skip
+    return rows
+
+
+def _exports(recon, rec, out: Path, formats: list[str]) -> list[str]:
+    """Write the non-npz formats; a format that cannot be written is reported, not fatal."""
+    extra = [f for f in formats if f != "npz"]
+    if not extra:
+        return []
+    from grip.export import export_reconstruction
+
+    return [str(p) for p in export_reconstruction(recon, out, extra, recording=rec)]
+
+
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.recordings import kin_checkpoint
+    from grip.core.atomic import atomic_write_text
+    from grip.eval.reconstruct import RecoveryConfig
+
+    formats = [f.strip() for f in args.formats.split(",") if f.strip()]
+    unknown = sorted(set(formats) - {"npz", "bvh", "glb", "mp4", "png"})
+    if unknown:
+        raise CliError(f"--formats: unknown {unknown}; use npz, bvh, glb, mp4, png")
+    missing = [str(f) for f in args.recordings if not f.is_file()]
+    if missing:
+        raise CliError(f"no such recording file(s): {', '.join(missing)}")
+    if args.workers < 1 or args.history < 1:
+        raise CliError("--workers and --history must be >= 1")
+    policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
+    recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history)
+    args.out.mkdir(parents=True, exist_ok=True)
+    summary_path = args.out / "summary.json"
+    done: dict[str, dict] = {}
+    if summary_path.is_file() and not args.overwrite:
+        try:
+            done = {r["file"]: r for r in json.loads(summary_path.read_text())["recordings"]}
+        except (ValueError, KeyError, TypeError):
+            done = {}
+    todo = [str(f) for f in args.recordings
+            if str(f) not in done or not all(Path(w).is_file() for w in done[str(f)]["written"])]
+    print(f"{len(args.recordings)} recording(s), {len(args.recordings) - len(todo)} already done")
+
+    def save() -> None:
+        rows = list(done.values())
+        meta = {"policy": str(policy), "kin": str(kin), "recovery": recovery.enabled,
+                "history_frames": recovery.history_frames}
+        atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows}, indent=1))
+
+    jobs = [([f], str(args.out), str(policy), str(kin), recovery, args.max_frames, formats)
+            for f in todo]  # fmt: skip
+    with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
+        if args.workers == 1 or len(todo) <= 1:
+            results = map(_work, jobs)
+        else:
+            ctx = get_context("forkserver" if os.name == "posix" else "spawn")
+            pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx)
+            results = pool.map(_work, jobs)
+        try:
+            for rows in results:
+                for r in rows:
+                    done[r["file"]] = r
+                    bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
+                save()
+                bar.update(1)
+        except (OSError, ValueError) as e:
+            raise CliError(str(e)) from e
+        finally:
+            if args.workers > 1 and len(todo) > 1:
+                pool.shutdown(cancel_futures=True)
+    rows = [done[str(f)] for f in args.recordings if str(f) in done]
+    falls = sum(len(r["falls"]) for r in rows)
+    frames = sum(r["frames"] for r in rows)
+    print(f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
+          f"event(s){' recovered' if recovery.enabled else ''}; summary {summary_path}")
+    return 0

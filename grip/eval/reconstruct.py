@@ -1,0 +1,233 @@
+"""GRIP's offline reconstruction: KinematicsNet, then the policy drives the simulated humanoid,
+with GRIP's fall recovery (``grip reconstruct``).
+
+Per recording: KinematicsNet runs once over the whole sequence (batched over recordings); the
+humanoid starts from the recording's first (calibration) frame and the policy follows the
+estimate in MuJoCo. Every frame records the simulated joints, the ground reaction force and
+centre of pressure of each foot (MuJoCo's contact forces), the actuator torques and the foot
+contact states.
+
+Fall recovery (GRIP Sec. 3.4, BASELINES_AND_METRICS 5.4): a fall is the pelvis below
+``fall_height_m`` (0.30 m) while the AMP discriminator's probability that the recent motion is
+human is below ``fall_probability`` (0.7), or a simulation blow-up. The history buffer holds the
+last ``history_frames`` (N = 30) KinematicsNet outputs. On a fall at frame t the simulated root is
+put at its position of frame t - N plus the estimated pelvis velocity integrated over the N
+frames, the joints at the FA estimate of frame t (velocities: the estimated pelvis velocity,
+joints at rest), the body lowered or lifted onto the ground, and the simulation resumes. Output
+frames t - N .. t are replaced by the buffered kinematic estimate on the same integrated root;
+their forces and torques are NaN and their contacts False. Each event is reported as
+``[t - N, t]`` in :attr:`grip.core.reconstruction.Reconstruction.falls`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.tracking_env import GripTrackingEnv
+from grip.core import skeleton as sk
+from grip.core.metrics import global_to_local_rot
+from grip.core.reconstruction import Reconstruction
+from grip.core.reference import ReferenceClip, ReferenceSet, pose_vector
+from grip.sim.model import FootContacts
+
+CONTACT_FORCE_N = 20.0
+"""A foot is in contact when the vertical ground reaction force on it exceeds this (the same
+threshold as the insole contact labels, PRISM_FORMAT.md)."""
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """GRIP's fall detector and history-buffer recovery.
+
+    Attributes:
+        enabled: Recover from falls (off: the humanoid stays down; each fall is still reported).
+        history_frames: N, KinematicsNet outputs kept in the history buffer (0.3 s at 100 Hz).
+        fall_height_m: Pelvis height below which a fall is possible, m.
+        fall_probability: Discriminator probability below which a low pelvis is a fall.
+    """
+
+    enabled: bool = True
+    history_frames: int = 30
+    fall_height_m: float = 0.30
+    fall_probability: float = 0.7
+
+    def __post_init__(self) -> None:
+        if self.history_frames < 1:
+            raise ValueError("RecoveryConfig.history_frames must be >= 1")
+
+
+class _Trace:
+    """Per-frame output arrays of one simulated recording."""
+
+    def __init__(self, n: int) -> None:
+        self.pos = np.full((n, sk.N_JOINTS, 3), np.nan)
+        self.rot = np.full((n, sk.N_JOINTS, 3, 3), np.nan)
+        self.grf = np.full((n, 2, 3), np.nan)
+        self.cop = np.full((n, 2, 3), np.nan)
+        self.torques = np.full((n, 3 * (sk.N_JOINTS - 1)), np.nan)
+        self.contacts = np.zeros((n, 2), dtype=bool)
+
+
+def simulate_clip(
+    env: GripTrackingEnv,
+    runner,
+    clip_index: int,
+    recovery: RecoveryConfig = RecoveryConfig(),
+) -> tuple[Reconstruction, dict]:
+    """Play one reference clip from its first frame with the policy and fall recovery.
+
+    Args:
+        env: An inference env (no random start, no termination) holding the clip.
+        runner: A :class:`policies.runner.PolicyRunner`.
+        clip_index: Clip of ``env.reference`` to play.
+        recovery: Fall detection and recovery settings.
+
+    Returns:
+        The reconstruction (method ``"grip"``, forces and torques from the simulation) and
+        ``{"blowups": int, "sim_s": float}``.
+    """
+    t0 = time.perf_counter()
+    obs, info = env.reset(options={"clip": clip_index, "start": 0})
+    clip: ReferenceClip = env.clip
+    sim = env._sim
+    ix, n = sim.index, clip.n_frames
+    feet = FootContacts(sim.model, ix)
+    tr = _Trace(n)
+    blowups0 = env.blowups
+
+    def record(t: int) -> None:
+        d = env.data
+        tr.pos[t] = d.xpos[ix.body_ids]
+        tr.rot[t] = d.xmat[ix.body_ids].reshape(-1, 3, 3)
+        tr.grf[t], tr.cop[t] = feet(d)
+        tr.torques[t] = d.actuator_force[ix.actuator_ids]
+        tr.contacts[t] = tr.grf[t, :, 2] > CONTACT_FORCE_N
+
+    record(0)
+    falls: list[tuple[int, int]] = []
+    floor = 0  # frames before this were replaced by a recovery: the buffer starts after them
+    down = False  # (recovery off) the humanoid is down: report a fall once until it is up
+    while True:
+        obs, _, terminated, truncated, info = env.step(runner.act(obs))
+        t = info["frame"]
+        unstable = bool(info.get("sim_unstable"))
+        if not unstable:
+            record(t)
+        low = unstable or info["root_height_m"] < recovery.fall_height_m
+        fell = low and (
+            unstable
+            or runner.disc is None
+            or runner.fall_probability(info["amp_obs"])[0] < recovery.fall_probability
+        )
+        if fell and recovery.enabled:
+            s = max(floor, t - recovery.history_frames, 0)
+            obs = _recover(env, clip, tr, s, t)
+            falls.append((s, t))
+            floor = t + 1
+        elif fell and not down:
+            falls.append((t, t))
+        if not recovery.enabled:
+            down = low
+        if unstable and not recovery.enabled:
+            break  # MuJoCo reset the state itself: nothing meaningful follows
+        if t >= n - 1 or terminated or truncated:
+            break
+    last = t if not unstable or recovery.enabled else t - 1
+    sim_s = time.perf_counter() - t0
+    sl = slice(0, last + 1)
+    recon = Reconstruction(
+        name=clip.name, method="grip", fps=clip.fps,
+        joint_pos=tr.pos[sl], global_rot=tr.rot[sl], grf=tr.grf[sl], cop=tr.cop[sl],
+        torques=tr.torques[sl], contacts=tr.contacts[sl],
+        falls=np.array(falls, dtype=np.int64).reshape(-1, 2),
+        ms_per_frame=1e3 * sim_s / max(last + 1, 1),
+        notes={"blowups": env.blowups - blowups0, "recovery": recovery.enabled},
+    )  # fmt: skip
+    return recon, {"blowups": env.blowups - blowups0, "sim_s": sim_s}
+
+
+def kinematic_frames(clip: ReferenceClip, root0: np.ndarray, s: int, t: int):
+    """The buffered KinematicsNet estimate of frames ``s..t`` on a root integrated from
+    ``root0`` (the position at frame ``s``) with the estimated pelvis velocity.
+
+    Returns:
+        ``pos (t-s+1, 24, 3)`` world joints and ``rot (t-s+1, 24, 3, 3)`` global rotations.
+    """
+    root = root0 + (clip.est_root_pos[s : t + 1] - clip.est_root_pos[s])
+    rel = clip.est_pos[s : t + 1] - clip.est_pos[s : t + 1, :1]  # (FP's pelvis is not exactly 0)
+    return rel + root[:, None], clip.est_rot[s : t + 1]
+
+
+def _recover(env: GripTrackingEnv, clip: ReferenceClip, tr: _Trace, s: int, t: int):
+    """Reset the humanoid after a fall at ``t`` (history starts at ``s``); fill ``s..t``."""
+    pos, rot = kinematic_frames(clip, tr.pos[s, 0], s, t)
+    tr.pos[s : t + 1], tr.rot[s : t + 1] = pos, rot
+    tr.grf[s : t + 1] = tr.cop[s : t + 1] = tr.torques[s : t + 1] = np.nan
+    tr.contacts[s : t + 1] = False
+    local = global_to_local_rot(rot[-1])
+    qpos = pose_vector(local, pos[-1, 0])
+    qvel = np.zeros(75)
+    qvel[:3] = clip.est_vel[t, -1]
+    obs, _ = env.teleport(qpos, qvel)
+    return obs
+
+
+def inference_env(runner, reference: ReferenceSet) -> GripTrackingEnv:
+    """The policy's env settings for inference: clips play from frame 0 to their end."""
+    cfg = dataclasses.replace(runner.env_cfg, random_start=False, termination_dist_m=0.0,
+                              fall_height_m=0.0, max_episode_frames=0, clip_index=-1)  # fmt: skip
+    return GripTrackingEnv(cfg, reference)
+
+
+class GripReconstructor:
+    """KinematicsNet + policy + fall recovery over PRISM-format recordings.
+
+    Args:
+        runner: A :class:`policies.runner.PolicyRunner` (its env settings and sensor features
+            must match the estimator's).
+        estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
+        recovery: Fall detection and recovery settings.
+    """
+
+    def __init__(self, runner, estimator, recovery: RecoveryConfig = RecoveryConfig()) -> None:
+        self.runner = runner
+        self.estimator = estimator
+        self.recovery = recovery
+
+    @classmethod
+    def from_files(cls, policy, kin, recovery: RecoveryConfig = RecoveryConfig()):
+        """Load a policy export (``grip policy-export``) and a KinematicsNet checkpoint."""
+        from grip.kinematics.inference import KinematicsEstimator
+        from policies.runner import PolicyRunner
+
+        return cls(PolicyRunner.load(policy), KinematicsEstimator.from_checkpoint(kin), recovery)
+
+    def reconstruct(
+        self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16
+    ) -> list[Reconstruction]:
+        """One :class:`Reconstruction` per recording, in order."""
+        from grip.kinematics.reference import build_reference_set
+
+        out: list[Reconstruction] = []
+        for i in range(0, len(recs), batch):
+            part = list(recs[i : i + batch])
+            t0 = time.perf_counter()
+            ref = build_reference_set(part, self.estimator, batch=batch)
+            kin_ms = 1e3 * (time.perf_counter() - t0) / max(ref.total_frames, 1)
+            env = inference_env(self.runner, ref)
+            try:
+                for k in range(len(part)):
+                    recon, _ = simulate_clip(env, self.runner, k, self.recovery)
+                    recon.ms_per_frame += kin_ms
+                    recon.notes["kinematics_ms_per_frame"] = kin_ms
+                    out.append(recon)
+                    if progress is not None:
+                        progress(1)
+            finally:
+                env.close()
+        return out

@@ -1,0 +1,127 @@
+"""GRIP's reconstruction loop: outputs, fall detection and history-buffer recovery.
+
+A scripted policy stands in for a trained one: zero actions follow the KinematicsNet estimate
+with the PD servos; actions of -1 make the humanoid collapse. A scripted discriminator decides
+whether a low pelvis counts as a fall.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from envs.config import TrackingEnvConfig
+from envs.tracking_env import GripTrackingEnv
+from grip.core.body import GRAVITY
+from grip.eval.reconstruct import (
+    RecoveryConfig,
+    inference_env,
+    kinematic_frames,
+    simulate_clip,
+)
+
+
+class _Runner:
+    """Policy stand-in: a constant action; ``prob`` is the discriminator's answer."""
+
+    def __init__(self, action: float, prob: float | None = 0.0) -> None:
+        self.action = action
+        self.prob = prob
+        self.disc = None if prob is None else object()
+        self.env_cfg = TrackingEnvConfig(amp_window=2)
+
+    def act(self, obs: dict) -> np.ndarray:
+        return np.full(69, self.action)
+
+    def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
+        return np.array([self.prob])
+
+
+@pytest.fixture(scope="module")
+def env() -> GripTrackingEnv:
+    return inference_env(_Runner(0.0), GripTrackingEnv().reference)
+
+
+def test_following_the_estimate_gives_a_full_physical_reconstruction(env) -> None:
+    # PD servos alone on the estimate (no policy) keep a walk up for ~80 frames: look at those
+    recon, info = simulate_clip(env, _Runner(0.0), 0, RecoveryConfig())
+    clip = env.reference.clip(0)
+    assert recon.n_frames == clip.n_frames and recon.method == "grip" and info["blowups"] == 0
+    np.testing.assert_allclose(recon.joint_pos[0], clip.gt_pos[0], atol=1e-6)  # GT start
+    first = recon.falls[0, 0] if recon.fell else recon.n_frames
+    assert first > 40
+    recon = recon.slice_frames(0, first)
+    assert recon.torques.shape == (first, 69) and np.isfinite(recon.torques).all()
+    weight = clip.body.mass_kg * GRAVITY
+    # over the clip the feet carry the body: mean total vertical force ~ body weight
+    assert 0.7 * weight < np.nanmean(recon.grf[:, :, 2].sum(axis=1)) < 1.5 * weight
+    assert recon.contacts.any(axis=1).mean() > 0.8
+    on = recon.contacts[:, 0]
+    assert np.isfinite(recon.cop[on, 0]).all()
+    assert np.isnan(recon.cop[recon.grf[:, 0, 2] == 0, 0]).all()
+    # CoP of a loaded foot lies under that foot (within its length)
+    d = np.linalg.norm(recon.cop[on, 0, :2] - recon.joint_pos[on, 7, :2], axis=1)
+    assert np.median(d) < 0.2
+    assert recon.ms_per_frame > 0
+
+
+def test_a_fall_is_recovered_from_the_history_buffer(env) -> None:
+    rec_cfg = RecoveryConfig(history_frames=20)
+    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, rec_cfg)
+    clip = env.reference.clip(0)
+    assert recon.n_frames == clip.n_frames and recon.fell
+    s, t = recon.falls[0]
+    assert t - s == 20 and t > 0
+    # the fall's frames are the buffered estimate on a root integrated from frame s
+    pos, rot = kinematic_frames(clip, recon.joint_pos[s, 0], s, t)
+    np.testing.assert_allclose(recon.joint_pos[s + 1 : t + 1], pos[1:], atol=1e-9)
+    np.testing.assert_allclose(recon.global_rot[s : t + 1], rot, atol=1e-9)
+    assert np.isnan(recon.torques[s : t + 1]).all() and not recon.contacts[s : t + 1].any()
+    # right after the reset the body stands again, on the ground
+    assert recon.joint_pos[t + 1, 0, 2] > rec_cfg.fall_height_m
+
+
+def test_a_human_looking_low_pelvis_is_not_a_fall(env) -> None:
+    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.9), 0, RecoveryConfig())
+    assert not recon.fell
+
+
+def test_without_recovery_each_fall_is_reported_once_and_the_body_stays_down(env) -> None:
+    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, RecoveryConfig(enabled=False))
+    assert recon.falls.shape == (1, 2) and recon.falls[0, 0] == recon.falls[0, 1]
+    assert recon.joint_pos[-1, 0, 2] < 0.3
+
+
+def test_teleport_puts_the_body_on_the_ground(env) -> None:
+    env.reset(options={"clip": 0, "start": 0})
+    clip = env.clip
+    q = clip.gt_qpos[10].copy()
+    q[2] += 0.5  # half a metre in the air
+    obs, info = env.teleport(q)
+    assert abs(env._lowest_clearance()) < 1e-9
+    assert all(np.isfinite(v).all() for v in obs.values()) and info["frame"] == 0
+    with pytest.raises(ValueError, match="teleport"):
+        env.teleport(np.full(76, np.nan))
+
+
+def test_recovery_config_is_checked() -> None:
+    with pytest.raises(ValueError, match="history_frames"):
+        dataclasses.replace(RecoveryConfig(), history_frames=0)
+
+
+def test_reading_foot_forces_does_not_change_the_simulation(env) -> None:
+    from grip.sim.model import FootContacts
+
+    final = []
+    for read in (False, True):
+        env.reset(options={"clip": 0, "start": 0})
+        feet = FootContacts(env.model, env._sim.index)
+        for _ in range(40):
+            env.step(np.zeros(69))
+            if read:
+                grf, _ = feet(env.data)
+                assert (grf[:, 2] >= 0).all()
+        final.append(env.data.qpos.copy())
+    np.testing.assert_array_equal(final[0], final[1])
