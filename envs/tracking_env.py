@@ -164,6 +164,7 @@ class GripTrackingEnv(gym.Env):
         self._ref_target = np.zeros(0)  # (T, 69) relative-action reference (+ feed-forward)
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._n_bad = 0
+        self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)
         self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
@@ -265,6 +266,9 @@ class GripTrackingEnv(gym.Env):
         self._t = start
         self._steps = 0
         self._set_state(clip, start)
+        # the estimated root is integrated from the clip's first frame; an episode follows it
+        # from where the episode starts (the ground truth there), not with the drift before
+        self._root_offset = clip.gt_qpos[start, :3] - clip.est_root_pos[start]
         self._per_clip_arrays(clip)
         pvw, rot = self._sim_state()
         obs = self._observe(pvw, rot)
@@ -345,7 +349,7 @@ class GripTrackingEnv(gym.Env):
         h = O.heading_matrix(rot[0])
         kin, self_vec = O.observation_parts(
             cfg.kinematic_obs, h, pvw, rot, clip.est_pos[t], self._est_leaf_rot[t],
-            clip.est_vel[t], self._est_leaf_angvel[t], clip.est_root_pos[t],
+            clip.est_vel[t], self._est_leaf_angvel[t], clip.est_root_pos[t] + self._root_offset,
         )  # fmt: skip
         if self._sim.hfield is None:  # flat floor: the height map is the pelvis height
             hm = np.full(self._grid.shape[0], -root[2], dtype=np.float32)
@@ -398,7 +402,14 @@ class GripTrackingEnv(gym.Env):
                 info["amp_obs"] = self._amp.vector()
             return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
         pvw, rot = self._sim_state()
-        terms, sq = R.imitation_terms(pvw, rot, self._gt_pvw[t], clip.gt_rot[t], cfg.reward)
+        gt = self._gt_pvw[t]
+        if cfg.align_root_xy:  # compare with the pelvis over the ground truth's (see config)
+            shift = gt[0, 0, :2] - pvw[0, 0, :2]
+            pvw[0, :, :2] += shift
+            terms, sq = R.imitation_terms(pvw, rot, gt, clip.gt_rot[t], cfg.reward)
+            pvw[0, :, :2] -= shift
+        else:
+            terms, sq = R.imitation_terms(pvw, rot, gt, clip.gt_rot[t], cfg.reward)
         power = R.mechanical_power(sim.act_force[sim.act], sim.qvel[ix.hinge_dof_adr])
         terms["energy"] = power if self._steps > cfg.reward.energy_skip_frames else 0.0
         terms["amp"] = 0.0
@@ -451,6 +462,7 @@ class GripTrackingEnv(gym.Env):
         gap = self._lowest_clearance()
         d.qpos[r + 2] -= gap
         mujoco.mj_forward(m, d)
+        self._root_offset = d.qpos[r : r + 3] - self._clip.est_root_pos[self._t]
         self._n_bad = int(sim.warnings[_UNSTABLE].sum())
         pvw, rot = self._sim_state()
         obs = self._observe(pvw, rot)

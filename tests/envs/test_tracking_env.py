@@ -201,3 +201,26 @@ def test_split_substeps_follow_mj_step_bit_for_bit(reference) -> None:
         mujoco.mj_step(m, twin, nstep=2)
         np.testing.assert_array_equal(env.data.qpos, twin.qpos)
         np.testing.assert_array_equal(env.data.qvel, twin.qvel)
+
+
+def test_an_episode_follows_the_estimated_root_from_its_own_start() -> None:
+    env = GripTrackingEnv()  # bundled sample: KinematicsNet estimates, whose root drifts
+    clip = env.reference.clip(0)
+    start = clip.n_frames - 30
+    env.reset(options={"clip": 0, "start": start})
+    np.testing.assert_allclose(clip.est_root_pos[start] + env._root_offset, clip.gt_qpos[start, :3])
+
+
+@pytest.mark.parametrize("align", [True, False])
+def test_align_root_xy_ignores_a_horizontal_offset(align: bool) -> None:
+    env = GripTrackingEnv(TrackingEnvConfig(align_root_xy=align, amp_window=0))
+    rewards = []
+    for dx in (0.0, 0.5):
+        env.reset(options={"clip": 0, "start": 5})
+        env.data.qpos[0] += dx  # the whole body half a metre to the side (flat floor)
+        _, _, _, _, info = env.step(np.zeros(69))
+        rewards.append(info["reward/imit_pos"])
+    if align:
+        assert rewards[1] == pytest.approx(rewards[0], rel=1e-6)
+    else:
+        assert rewards[1] < 0.01 * rewards[0]
