@@ -18,10 +18,13 @@ FORBIDDEN = {
     "grip.motion": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.config": ("numpy", "torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.kinematics.features": ("torch", "mujoco", "envs", "policies"),
+    "grip.export": ("torch", "stable_baselines3", "policies"),
     "grip.kinematics": ("mujoco", "envs", "policies", "gymnasium"),
     "grip.cli.main": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.core.reference": ("torch", "mujoco", "gymnasium", "stable_baselines3"),
     "grip.sim": ("torch", "gymnasium", "stable_baselines3", "envs", "policies"),
+    "grip.baselines": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
+    "grip.baselines.pip_physics": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs.tracking_env": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs.amp": ("torch", "mujoco", "stable_baselines3", "policies", "grip.kinematics"),
@@ -58,7 +61,7 @@ def _submodules(package: str) -> tuple[str, ...]:
 @pytest.mark.parametrize("layer", sorted(FORBIDDEN))
 def test_layer_does_not_import_forbidden(layer: str) -> None:
     extra: tuple[str, ...] = ()
-    if layer in ("prism_tools", "grip.core"):
+    if layer in ("prism_tools", "grip.core", "grip.export"):
         extra = _submodules(layer)  # every module of the layer, not just its __init__
     loaded = _loaded(layer, extra)
     bad = [

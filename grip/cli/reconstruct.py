@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 from pathlib import Path
 
 
@@ -87,25 +88,29 @@ def _work(job: tuple) -> list[dict]:
         (recon,) = g.reconstruct([rec])
         dst = Path(out) / f"{safe_name(rec.name)}.npz"
         recon.save(dst)
-        written = [str(dst)]
-        written += _exports(recon, rec, Path(out), formats)
+        files, failed = _exports(recon, rec, Path(out), formats)
         rows.append({"file": str(f), "name": rec.name, "frames": recon.n_frames,
                      "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
-                     "blowups": recon.notes.get("blowups", 0), "written": written})  # fmt: skip
+                     "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *files],
+                     "failed": failed})  # fmt: skip
     return rows
 
 
-def _exports(recon, rec, out: Path, formats: list[str]) -> list[str]:
+def _exports(recon, rec, out: Path, formats: list[str]) -> tuple[list[str], dict[str, str]]:
     """Write the non-npz formats; a format that cannot be written is reported, not fatal."""
     extra = [f for f in formats if f != "npz"]
     if not extra:
-        return []
+        return [], {}
     from grip.export import export_reconstruction
 
-    return [str(p) for p in export_reconstruction(recon, out, extra, recording=rec)]
+    written, failed = export_reconstruction(recon, out, extra, stem=safe_name(rec.name),
+                                            recording=rec)  # fmt: skip
+    return [str(p) for p in written], failed
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
+    if "mp4" in args.formats:  # MuJoCo picks its OpenGL backend at import; EGL works headless
+        os.environ.setdefault("MUJOCO_GL", "egl")
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
@@ -171,4 +176,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     frames = sum(r["frames"] for r in rows)
     print(f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
           f"event(s){' recovered' if recovery.enabled else ''}; summary {summary_path}")
-    return 0
+    failed = [(r["name"], fmt, msg) for r in rows for fmt, msg in r.get("failed", {}).items()]
+    for name, fmt, msg in failed:
+        print(f"grip: error: {fmt} of {name}: {msg}", file=sys.stderr)
+    return 1 if failed else 0

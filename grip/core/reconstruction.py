@@ -30,6 +30,7 @@ import dataclasses
 import io
 import json
 import os
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -167,7 +168,7 @@ class Reconstruction:
         try:
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as e:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
             raise ReconstructionError(f"{path}: not a readable .npz file ({e})") from e
         try:
             meta = json.loads(str(data.pop("__meta__")))

@@ -26,11 +26,15 @@ import numpy as np
 from envs.tracking_env import GripTrackingEnv
 from grip.core import metrics as M
 from grip.core import skeleton as sk
-from grip.core.body import GRAVITY, build_body
-from grip.core.fk import sole_points
 from grip.core.reference import ReferenceSet
+from grip.eval.bench import (
+    foot_penetration_mm,
+    foot_sliding_mps,
+    gt_foot_contacts,
+    insole_vertical_force_n,
+    vgrf_error_n,
+)
 from grip.sim.model import insole_forces
-from prism_tools.schema import FEET
 
 FALL_HEIGHT_M = 0.30
 FALL_PROBABILITY = 0.7
@@ -99,18 +103,9 @@ def segment_metrics(ep: Episode, clip, rec) -> dict[str, float]:
         "fell": ep.fell_at >= 0,
         "frames": t,
     }
-    contact = np.stack([rec.insole[f].contacts[:t].any(axis=1) for f in FEET], axis=1) \
-        if all(f in rec.insole for f in FEET) else None  # fmt: skip
-    if contact is None:
-        contact = M.contacts_from_motion(gt[:, list(sk.FOOT_JOINTS)], clip.fps)
-    out["FS_mps"] = M.foot_sliding(ep.pos, contact, clip.fps) if t >= 2 else float("nan")
-    out["FP_mm"] = M.foot_penetration(sole_points(ep.rot, ep.pos, build_body(clip.body)))
-    if all(f in rec.insole for f in FEET) and np.isfinite(ep.grf).all():
-        weight = clip.body.mass_kg * GRAVITY
-        gt_f = np.stack([rec.insole[f].force[:t, 0] for f in FEET], axis=1) * weight
-        out["vGRF_N"] = M.vgrf_error(ep.grf, gt_f)
-    else:
-        out["vGRF_N"] = float("nan")
+    out["FS_mps"] = foot_sliding_mps(ep.pos, gt_foot_contacts(rec, gt, clip.fps), clip.fps)
+    out["FP_mm"] = foot_penetration_mm(ep.rot, ep.pos, clip.body)
+    out["vGRF_N"] = vgrf_error_n(ep.grf, insole_vertical_force_n(rec, clip.body.mass_kg, t))
     return out
 
 

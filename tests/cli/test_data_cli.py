@@ -222,3 +222,23 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
         assert key in res
     assert res["segments"] == 2
     assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    # reconstruct: npz + exports per recording, summary, resume, errors named
+    recs = sorted((built / "sequences").glob("*.npz"))[:2]
+    out = tmp_path / "recon"
+    argv = ["reconstruct", *map(str, recs), "--out", str(out), "--policy", str(exported),
+            "--max-frames", "60", "--formats", "npz,bvh,png"]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["recordings"]) == 2 and summary["history_frames"] == 30
+    from grip.core.reconstruction import Reconstruction
+
+    for row in summary["recordings"]:
+        assert len(row["written"]) == 3 and all(Path(w).is_file() for w in row["written"])
+        r = Reconstruction.load(row["written"][0])
+        assert r.n_frames == 60 and r.method == "grip" and r.grf.shape == (60, 2, 3)
+    capsys.readouterr()
+    assert main(argv) == 0 and "2 already done" in capsys.readouterr().out
+    assert main(["reconstruct", str(tmp_path / "missing.npz"), "--out", str(out),
+                 "--policy", str(exported)]) == 2  # fmt: skip
+    assert "missing.npz" in capsys.readouterr().err
+    assert main([*argv[:-1], "npz,gif"]) == 2

@@ -1,0 +1,128 @@
+"""``grip bench``: GRIP and the baselines on the same test segments, with GRIP's metrics."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="benchmark methods on the test segments (GRIP Table 1 metrics, tables, plots)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Run every method on the same segments of a dataset split (500 frames by default,\n"
+            "each started from the ground truth at its first frame: the GRIP protocol), in\n"
+            "parallel worker processes, and write OUT/results.json ({method: {metric: value}}),\n"
+            "OUT/results.csv, OUT/segments.csv, OUT/table.md (the GRIP Table 1 layout plus\n"
+            "runtime and failures) and plots (per-joint errors, the trajectory and the ground\n"
+            "reaction force of a sample segment). Finished segments are kept in OUT/segments:\n"
+            "running the same command again resumes. A method that raises on a segment is\n"
+            "counted as a failure of that segment."
+        ),
+        epilog="example: grip bench --data data/prism_synth --methods kinematics --out runs/bench\n"
+        "         grip bench --data data/prism_synth --methods kinematics --out runs/bench_s "
+        "--sweep runs/sweep --sensors imu2_nopress,imu4_press",
+    )
+    p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
+    p.add_argument("--out", required=True, type=Path, help="output folder (created or resumed)")
+    p.add_argument("--methods", default=None, metavar="NAME,NAME,...",
+                   help="methods to run, e.g. pip,transpose,kinematics,grip (default: every "
+                   "registered method; an unknown name lists them)")  # fmt: skip
+    p.add_argument("--split", default="test", choices=("train", "test", "all"))
+    p.add_argument("--category", action="append", default=[], metavar="GLOB",
+                   help="only these motion categories (glob, repeatable)")  # fmt: skip
+    p.add_argument("--segment-frames", type=int, default=500, help="frames per segment")
+    p.add_argument("--segments", type=int, default=0, metavar="N",
+                   help="at most N segments, spread over the categories (0: all)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes, one thread each (1: run in this process; "
+                   "default: the number of cores)")  # fmt: skip
+    p.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    p.add_argument("--sensors", default=None, metavar="NAME,NAME,...",
+                   help="sensor configurations of a 'grip train-kin --sweep' folder "
+                   "(imu<N>_press|nopress), GRIP Table 3; methods that cannot change sensors "
+                   "are skipped")  # fmt: skip
+    p.add_argument("--sweep", type=Path, default=None, metavar="DIR",
+                   help="the sweep folder the --sensors configurations are read from")  # fmt: skip
+    p.add_argument("--save-recons", action="store_true",
+                   help="save every reconstruction (OUT/recons/<method>/<seg>.npz)")  # fmt: skip
+    p.add_argument("--retry-failed", action="store_true",
+                   help="run segments that failed in an earlier run again")  # fmt: skip
+    p.set_defaults(func=cmd_bench)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.recordings import split_paths
+    from grip.eval.bench import (
+        BenchError,
+        list_segments,
+        markdown_table,
+        prepare_runs,
+        run_bench,
+        select_segments,
+        write_outputs,
+    )
+    from grip.eval.methods import METHODS, MethodOptions, parse_method_names, sensor_set
+
+    if args.workers < 1:
+        raise CliError(f"--workers must be >= 1, got {args.workers}")
+    if args.segment_frames < 3:
+        raise CliError(f"--segment-frames must be >= 3, got {args.segment_frames}")
+    sensors: list[str] = []
+    try:
+        names = parse_method_names(args.methods or ",".join(METHODS))
+        if args.sensors is not None:
+            sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
+            if not sensors:
+                raise ValueError("--sensors: no configuration given")
+            for s in sensors:
+                sensor_set(s)
+            if args.sweep is None:
+                raise ValueError("--sensors needs --sweep DIR (the 'grip train-kin --sweep' "
+                                 "folder)")  # fmt: skip
+        elif args.sweep is not None:
+            raise ValueError("--sweep is only used with --sensors")
+        segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
+                             args.category)  # fmt: skip
+        segs = select_segments(segs, args.segments)
+        options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep)
+        runs, built = prepare_runs(names, options, sensors)
+    except (BenchError, ValueError, FileNotFoundError) as e:
+        raise CliError(str(e)) from e
+    labels = [r.label for r in runs]
+    print(f"{len(segs)} segment(s) x {len(runs)} method(s) ({', '.join(labels)}), "
+          f"{args.workers} worker(s) -> {args.out}")  # fmt: skip
+    t0 = time.perf_counter()
+    failed = 0
+    stored = sum((args.out / "segments" / r.label / f"{s.id}.json").is_file()
+                 for r in runs for s in segs)  # fmt: skip
+    with tqdm(total=len(segs) * len(runs), initial=stored, unit="seg", desc="bench") as bar:
+
+        def progress(row: dict) -> None:
+            nonlocal failed
+            failed += row["status"] != "ok"
+            bar.set_postfix(failed=failed)
+            bar.update(1)
+
+        try:
+            rows = run_bench(runs, segs, args.out, workers=args.workers,
+                             save_recons=args.save_recons, retry_failed=args.retry_failed,
+                             built=built, progress=progress, log=bar.write)  # fmt: skip
+        except BenchError as e:
+            raise CliError(str(e)) from e
+    title = f"Benchmark on {args.data} ({args.split} split)"
+    summary = write_outputs(args.out, rows, runs, segs, title)
+    print(markdown_table(summary))
+    if failed:
+        print(f"{failed} segment(s) failed in this run; see {args.out / 'table.md'}")
+    print(f"wrote {args.out}/results.json, results.csv, segments.csv, table.md and plots "
+          f"in {time.perf_counter() - t0:.0f} s")  # fmt: skip
+    return 0

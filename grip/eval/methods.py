@@ -1,0 +1,236 @@
+"""The methods ``grip bench`` compares, behind one protocol and one registry.
+
+A method turns one segment recording into a :class:`~grip.core.reconstruction.Reconstruction`.
+The segment's first frame is the ground-truth initialisation (the GRIP protocol: every method
+starts from the true pose and position at the first frame); a method reads nothing else of the
+ground truth (``smpl_params``, ``imu_gt``) after frame 0.
+
+Adding a method is one factory function ``factory(options) -> Method`` and one line in
+:data:`METHODS`. Factories load their models (the expensive part) once; ``grip bench`` calls a
+factory once per worker process and then ``reconstruct`` once per segment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+from grip.core.reconstruction import Reconstruction
+
+__all__ = [
+    "METHODS",
+    "KinematicsOnly",
+    "Method",
+    "MethodFactory",
+    "MethodOptions",
+    "UnknownMethodError",
+    "kinematics_method",
+    "make_method",
+    "parse_method_names",
+    "sensor_set",
+    "sweep_checkpoint",
+]
+
+
+@runtime_checkable
+class Method(Protocol):
+    """What ``grip bench`` runs.
+
+    Attributes:
+        name: Registry name (``"kinematics"``, ``"pip"``, ...), also ``Reconstruction.method``.
+        supports_sensors: The method can run another sensor configuration (``--sensors``).
+        can_fall: The method can fail by falling (GRIP's success rate); ``False`` makes the
+            success rate "n/a" (optimisation and kinematic baselines).
+    """
+
+    name: str
+    supports_sensors: bool
+    can_fall: bool
+
+    def reconstruct(self, rec) -> Reconstruction:
+        """The reconstruction of one segment (a ``prism_tools`` ``Recording``), with as many
+        frames as the recording, at its frame rate."""
+        ...
+
+
+@dataclass(frozen=True)
+class MethodOptions:
+    """Settings handed to every factory (each reads the fields it needs).
+
+    Attributes:
+        kin_checkpoint: KinematicsNet checkpoint; ``None``: the shipped one.
+        sensors: Sensor configuration of a sweep (``"imu4_press"``, see
+            :mod:`grip.kinematics.sweep`), ``None`` for the method's default sensors.
+        sweep_dir: Folder of ``grip train-kin --sweep`` holding ``<sensors>/best.pt``.
+    """
+
+    kin_checkpoint: Path | None = None
+    sensors: str | None = None
+    sweep_dir: Path | None = None
+
+    def to_dict(self) -> dict[str, str | None]:
+        """JSON-ready form (paths as absolute strings), used to detect changed settings."""
+        out: dict[str, str | None] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = str(Path(v).resolve()) if isinstance(v, Path) else v
+        return out
+
+
+MethodFactory = Callable[[MethodOptions], Method]
+
+
+class UnknownMethodError(ValueError):
+    """A method name that is not in the registry; the message lists the known ones."""
+
+
+# ------------------------------------------------------------------------- kinematics only
+def _shipped_kin_checkpoint() -> Path:
+    from grip.cli.paths import REPO_ROOT
+    from grip.cli.recordings import SHIPPED_KIN
+
+    return REPO_ROOT / SHIPPED_KIN
+
+
+def sensor_set(name: str):
+    """The :class:`grip.kinematics.sweep.SensorSet` called ``name`` (``"imu4_press"``).
+
+    Raises:
+        ValueError: ``name`` is not a sweep configuration; the message lists the valid ones.
+    """
+    from grip.kinematics.sweep import IMU_ORDER, sensor_sets
+
+    sets = {s.name: s for s in sensor_sets(tuple(range(1, len(IMU_ORDER) + 1)))}
+    if name not in sets:
+        raise ValueError(f"unknown sensor configuration {name!r}; expected one of "
+                         f"{', '.join(sets)}")  # fmt: skip
+    return sets[name]
+
+
+def sweep_checkpoint(sweep_dir: Path | None, sensors: str) -> Path:
+    """``sweep_dir/<sensors>/best.pt`` (else ``last.pt``) of a ``grip train-kin --sweep`` folder.
+
+    Raises:
+        ValueError: No sweep folder given, unknown configuration, or no checkpoint there.
+    """
+    sensor_set(sensors)
+    if sweep_dir is None:
+        raise ValueError(f"sensors {sensors!r} need the sweep folder of 'grip train-kin --sweep' "
+                         "(--sweep DIR)")  # fmt: skip
+    for ck in ("best.pt", "last.pt"):
+        p = Path(sweep_dir) / sensors / ck
+        if p.is_file():
+            return p
+    raise ValueError(f"{Path(sweep_dir) / sensors}: no best.pt or last.pt (train the sweep with "
+                     f"'grip train-kin --sweep --out {sweep_dir}')")  # fmt: skip
+
+
+class KinematicsOnly:
+    """KinematicsNet alone: its pose on the root integrated from its pelvis velocity.
+
+    The PIP ablation row "kinematics only" (BASELINES_AND_METRICS 2.4): no physics, so it cannot
+    fall and has no forces. The LSTMs start from the segment's first-frame ground truth and the
+    root from the true first-frame pelvis position. The estimated root-relative joints are
+    re-centred on the estimated pelvis (whose root-relative estimate is not exactly zero), so the
+    pelvis lies on the integrated trajectory. Runs offline: the whole segment in one batch (the
+    network is causal, so streaming gives the same numbers).
+    """
+
+    name = "kinematics"
+    supports_sensors = True
+    can_fall = False
+
+    def __init__(self, estimator, checkpoint: Path) -> None:
+        self.estimator = estimator
+        self.checkpoint = Path(checkpoint)
+
+    def reconstruct(self, rec) -> Reconstruction:
+        t0 = time.perf_counter()
+        est = self.estimator.predict([rec])[0]
+        rel = est.joint_pos - est.joint_pos[:, :1]
+        pos = rel + est.root_pos[:, None]
+        ms = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
+        feats = self.estimator.cfg.features
+        return Reconstruction(
+            name=rec.name, method=self.name, fps=float(rec.fps), joint_pos=pos,
+            global_rot=est.global_rot, ms_per_frame=ms,
+            notes={"checkpoint": str(self.checkpoint), "sites": list(feats.sites),
+                   "insoles": bool(feats.insoles), "mode": "offline"},
+        )  # fmt: skip
+
+
+def kinematics_method(options: MethodOptions) -> KinematicsOnly:
+    """Factory of :class:`KinematicsOnly`.
+
+    The checkpoint is ``options.kin_checkpoint`` (default: the shipped one); with
+    ``options.sensors`` it is that configuration's run of the sweep folder, which must have been
+    trained on exactly those sensors.
+
+    Raises:
+        ValueError: Missing or unreadable checkpoint, or one trained on other sensors.
+    """
+    from grip.kinematics.inference import KinematicsEstimator
+
+    if options.sensors:
+        ck = sweep_checkpoint(options.sweep_dir, options.sensors)
+    else:
+        ck = Path(options.kin_checkpoint or _shipped_kin_checkpoint())
+    if not ck.is_file():
+        raise ValueError(f"{ck}: no such KinematicsNet checkpoint")
+    est = KinematicsEstimator.from_checkpoint(ck)
+    if options.sensors:
+        s = sensor_set(options.sensors)
+        feats = est.cfg.features
+        if tuple(feats.sites) != s.sites or bool(feats.insoles) != s.insoles:
+            raise ValueError(f"{ck}: trained on {feats.sites} (insoles={feats.insoles}), not "
+                             f"the {s.name} configuration its folder names")  # fmt: skip
+    return KinematicsOnly(est, ck)
+
+
+# ------------------------------------------------------------------------------- registry
+METHODS: dict[str, MethodFactory] = {
+    "kinematics": kinematics_method,
+}
+"""Method name -> factory. The baselines (``pip``, ``transpose``) and ``grip`` register here."""
+
+
+def make_method(
+    name: str, options: MethodOptions, registry: Mapping[str, MethodFactory] = METHODS
+) -> Method:
+    """Build a registered method.
+
+    Raises:
+        UnknownMethodError: ``name`` is not registered (the message lists the known names).
+    """
+    if name not in registry:
+        raise UnknownMethodError(f"unknown method {name!r}; known methods: "
+                                 f"{', '.join(sorted(registry)) or '(none)'}")  # fmt: skip
+    method = registry[name](options)
+    if not isinstance(method, Method):
+        raise TypeError(f"factory of {name!r} returned {type(method).__name__}, which lacks "
+                        "name/supports_sensors/can_fall/reconstruct")  # fmt: skip
+    return method
+
+
+def parse_method_names(text: str, registry: Mapping[str, MethodFactory] = METHODS) -> list[str]:
+    """``"pip,kinematics"`` -> ``["pip", "kinematics"]``, each checked against the registry.
+
+    Raises:
+        UnknownMethodError: An unknown name (listing the known ones).
+        ValueError: No name, or a name given twice.
+    """
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise ValueError("--methods: no method given")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"--methods: {dup} given more than once")
+    unknown = [n for n in names if n not in registry]
+    if unknown:
+        raise UnknownMethodError(f"unknown method(s) {unknown}; known methods: "
+                                 f"{', '.join(sorted(registry)) or '(none)'}")  # fmt: skip
+    return names

@@ -1,0 +1,421 @@
+"""``grip bench``: segment listing, metrics of one segment, the runner (failures, resume, worker
+crashes), the method registry, the kinematics-only method and the command line."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import shutil
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grip.cli.main import main
+from grip.cli.paths import REPO_ROOT
+from grip.cli.recordings import SHIPPED_KIN
+from grip.core import metrics as M
+from grip.core.reconstruction import Reconstruction
+from grip.eval import bench as B
+from grip.eval.methods import (
+    KinematicsOnly,
+    MethodOptions,
+    UnknownMethodError,
+    kinematics_method,
+    make_method,
+    parse_method_names,
+    sensor_set,
+)
+from prism_tools.chunking import make_split, save_split
+from prism_tools.io import save_recording
+from prism_tools.synthetic import make_recording
+
+FRAMES = 100  # segment length of these tests
+LENGTHS = {"take0": (250, "walk"), "take1": (120, "run"), "take2": (210, "walk")}
+
+
+def _recording(name: str, seed: int):
+    n, cat = LENGTHS[name]
+    rec = make_recording(n, seed=seed)
+    return dataclasses.replace(rec, extras={**rec.extras, "take_name": name, "category": cat})
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    """A tiny ``grip data build``-style folder: every recording in the test split."""
+    root = tmp_path_factory.mktemp("data")
+    for i, name in enumerate(LENGTHS):
+        save_recording(_recording(name, i), root / "sequences" / f"{name}.npz")
+    split = make_split(list(LENGTHS), test_fraction=1.0)
+    save_split(split, root / "split.json")
+    return root
+
+
+@pytest.fixture(scope="module")
+def segments(dataset: Path) -> list[B.Segment]:
+    return B.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES)
+
+
+# ------------------------------------------------------------------------------ fake methods
+class Oracle:
+    """Returns the ground truth (+ a constant shift); forces equal to the insoles'.
+
+    ``fail_on``: recording names on which it raises; ``calls``: list the names it ran on.
+    """
+
+    name = "oracle"
+    supports_sensors = False
+
+    def __init__(self, shift=(0.0, 0.0, 0.0), fail_on=(), calls=None, can_fall=True,
+                 fall=False, grf_offset_n=0.0) -> None:  # fmt: skip
+        self.shift = np.asarray(shift, dtype=float)
+        self.fail_on = set(fail_on)
+        self.calls = calls if calls is not None else []
+        self.can_fall = can_fall
+        self.fall = fall
+        self.grf_offset_n = grf_offset_n
+
+    def reconstruct(self, rec) -> Reconstruction:
+        self.calls.append(rec.name)
+        if rec.name in self.fail_on:
+            raise RuntimeError(f"solver diverged on {rec.name}")
+        gt = B.ground_truth(rec)
+        grf = np.zeros((rec.n_frames, 2, 3))
+        grf[..., 2] = gt.insole_fz_n + self.grf_offset_n
+        falls = np.array([[rec.n_frames - 5, rec.n_frames - 2]]) if self.fall else None
+        return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
+                              joint_pos=gt.joint_pos + self.shift, global_rot=gt.global_rot,
+                              grf=grf, **({"falls": falls} if self.fall else {}))  # fmt: skip
+
+
+def _run(label: str, factory) -> B.MethodRun:
+    return B.MethodRun(label, "oracle", factory, MethodOptions())
+
+
+def _oracle_factory(options: MethodOptions) -> Oracle:
+    return Oracle()
+
+
+# ------------------------------------------------------------------------------- segments
+def test_list_segments_cuts_full_segments_and_names_them(segments, dataset) -> None:
+    ids = [s.id for s in segments]
+    # 250 -> 2 segments, 120 -> 1, 210 -> 2: shorter tails are left out.
+    assert ids == ["take0_f000000", "take0_f000100", "take1_f000000", "take2_f000000",
+                   "take2_f000100"]  # fmt: skip
+    assert all(s.n_frames == FRAMES for s in segments)
+    assert [s.category for s in segments] == ["walk", "walk", "run", "walk", "walk"]
+    only_run = B.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES, ["r*"])
+    assert [s.id for s in only_run] == ["take1_f000000"]
+    with pytest.raises(B.BenchError, match="no 300-frame segment"):
+        B.list_segments([dataset / "sequences" / "take1.npz"], 300)
+
+
+def test_list_segments_names_an_unreadable_file(tmp_path) -> None:
+    bad = tmp_path / "broken.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(B.BenchError, match=r"broken\.npz"):
+        B.list_segments([bad], FRAMES)
+
+
+def test_select_segments_spreads_over_categories_deterministically() -> None:
+    cats = ["a"] * 5 + ["b"] + ["c"] * 2
+    segs = [B.Segment(f"s{i}", Path(f"f{i}"), 0, 10, c) for i, c in enumerate(cats)]
+    picked = B.select_segments(segs, 4)
+    assert [s.id for s in picked] == ["s0", "s1", "s5", "s6"]  # a, a, b, c in input order
+    assert sorted({s.category for s in picked}) == ["a", "b", "c"]
+    assert B.select_segments(segs, 4) == picked
+    assert B.select_segments(segs, 0) == segs and B.select_segments(segs, 99) == segs
+
+
+# ------------------------------------------------------------------------ segment metrics
+@pytest.fixture(scope="module")
+def seg_rec():
+    return _recording("take0", 0).slice_frames(0, FRAMES)
+
+
+def test_ground_truth_reconstruction_has_zero_errors(seg_rec) -> None:
+    gt = B.ground_truth(seg_rec)
+    m, per_joint = B.segment_metrics(Oracle().reconstruct(seg_rec), gt, can_fall=True)
+    for k in ("MPJPE_mm", "PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2", "vGRF_N"):
+        assert m[k] == pytest.approx(0.0, abs=1e-6), k
+    assert m["success_rate"] == 100.0
+    # Foot sliding and penetration are properties of the motion itself: the ground truth's.
+    assert gt.contacts.any() and m["FS_mps"] == pytest.approx(
+        M.foot_sliding(gt.joint_pos, gt.contacts, 100.0)
+    )
+    assert m["FP_mm"] >= 0.0 and math.isfinite(m["FP_mm"])
+    assert per_joint["MPJPE_mm"].shape == (24,) and np.allclose(per_joint["MPJPE_mm"], 0.0)
+
+
+def test_hand_made_errors(seg_rec) -> None:
+    gt = B.ground_truth(seg_rec)
+    shifted = Oracle(shift=(0.1, 0.0, 0.0), grf_offset_n=10.0).reconstruct(seg_rec)
+    m, per_joint = B.segment_metrics(shifted, gt, can_fall=True)
+    assert m["MPJPE_mm"] == pytest.approx(100.0)
+    np.testing.assert_allclose(per_joint["MPJPE_mm"], 100.0)
+    for k in ("PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2"):
+        assert m[k] == pytest.approx(0.0, abs=1e-6), k  # a constant shift changes none of them
+    assert m["vGRF_N"] == pytest.approx(10.0)
+
+    # Every global rotation turned by 90 deg about z: MPJRE 90 deg, positions unchanged.
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    turned = Oracle().reconstruct(seg_rec)
+    turned.global_rot = turned.global_rot @ rz
+    m, _ = B.segment_metrics(turned, gt, can_fall=False)
+    assert m["MPJRE_deg"] == pytest.approx(90.0) and m["MPJPE_mm"] == pytest.approx(0.0)
+    assert math.isnan(m["success_rate"])  # a method that cannot fall has no success rate
+
+    m, _ = B.segment_metrics(Oracle(fall=True).reconstruct(seg_rec), gt, can_fall=True)
+    assert m["success_rate"] == 0.0
+    no_forces = Oracle().reconstruct(seg_rec)
+    no_forces.grf = None
+    assert math.isnan(B.segment_metrics(no_forces, gt, can_fall=True)[0]["vGRF_N"])
+
+
+def test_contacts_and_insole_force_fall_back_without_insoles(seg_rec) -> None:
+    gt = B.ground_truth(seg_rec)
+    np.testing.assert_array_equal(
+        gt.contacts, np.stack([seg_rec.insole[f].contacts.any(axis=1) for f in B._FEET], 1)
+    )
+    bare = dataclasses.replace(seg_rec, insole={}, insole_combined=None)
+    gt_bare = B.ground_truth(bare)
+    np.testing.assert_array_equal(
+        gt_bare.contacts, M.contacts_from_motion(gt.joint_pos[:, [10, 11]], 100.0)
+    )
+    assert gt_bare.insole_fz_n is None
+    force = B.insole_vertical_force_n(seg_rec, 70.0)
+    np.testing.assert_allclose(force[:, 0], seg_rec.insole["L_Foot"].force[:, 0] * 70.0 * 9.81,
+                               rtol=1e-3)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------- runner
+def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_path) -> None:
+    calls: list[str] = []
+    oracle = Oracle(fail_on={"take1"}, calls=calls)
+    runs = [_run("oracle", lambda o: oracle)]
+    out = tmp_path / "bench"
+    rows = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    assert len(calls) == len(segments) == len(rows)
+    status = {r["segment"]: r["status"] for r in rows}
+    assert status.pop("take1_f000000") == "error" and set(status.values()) == {"ok"}
+    bad = json.loads((out / "segments" / "oracle" / "take1_f000000.json").read_text())
+    assert "solver diverged on take1" in bad["error"] and "RuntimeError" in bad["traceback"]
+    assert (out / "recons" / "oracle" / f"{segments[0].id}.npz").is_file()  # the sample's
+
+    summary = B.write_outputs(out, rows, runs, segments, "test", plots=False)
+    assert summary["oracle"]["failed"] == 1 and summary["oracle"]["segments"] == 4
+    assert summary["oracle"]["MPJPE_mm"] == pytest.approx(0.0, abs=1e-6)
+    results = json.loads((out / "results.json").read_text())
+    assert set(results["oracle"]) == {*B.RESULT_KEYS, "failed"}
+    assert results["oracle"]["success_rate"] == 100.0 and results["oracle"]["segments"] == 4
+    table = (out / "table.md").read_text()
+    assert "| oracle | 0.00 |" in table and "| 4 | 1 |" in table
+    assert "solver diverged on take1" in table  # listed under the failed segments
+    assert "take1_f000000" in (out / "segments.csv").read_text()
+
+    # Resume: nothing runs again, the failure is kept (until retry_failed).
+    calls.clear()
+    again = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    assert calls == [] and [r["status"] for r in again] == [r["status"] for r in rows]
+    (out / "segments" / "oracle" / "take2_f000100.json").unlink()
+    B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    assert calls == ["take2"]
+    calls.clear()
+    oracle.fail_on.clear()
+    fixed = B.run_bench(runs, segments, out, built={"oracle": oracle}, retry_failed=True,
+                        log=lambda s: None)  # fmt: skip
+    assert calls == ["take1"] and {r["status"] for r in fixed} == {"ok"}
+    assert B.load_rows(out, runs, segments)[2]["status"] == "ok"
+
+
+def test_resume_refuses_other_settings(segments, tmp_path) -> None:
+    out = tmp_path / "bench"
+    B.run_bench([_run("oracle", _oracle_factory)], segments[:1], out, log=lambda s: None)
+    other = B.MethodRun("oracle", "oracle", _oracle_factory,
+                        MethodOptions(kin_checkpoint=tmp_path / "other.pt"))  # fmt: skip
+    with pytest.raises(B.BenchError, match="other settings"):
+        B.run_bench([other], segments[:1], out, log=lambda s: None)
+    moved = dataclasses.replace(segments[0], start=50, stop=150)
+    with pytest.raises(B.BenchError, match="other data"):
+        B.run_bench([_run("oracle", _oracle_factory)], [moved], out, log=lambda s: None)
+
+
+def test_methods_without_falls_or_forces_report_nan_and_table_says_na(segments, tmp_path) -> None:
+    def factory(options):
+        return Oracle(can_fall=False)
+
+    runs = [_run("stiff", factory), _run("oracle", _oracle_factory)]
+    out = tmp_path / "b"
+    rows = B.run_bench(runs, segments[:2], out, log=lambda s: None)
+    summary = B.write_outputs(out, rows, runs, segments[:2], plots=True)
+    assert math.isnan(summary["stiff"]["success_rate"])
+    assert json.loads((out / "results.json").read_text())["stiff"]["success_rate"] is None
+    stiff_row = next(line for line in (out / "table.md").read_text().splitlines()
+                     if line.startswith("| stiff |"))  # fmt: skip
+    assert "n/a" in stiff_row
+    for png in ("per_joint.png", "trajectory.png", "grf.png"):
+        assert (out / png).read_bytes()[:4] == b"\x89PNG"
+
+
+CRASHY = """
+import os
+from grip.eval.bench import ground_truth
+from grip.core.reconstruction import Reconstruction
+
+
+class Crashy:
+    name = "crashy"
+    supports_sensors = False
+    can_fall = False
+
+    def reconstruct(self, rec):
+        if rec.name == "take1":
+            os._exit(3)  # a segfault, as far as the pool can tell
+        gt = ground_truth(rec)
+        return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
+                              joint_pos=gt.joint_pos, global_rot=gt.global_rot)
+
+
+def factory(options):
+    return Crashy()
+"""
+
+
+def test_a_worker_that_dies_fails_only_its_segment(segments, tmp_path, monkeypatch) -> None:
+    """Two spawned workers; the one running take1 dies (twice: in the pool, then alone)."""
+    mod_dir = tmp_path / "mods"
+    mod_dir.mkdir()
+    (mod_dir / "bench_crashy_method.py").write_text(textwrap.dedent(CRASHY))
+    monkeypatch.syspath_prepend(str(mod_dir))
+    monkeypatch.setattr(B, "_start_method", lambda: "spawn")  # children inherit sys.path
+    import bench_crashy_method
+
+    run = B.MethodRun("crashy", "crashy", bench_crashy_method.factory, MethodOptions())
+    segs = segments[:3]  # take0 x 2, take1
+    rows = B.run_bench([run], segs, tmp_path / "b", workers=2, log=lambda s: None)
+    by_seg = {r["segment"]: r for r in rows}
+    assert by_seg["take1_f000000"]["status"] == "error"
+    assert "worker process died" in by_seg["take1_f000000"]["error"]
+    assert by_seg["take0_f000000"]["status"] == by_seg["take0_f000100"]["status"] == "ok"
+    assert not list((tmp_path / "b").rglob("*.running"))
+
+
+# -------------------------------------------------------------------------------- registry
+def test_registry_errors_list_the_known_methods() -> None:
+    with pytest.raises(UnknownMethodError, match=r"known methods: .*kinematics"):
+        parse_method_names("kinematics,nope")
+    with pytest.raises(UnknownMethodError, match=r"known methods: .*kinematics"):
+        make_method("nope", MethodOptions())
+    with pytest.raises(ValueError, match="more than once"):
+        parse_method_names("kinematics,kinematics")
+    assert parse_method_names(" kinematics ") == ["kinematics"]
+    with pytest.raises(ValueError, match="imu4_press"):
+        sensor_set("imu9_press")
+
+
+def test_prepare_runs_skips_methods_without_sensor_support(segments, tmp_path) -> None:
+    def sensing(options):
+        o = Oracle()
+        o.supports_sensors = True
+        o.sensors = options.sensors
+        return o
+
+    registry = {"oracle": _oracle_factory, "sensing": sensing}
+    messages: list[str] = []
+    runs, built = B.prepare_runs(["oracle", "sensing"], MethodOptions(),
+                                 ["imu2_nopress", "imu4_press"], registry,
+                                 log=messages.append)  # fmt: skip
+    assert [r.label for r in runs] == ["sensing@imu2_nopress", "sensing@imu4_press"]
+    assert built["sensing@imu4_press"].sensors == "imu4_press"
+    assert messages == ["oracle: does not support --sensors; skipped"]
+    out = tmp_path / "sweep"
+    rows = B.run_bench(runs, segments[:1], out, built=built, log=lambda s: None)
+    B.write_outputs(out, rows, runs, segments[:1], plots=False)
+    table = (out / "table.md").read_text()
+    assert "GRIP Table 3" in table
+    assert "| sensing | 2 | no | 0.00 |" in table and "| sensing | 4 | yes | 0.00 |" in table
+    with pytest.raises(B.BenchError, match="no method to run"):
+        B.prepare_runs(["oracle"], MethodOptions(), ["imu4_press"], registry, log=print)
+
+
+# ------------------------------------------------------------------------ kinematics only
+def test_kinematics_method_starts_at_the_true_root(seg_rec) -> None:
+    method = kinematics_method(MethodOptions())
+    assert isinstance(method, KinematicsOnly) and not method.can_fall
+    recon = method.reconstruct(seg_rec)
+    assert recon.n_frames == FRAMES and recon.grf is None and recon.ms_per_frame > 0
+    gt = B.ground_truth(seg_rec)
+    np.testing.assert_allclose(recon.joint_pos[0, 0], gt.joint_pos[0, 0], atol=1e-6)
+    m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
+    assert all(math.isfinite(m[k]) for k in ("MPJPE_mm", "PEL_MPJPE_mm", "MPJRE_deg", "FS_mps"))
+    assert math.isnan(m["vGRF_N"]) and math.isnan(m["success_rate"])
+
+
+def test_kinematics_sensor_checkpoints_come_from_the_sweep_folder(tmp_path) -> None:
+    shipped = REPO_ROOT / SHIPPED_KIN  # trained on feet + wrists + insoles = imu4_press
+    for name in ("imu4_press", "imu2_press"):
+        (tmp_path / name).mkdir()
+        shutil.copy(shipped, tmp_path / name / "best.pt")
+    ok = kinematics_method(MethodOptions(sensors="imu4_press", sweep_dir=tmp_path))
+    assert ok.checkpoint == tmp_path / "imu4_press" / "best.pt"
+    with pytest.raises(ValueError, match="not the imu2_press configuration"):
+        kinematics_method(MethodOptions(sensors="imu2_press", sweep_dir=tmp_path))
+    with pytest.raises(ValueError, match=r"no best\.pt or last\.pt"):
+        kinematics_method(MethodOptions(sensors="imu6_press", sweep_dir=tmp_path))
+    with pytest.raises(ValueError, match="--sweep DIR"):
+        kinematics_method(MethodOptions(sensors="imu4_press"))
+    with pytest.raises(ValueError, match="no such KinematicsNet checkpoint"):
+        kinematics_method(MethodOptions(kin_checkpoint=tmp_path / "none.pt"))
+
+
+# ------------------------------------------------------------------------------------- CLI
+def test_cli_bench_kinematics_writes_results_and_resumes(dataset, tmp_path, capsys) -> None:
+    args = ["bench", "--data", str(dataset), "--methods", "kinematics", "--segment-frames",
+            str(FRAMES)]  # fmt: skip
+    out1 = tmp_path / "one"
+    assert main([*args, "--out", str(out1), "--workers", "1", "--segments", "3"]) == 0
+    res = json.loads((out1 / "results.json").read_text())
+    assert set(res["kinematics"]) == {*B.RESULT_KEYS, "failed"}
+    assert res["kinematics"]["segments"] == 3 and res["kinematics"]["failed"] == 0
+    assert res["kinematics"]["vGRF_N"] is None and res["kinematics"]["success_rate"] is None
+    assert res["kinematics"]["MPJPE_mm"] > 0
+    seg_files = sorted(p.name for p in (out1 / "segments" / "kinematics").glob("*_f*.json"))
+    assert "take1_f000000.json" in seg_files  # the run category is represented
+    for name in ("results.csv", "segments.csv", "table.md", "per_joint.png", "trajectory.png",
+                 "grf.png"):  # fmt: skip
+        assert (out1 / name).is_file(), name
+    assert "| kinematics |" in capsys.readouterr().out
+
+    assert main([*args, "--out", str(out1), "--workers", "1", "--segments", "3"]) == 0
+    captured = capsys.readouterr()
+    assert "3 finished segment result(s) kept" in captured.out + captured.err
+
+
+@pytest.mark.slow
+def test_cli_bench_workers_give_the_in_process_numbers(dataset, tmp_path) -> None:
+    """Two forkserver workers (each imports torch: ~10 s on a busy machine, hence slow)."""
+    args = ["bench", "--data", str(dataset), "--methods", "kinematics", "--segment-frames",
+            str(FRAMES), "--segments", "3"]  # fmt: skip
+    res = {}
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        assert main([*args, "--out", str(out), "--workers", str(workers)]) == 0
+        res[workers] = json.loads((out / "results.json").read_text())["kinematics"]
+    assert res[2]["segments"] == 3 and res[2]["failed"] == 0
+    for k in ("MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "FS_mps", "FP_mm"):
+        assert res[2][k] == pytest.approx(res[1][k], rel=1e-5), k
+
+
+def test_cli_bench_errors_are_clean(dataset, tmp_path, capsys) -> None:
+    base = ["bench", "--data", str(dataset), "--out", str(tmp_path / "o"), "--workers", "1"]
+    assert main([*base, "--methods", "kinematics,nope"]) == 2
+    err = capsys.readouterr().err
+    assert "nope" in err and "kinematics" in err and "Traceback" not in err
+    assert main([*base, "--sensors", "imu4_press"]) == 2
+    assert "--sweep" in capsys.readouterr().err
+    assert main([*base, "--data", str(tmp_path / "nowhere")]) == 2
+    assert "split.json" in capsys.readouterr().err
+    assert main([*base, "--kin", str(tmp_path / "none.pt"), "--segment-frames", "100"]) == 2
+    assert "none.pt" in capsys.readouterr().err
