@@ -174,12 +174,16 @@ def foot_penetration_mm(rot: np.ndarray, pos: np.ndarray, body: BodyParams) -> f
 def vgrf_error_n(pred_fz_n: np.ndarray | None, insole_fz_n: np.ndarray | None) -> float:
     """Vertical GRF error, N: :func:`grip.core.metrics.vgrf_error` of ``(T, 2)`` forces.
 
-    NaN when the method has no forces, the recording no insoles, or the prediction has
-    non-finite values.
+    Frames whose predicted force is not finite are left out (GRIP's fall recovery replaces
+    the frames of a fall by the kinematic estimate, which has no forces). NaN when the method
+    has no forces, the recording no insoles, or no frame has a finite prediction.
     """
-    if pred_fz_n is None or insole_fz_n is None or not np.isfinite(pred_fz_n).all():
+    if pred_fz_n is None or insole_fz_n is None:
         return float("nan")
-    return float(M.vgrf_error(pred_fz_n, insole_fz_n))
+    ok = np.isfinite(pred_fz_n).all(axis=1)
+    if not ok.any():
+        return float("nan")
+    return float(M.vgrf_error(pred_fz_n[ok], np.asarray(insole_fz_n)[ok]))
 
 
 # ------------------------------------------------------------------ one segment's metrics

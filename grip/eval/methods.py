@@ -23,7 +23,9 @@ from grip.core.reconstruction import Reconstruction
 
 __all__ = [
     "METHODS",
+    "Grip",
     "KinematicsOnly",
+    "KinematicsPip",
     "Method",
     "MethodFactory",
     "MethodOptions",
@@ -66,11 +68,13 @@ class MethodOptions:
         sensors: Sensor configuration of a sweep (``"imu4_press"``, see
             :mod:`grip.kinematics.sweep`), ``None`` for the method's default sensors.
         sweep_dir: Folder of ``grip train-kin --sweep`` holding ``<sensors>/best.pt``.
+        policy_checkpoint: GRIP policy export; ``None``: the shipped one.
     """
 
     kin_checkpoint: Path | None = None
     sensors: str | None = None
     sweep_dir: Path | None = None
+    policy_checkpoint: Path | None = None
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""
@@ -191,9 +195,94 @@ def kinematics_method(options: MethodOptions) -> KinematicsOnly:
     return KinematicsOnly(est, ck)
 
 
+# ------------------------------------------------------------------------------- GRIP
+class Grip:
+    """GRIP: KinematicsNet, the policy in MuJoCo, fall recovery (:mod:`grip.eval.reconstruct`).
+
+    Starts from the segment's first-frame ground truth; the success rate counts the segments in
+    which the fall detector never fired (each fall is recovered, the segment still counts as a
+    failure, as in GRIP).
+    """
+
+    name = "grip"
+    supports_sensors = False
+    can_fall = True
+
+    def __init__(self, reconstructor) -> None:
+        self.reconstructor = reconstructor
+
+    def reconstruct(self, rec) -> Reconstruction:
+        return self.reconstructor.reconstruct([rec])[0]
+
+
+def grip_method(options: MethodOptions) -> Grip:
+    """Factory of :class:`Grip` (policy: ``options.policy_checkpoint`` or the shipped one)."""
+    from grip.cli.paths import REPO_ROOT
+    from grip.cli.policy import SHIPPED_POLICY
+    from grip.eval.reconstruct import GripReconstructor
+
+    policy = Path(options.policy_checkpoint or REPO_ROOT / SHIPPED_POLICY)
+    kin = Path(options.kin_checkpoint or _shipped_kin_checkpoint())
+    for what, p in (("policy", policy), ("KinematicsNet", kin)):
+        if not p.is_file():
+            raise ValueError(f"{p}: no such {what} checkpoint")
+    return Grip(GripReconstructor.from_files(policy, kin))
+
+
+# ------------------------------------------------------------------ PIP physics on KinematicsNet
+class KinematicsPip:
+    """PIP's physics optimiser (:mod:`grip.baselines.pip_physics`) on KinematicsNet's estimate.
+
+    The optimiser's inputs: local rotations from the FA estimate, joint velocities from the
+    estimated joints on the integrated root (backward differences, PIP's definition), foot
+    contact probabilities from the insoles (1 where the fore or rear cells report contact: the
+    "insole contact" variant of BASELINES_AND_METRICS 2.4). Separates what physics adds from
+    what PIP's own networks add (method ``pip``).
+    """
+
+    name = "kin+pip"
+    supports_sensors = False
+    can_fall = False
+
+    def __init__(self, estimator, cfg=None) -> None:
+        self.estimator = estimator
+        self.cfg = cfg
+
+    def reconstruct(self, rec) -> Reconstruction:
+        from grip.baselines.pip_physics import PipPhysics, backward_velocity
+        from grip.core.metrics import global_to_local_rot
+        from grip.kinematics.features import recording_body
+        from prism_tools.schema import FEET
+
+        t0 = time.perf_counter()
+        est = self.estimator.predict([rec])[0]
+        pos = est.joint_pos - est.joint_pos[:, :1] + est.root_pos[:, None]
+        vel = backward_velocity(pos, float(rec.fps))
+        import numpy as np
+
+        if all(f in rec.insole for f in FEET):
+            prob = np.stack([rec.insole[f].contacts.any(axis=1) for f in FEET], axis=1)
+            prob = prob.astype(float)
+        else:
+            raise ValueError(f"{rec.name}: kin+pip needs both insoles for the foot contacts")
+        pip = PipPhysics(recording_body(rec), self.cfg)
+        out = pip.reconstruct(global_to_local_rot(est.global_rot), vel, prob, est.root_pos[0],
+                              name=rec.name)  # fmt: skip
+        out.method = self.name
+        out.ms_per_frame = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
+        return out
+
+
+def kinematics_pip_method(options: MethodOptions) -> KinematicsPip:
+    """Factory of :class:`KinematicsPip` (KinematicsNet checkpoint as for ``kinematics``)."""
+    return KinematicsPip(kinematics_method(dataclasses.replace(options, sensors=None)).estimator)
+
+
 # ------------------------------------------------------------------------------- registry
 METHODS: dict[str, MethodFactory] = {
     "kinematics": kinematics_method,
+    "kin+pip": kinematics_pip_method,
+    "grip": grip_method,
 }
 """Method name -> factory. The baselines (``pip``, ``transpose``) and ``grip`` register here."""
 

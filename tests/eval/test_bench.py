@@ -419,3 +419,21 @@ def test_cli_bench_errors_are_clean(dataset, tmp_path, capsys) -> None:
     assert "split.json" in capsys.readouterr().err
     assert main([*base, "--kin", str(tmp_path / "none.pt"), "--segment-frames", "100"]) == 2
     assert "none.pt" in capsys.readouterr().err
+
+
+def test_pip_physics_on_kinematicsnet_gives_forces_and_less_foot_sliding(seg_rec) -> None:
+    method = make_method("kin+pip", MethodOptions())
+    recon = method.reconstruct(seg_rec)
+    assert recon.method == "kin+pip" and recon.n_frames == FRAMES and not method.can_fall
+    gt = B.ground_truth(seg_rec)
+    m, _ = B.segment_metrics(recon, gt, can_fall=False)
+    assert math.isfinite(m["vGRF_N"]) and recon.residual.shape == (FRAMES, 6)
+    kin, _ = B.segment_metrics(kinematics_method(MethodOptions()).reconstruct(seg_rec), gt, False)
+    assert m["FS_mps"] < kin["FS_mps"]
+
+
+def test_vgrf_leaves_out_frames_without_forces() -> None:
+    pred = np.array([[100.0, 200.0], [np.nan, np.nan], [110.0, 190.0]])
+    ins = np.array([[90.0, 200.0], [500.0, 500.0], [110.0, 200.0]])
+    assert B.vgrf_error_n(pred, ins) == pytest.approx(5.0)
+    assert math.isnan(B.vgrf_error_n(np.full((2, 2), np.nan), ins[:2]))
