@@ -575,12 +575,17 @@ def vgrf_error(pred_force_n: np.ndarray, gt_force_n: np.ndarray) -> float:
         gt_force_n: ``(T, 2)`` insole vertical force per foot, N.
 
     Returns:
-        The mean absolute error in N.
+        The mean absolute error in N over the frames whose prediction is finite (a method may
+        have no forces on some frames, e.g. GRIP's fall recovery replaces the frames of a fall
+        by the kinematic estimate); NaN if no frame has one.
     """
     p, g = _as_float(pred_force_n), _as_float(gt_force_n)
     if p.shape != g.shape or p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f"vgrf_error: expected two (T, 2) arrays, got {p.shape} and {g.shape}")
-    return float(np.abs(p - g).mean())
+    ok = np.isfinite(p).all(axis=1)
+    if not ok.any():
+        return float("nan")
+    return float(np.abs(p[ok] - g[ok]).mean())
 
 
 # ------------------------------------------------------------------------------ success

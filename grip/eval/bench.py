@@ -180,10 +180,7 @@ def vgrf_error_n(pred_fz_n: np.ndarray | None, insole_fz_n: np.ndarray | None) -
     """
     if pred_fz_n is None or insole_fz_n is None:
         return float("nan")
-    ok = np.isfinite(pred_fz_n).all(axis=1)
-    if not ok.any():
-        return float("nan")
-    return float(M.vgrf_error(pred_fz_n[ok], np.asarray(insole_fz_n)[ok]))
+    return M.vgrf_error(pred_fz_n, insole_fz_n)
 
 
 # ------------------------------------------------------------------ one segment's metrics

@@ -164,6 +164,10 @@ def test_vgrf_error_and_success_rate():
     pred = np.array([[100.0, 200.0], [300.0, 0.0]])
     gt = np.array([[110.0, 190.0], [300.0, 40.0]])
     assert M.vgrf_error(pred, gt) == pytest.approx(15.0)
+    # frames without a predicted force (a recovered fall) are left out
+    pred_gap = np.vstack([pred, [[np.nan, np.nan]]])
+    assert M.vgrf_error(pred_gap, np.vstack([gt, [[500.0, 500.0]]])) == pytest.approx(15.0)
+    assert np.isnan(M.vgrf_error(np.full((2, 2), np.nan), gt))
     assert M.success_rate([False, False, True, False]) == pytest.approx(75.0)
     assert M.success_rate(np.zeros(508, bool)) == 100.0
     assert M.success_rate([True] * 28 + [False] * 480) == pytest.approx(94.488, abs=1e-3)
