@@ -25,6 +25,7 @@ FORBIDDEN = {
     "grip.sim": ("torch", "gymnasium", "stable_baselines3", "envs", "policies"),
     "grip.baselines": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "grip.baselines.pip_physics": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
+    "grip.baselines.transpose_translation": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs.tracking_env": ("torch", "stable_baselines3", "policies", "grip.kinematics"),
     "envs.amp": ("torch", "mujoco", "stable_baselines3", "policies", "grip.kinematics"),

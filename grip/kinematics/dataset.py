@@ -28,6 +28,7 @@ class SequenceArrays:
     y: dict[str, np.ndarray]
     root_pos: np.ndarray
     offsets: np.ndarray  # (24, 3) rest offsets of the subject's body model, m
+    fps: float = 100.0  # frame rate of the recording, Hz
 
 
 def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
@@ -47,6 +48,7 @@ def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
         y={k: v.astype(np.float32) for k, v in y.items()},
         root_pos=t.root_pos.astype(np.float32),
         offsets=build_body(recording_body(rec)).offsets.astype(np.float32),
+        fps=float(rec.fps),
     )
 
 
@@ -114,11 +116,14 @@ def sample_windows(
     their last frame; a window never crosses sequences), weighted by sequence length.
 
     Returns:
-        ``x (n, length, F)`` and ``{stage: (n, length, dim)}`` plus ``"offsets": (n, 24, 3)``.
+        ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
+        sequences (``TARGET_KEYS`` plus any the caller added to ``SequenceArrays.y``), plus
+        ``"offsets": (n, 24, 3)``.
     """
     lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
     pick = rng.choice(len(seqs), size=n, p=lens / lens.sum())
-    xs, offs, ys = [], [], {k: [] for k in TARGET_KEYS}
+    keys = tuple(seqs[0].y)
+    xs, offs, ys = [], [], {k: [] for k in keys}
     for i in pick:
         s = seqs[i]
         t = len(s.x)
@@ -126,7 +131,7 @@ def sample_windows(
         idx = np.minimum(np.arange(start, start + length), t - 1)
         xs.append(s.x[idx])
         offs.append(s.offsets)
-        for k in TARGET_KEYS:
+        for k in keys:
             ys[k].append(s.y[k][idx])
     out = {k: np.stack(v) for k, v in ys.items()}
     out["offsets"] = np.stack(offs)
