@@ -8,6 +8,16 @@ import time
 from pathlib import Path
 
 
+def shipped_methods() -> list[str]:
+    """Registered methods whose default models exist in this checkout."""
+    from grip.cli.paths import REPO_ROOT
+    from grip.cli.policy import SHIPPED_POLICY
+    from grip.eval.methods import METHODS, SHIPPED_BASELINES
+
+    files = {**SHIPPED_BASELINES, "grip": SHIPPED_POLICY}
+    return [n for n in METHODS if n not in files or (REPO_ROOT / files[n]).is_file()]
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
@@ -31,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="output folder (created or resumed)")
     p.add_argument("--methods", default=None, metavar="NAME,NAME,...",
                    help="methods to run, e.g. pip,transpose,kinematics,grip (default: every "
-                   "registered method; an unknown name lists them)")  # fmt: skip
+                   "registered method whose models ship; an unknown name lists them)")  # fmt: skip
     p.add_argument("--split", default="test", choices=("train", "test", "all"))
     p.add_argument("--category", action="append", default=[], metavar="GLOB",
                    help="only these motion categories (glob, repeatable)")  # fmt: skip
@@ -45,6 +55,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
     p.add_argument("--policy", type=Path, default=None,
                    help="GRIP policy export for method grip (default: the shipped one)")
+    p.add_argument("--transpose", type=Path, default=None,
+                   help="TransPose nets for method transpose (default: the shipped ones)")
+    p.add_argument("--pip", type=Path, default=None,
+                   help="PIP nets for method pip (default: the shipped ones)")
     p.add_argument("--sensors", default=None, metavar="NAME,NAME,...",
                    help="sensor configurations of a 'grip train-kin --sweep' folder "
                    "(imu<N>_press|nopress), GRIP Table 3; methods that cannot change sensors "
@@ -72,7 +86,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         select_segments,
         write_outputs,
     )
-    from grip.eval.methods import METHODS, MethodOptions, parse_method_names, sensor_set
+    from grip.eval.methods import MethodOptions, parse_method_names, sensor_set
 
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
@@ -80,7 +94,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise CliError(f"--segment-frames must be >= 3, got {args.segment_frames}")
     sensors: list[str] = []
     try:
-        names = parse_method_names(args.methods or ",".join(METHODS))
+        names = parse_method_names(args.methods or ",".join(shipped_methods()))
         if args.sensors is not None:
             sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
             if not sensors:
@@ -96,7 +110,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
                              args.category)  # fmt: skip
         segs = select_segments(segs, args.segments)
         options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
-                                policy_checkpoint=args.policy)
+                                policy_checkpoint=args.policy,
+                                transpose_checkpoint=args.transpose, pip_checkpoint=args.pip)
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         raise CliError(str(e)) from e

@@ -29,6 +29,8 @@ __all__ = [
     "Method",
     "MethodFactory",
     "MethodOptions",
+    "Pip",
+    "TransPose",
     "UnknownMethodError",
     "kinematics_method",
     "make_method",
@@ -69,12 +71,16 @@ class MethodOptions:
             :mod:`grip.kinematics.sweep`), ``None`` for the method's default sensors.
         sweep_dir: Folder of ``grip train-kin --sweep`` holding ``<sensors>/best.pt``.
         policy_checkpoint: GRIP policy export; ``None``: the shipped one.
+        transpose_checkpoint, pip_checkpoint: Baseline networks (``grip train-baseline``);
+            ``None``: the shipped ones (:data:`SHIPPED_BASELINES`).
     """
 
     kin_checkpoint: Path | None = None
     sensors: str | None = None
     sweep_dir: Path | None = None
     policy_checkpoint: Path | None = None
+    transpose_checkpoint: Path | None = None
+    pip_checkpoint: Path | None = None
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""
@@ -278,10 +284,96 @@ def kinematics_pip_method(options: MethodOptions) -> KinematicsPip:
     return KinematicsPip(kinematics_method(dataclasses.replace(options, sensors=None)).estimator)
 
 
+# ------------------------------------------------------------------- PIP and TransPose
+SHIPPED_BASELINES = {"transpose": "grip/assets/transpose4.pt", "pip": "grip/assets/pip4.pt"}
+"""Where the trained baseline networks ship (``grip baseline-export``)."""
+
+
+def _baseline_estimator(name: str, path: Path | None):
+    from grip.cli.paths import REPO_ROOT
+    from grip.kinematics.baselines import BaselineEstimator
+
+    p = Path(path or REPO_ROOT / SHIPPED_BASELINES[name])
+    if not p.is_file():
+        raise ValueError(f"{p}: no {name} checkpoint; train one with 'grip train-baseline {name} "
+                         f"--data DIR --out RUN' and pass RUN/best.pt")  # fmt: skip
+    return BaselineEstimator.from_checkpoint(p)
+
+
+class TransPose:
+    """TransPose-4 (BASELINES_AND_METRICS 2.2): the pose nets, then the root from the supporting
+    foot fused with Trans-B2's velocity (:func:`grip.baselines.transpose_translation.
+    root_translation`), from the true first-frame root. Offline (bidirectional) mode."""
+
+    name = "transpose"
+    supports_sensors = False
+    can_fall = False
+
+    def __init__(self, estimator) -> None:
+        self.estimator = estimator
+
+    def reconstruct(self, rec) -> Reconstruction:
+        from grip.baselines.transpose_translation import joint_floor_height, root_translation
+        from grip.core.body import build_body
+        from grip.kinematics.features import recording_body, targets
+
+        t0 = time.perf_counter()
+        est = self.estimator.predict([rec])[0]
+        body = build_body(recording_body(rec))
+        root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+        root = root_translation(est.global_rot, est.contact_prob, est.root_vel, body.offsets,
+                                root0, joint_floor_height(body))  # fmt: skip
+        pos = est.joint_pos - est.joint_pos[:, :1] + root[:, None]
+        return Reconstruction(
+            name=rec.name, method=self.name, fps=float(rec.fps), joint_pos=pos,
+            global_rot=est.global_rot, ms_per_frame=1e3 * (time.perf_counter() - t0) / rec.n_frames,
+        )  # fmt: skip
+
+
+class Pip:
+    """PIP-4 (BASELINES_AND_METRICS 2.3 and 1): PIP's networks (learned RNN initialisation from
+    the first frame) feed its physics optimiser, contacts from its contact net."""
+
+    name = "pip"
+    supports_sensors = False
+    can_fall = False
+
+    def __init__(self, estimator, cfg=None) -> None:
+        self.estimator = estimator
+        self.cfg = cfg
+
+    def reconstruct(self, rec) -> Reconstruction:
+        from grip.baselines.pip_physics import PipPhysics
+        from grip.core.metrics import global_to_local_rot
+        from grip.kinematics.features import recording_body, targets
+
+        t0 = time.perf_counter()
+        est = self.estimator.predict([rec])[0]
+        root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+        pip = PipPhysics(recording_body(rec), self.cfg)
+        out = pip.reconstruct(global_to_local_rot(est.global_rot), est.joint_vel,
+                              est.contact_prob, root0, name=rec.name)  # fmt: skip
+        out.method = self.name
+        out.ms_per_frame = 1e3 * (time.perf_counter() - t0) / rec.n_frames
+        return out
+
+
+def transpose_method(options: MethodOptions) -> TransPose:
+    """Factory of :class:`TransPose`."""
+    return TransPose(_baseline_estimator("transpose", options.transpose_checkpoint))
+
+
+def pip_method(options: MethodOptions) -> Pip:
+    """Factory of :class:`Pip`."""
+    return Pip(_baseline_estimator("pip", options.pip_checkpoint))
+
+
 # ------------------------------------------------------------------------------- registry
 METHODS: dict[str, MethodFactory] = {
     "kinematics": kinematics_method,
     "kin+pip": kinematics_pip_method,
+    "transpose": transpose_method,
+    "pip": pip_method,
     "grip": grip_method,
 }
 """Method name -> factory. The baselines (``pip``, ``transpose``) and ``grip`` register here."""

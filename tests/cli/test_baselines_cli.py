@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -71,6 +72,23 @@ def test_train_baseline_runs_resumes_and_exports(dataset: Path, tmp_path: Path, 
 
     est = BaselineEstimator.from_checkpoint(small)
     assert est.method == "pip" and not est.cfg.net.insoles
+    _check_bench_method("pip", small, dataset)
+
+
+def _check_bench_method(name: str, checkpoint: Path, dataset: Path) -> None:
+    """The exported nets run as a ``grip bench`` method from the true first frame."""
+    from grip.eval import bench as B
+    from grip.eval.methods import MethodOptions, make_method
+    from prism_tools.io import load_recording
+
+    rec = load_recording(sorted((dataset / "sequences").glob("*.npz"))[0]).slice_frames(0, 40)
+    method = make_method(name, MethodOptions(**{f"{name}_checkpoint": checkpoint}))
+    recon = method.reconstruct(rec)
+    gt = B.ground_truth(rec)
+    assert recon.method == name and recon.n_frames == 40 and not method.can_fall
+    assert abs(recon.joint_pos[0, 0] - gt.joint_pos[0, 0]).max() < 0.05
+    m, _ = B.segment_metrics(recon, gt, can_fall=False)
+    assert np.isfinite(m["MPJPE_mm"]) and (np.isfinite(m["vGRF_N"]) == (name == "pip"))
 
 
 def test_train_transpose_with_insoles(dataset: Path, tmp_path: Path, capsys) -> None:
@@ -80,6 +98,7 @@ def test_train_transpose_with_insoles(dataset: Path, tmp_path: Path, capsys) -> 
     assert "transpose + insoles: 58 inputs" in capsys.readouterr().out
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["method"] == "transpose" and cfg["config"]["net"]["insoles"] is True
+    _check_bench_method("transpose", run / "best.pt", dataset)
 
 
 def test_clear_errors(dataset: Path, tmp_path: Path, capsys) -> None:
