@@ -448,7 +448,8 @@ class GripTrackingEnv(gym.Env):
         m, d, ix = sim.model, sim.data, sim.index
         q = np.asarray(qpos76, dtype=np.float64).reshape(-1)
         v = np.zeros(75) if qvel75 is None else np.asarray(qvel75, dtype=np.float64).reshape(-1)
-        if q.shape != (76,) or v.shape != (75,) or not (np.isfinite(q).all() and np.isfinite(v).all()):
+        finite = np.isfinite(q).all() and np.isfinite(v).all()
+        if q.shape != (76,) or v.shape != (75,) or not finite:
             raise ValueError(f"teleport needs finite (76,) qpos and (75,) qvel, got {q.shape}, "
                              f"{v.shape}")  # fmt: skip
         q = q.copy()

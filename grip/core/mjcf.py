@@ -15,7 +15,8 @@ Model layout
   that order, e.g. ``Rx(a) @ Ry(b) @ Rz(c)``: :func:`grip.core.rotations.euler_to_matrix`.
 * ``qpos`` is ``[root_pos_world (3), root_quat_wxyz (4), 69 hinge angles]`` with the hinges in
   MuJoCo's depth-first body order, which is *not* SMPL order. Actuators are listed in SMPL order
-  (joint 1..23, then its hinges in composition order), which is :func:`hinge_names`; map with the index arrays of
+  (joint 1..23, then its hinges in composition order), which is :func:`hinge_names`; map with
+  the index arrays of
   :class:`grip.sim.model.HumanoidIndex`, never by position.
 * The standing pose (rest T-pose upright on the floor, facing world +y) is ``qpos0`` of the model
   and the keyframe ``"stand"``: root quaternion = :data:`grip.core.body.CANONICAL_TO_WORLD`,

@@ -20,7 +20,8 @@ Only primary arrays are stored (float32, compressed); derived arrays are compute
 numpy, so a file of a few seconds of motion stays small enough to bundle.
 
 Array conventions: world frame z up, metres, radians, w-first quaternions; hinge angles in SMPL
-order (joint 1..23 x its hinges in composition order), i.e. :func:`grip.core.mjcf.hinge_names` order, *not*
+order (joint 1..23 x its hinges in composition order), i.e. :func:`grip.core.mjcf.hinge_names`
+order, *not*
 MuJoCo's ``qpos`` order (the env maps them through its index arrays).
 """
 
@@ -94,7 +95,8 @@ def local_from_hinges(hinges: np.ndarray) -> np.ndarray:
 def pose_vector(local_rot: np.ndarray, root_pos: np.ndarray) -> np.ndarray:
     """``(..., 24, 3, 3)`` local rotations (row 0 = root world rotation) and ``(..., 3)`` root
     position -> ``(..., 76)`` ``[root_pos, root_quat_wxyz, 69 hinge angles (SMPL order)]``.
-    Hinge angles are the Euler angles of the MuJoCo humanoid's hinges (:func:`hinges_from_local`)."""
+    Hinge angles are the Euler angles of the MuJoCo humanoid's hinges
+    (:func:`hinges_from_local`)."""
     local_rot = np.asarray(local_rot, dtype=np.float64)
     lead = local_rot.shape[:-3]
     out = np.empty((*lead, 7 + N_HINGES))
@@ -315,7 +317,8 @@ class ReferenceSet:
             raise ReferenceError(f"{path}: not a grip reference file")
         if meta.get("version") != FORMAT_VERSION:
             raise ReferenceError(f"{path}: format version {meta.get('version')}, this code "
-                                 f"reads {FORMAT_VERSION}; rebuild it (grip data reference)")  # fmt: skip
+                                 f"reads {FORMAT_VERSION}; rebuild it "
+                                 "(grip data reference)")  # fmt: skip
         clips = []
         try:
             for i, cm in enumerate(meta["clips"]):

@@ -49,12 +49,12 @@ from grip.core.reconstruction import Reconstruction
 
 __all__ = [
     "FORMATS",
-    "export_reconstruction",
     "Y_UP_FROM_WORLD",
     "ExportError",
     "GroundTruth",
     "body_model",
     "check_ground_truth",
+    "export_reconstruction",
     "fk_mismatch_m",
     "ground_truth_from_recording",
     "posed_body",

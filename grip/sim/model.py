@@ -221,7 +221,7 @@ class FootContacts:
         for i in range(data.ncon):
             c = data.contact[i]
             s1, s2 = self._side[c.geom1], self._side[c.geom2]
-            if not (s1 >= 0 and self._ground[c.geom2] or s2 >= 0 and self._ground[c.geom1]):
+            if not ((s1 >= 0 and self._ground[c.geom2]) or (s2 >= 0 and self._ground[c.geom1])):
                 continue  # not a foot on the ground
             mujoco.mj_contactForce(m, data, i, self._f6)
             f = c.frame.reshape(3, 3).T @ self._f6[:3]  # world force on geom2

@@ -30,7 +30,8 @@ def test_round_trip_keeps_every_array(tmp_path) -> None:
     assert back.contacts.dtype == bool and back.cop is None and back.residual is None
     assert back.falls.tolist() == [[1, 3]] and back.fell
     assert back.ms_per_frame == 2.5 and back.notes == {"qp_failures": 0}
-    np.testing.assert_allclose(back.local_rot, np.broadcast_to(np.eye(3), (5, 24, 3, 3)), atol=1e-12)
+    eye = np.broadcast_to(np.eye(3), (5, 24, 3, 3))
+    np.testing.assert_allclose(back.local_rot, eye, atol=1e-12)
 
 
 def test_slice_shifts_fall_events() -> None:
@@ -58,5 +59,5 @@ def test_non_finite_motion_is_refused() -> None:
 def test_corrupt_file_is_named(tmp_path) -> None:
     p = tmp_path / "bad.npz"
     p.write_bytes(b"not a zip")
-    with pytest.raises(ReconstructionError, match="bad.npz"):
+    with pytest.raises(ReconstructionError, match=r"bad\.npz"):
         Reconstruction.load(p)
