@@ -48,29 +48,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: all cores)")
     p.set_defaults(func=cmd_train)
 
-    x = sub.add_parser(
-        "baseline-export",
-        help="write a small inference-only (fp16) copy of a baseline checkpoint",
-        description="Drop the optimiser state and store the weights as float16, for shipping "
-        "trained TransPose / PIP nets (a few MB).",
-        epilog="example: grip baseline-export runs/tp4/best.pt --out grip/assets/transpose4.pt",
-    )
-    x.add_argument("checkpoint", type=Path, help="training checkpoint (RUN/best.pt)")
-    x.add_argument("--out", required=True, type=Path, help="output .pt")
-    x.add_argument("--fp32", action="store_true", help="keep float32 weights")
-    x.set_defaults(func=cmd_export)
+    from grip.cli.kinematics import add_export_parser
 
-
-def cmd_export(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
-    from grip.kinematics.baselines import export_baseline
-
-    try:
-        size = export_baseline(args.checkpoint, args.out, half=not args.fp32)
-    except (FileNotFoundError, ValueError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
-    return 0
+    add_export_parser(sub, "baseline-export", "TransPose / PIP baseline",
+                      "for shipping trained baseline nets (a few MB)",
+                      "grip baseline-export runs/tp4/best.pt --out grip/assets/transpose4.pt",
+                      "grip.kinematics.baselines:export_baseline")
 
 
 def cmd_train(args: argparse.Namespace) -> int:

@@ -162,11 +162,11 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
 
     gt = None
     if args.gt is not None:
-        from grip.export import ground_truth_from_recording
+        from grip.export import ground_truth
         from prism_tools.io import load_recording
 
         try:
-            gt = ground_truth_from_recording(load_recording(args.gt))
+            gt = ground_truth(load_recording(args.gt))
         except (OSError, ValueError, KeyError) as e:
             raise CliError(f"{args.gt}: cannot read the recording ({e})") from e
         for path, recon in recons:

@@ -57,25 +57,38 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.set_defaults(func=cmd_train)
     add_eval_parser(sub)
+    add_export_parser(sub, "kin-export", "KinematicsNet",
+                      "the form in which the default model ships "
+                      "(grip/assets/kinematics_default.pt)",
+                      "grip kin-export runs/kin/best.pt --out grip/assets/kinematics_default.pt",
+                      "grip.kinematics.train:export_for_inference")
+
+
+def add_export_parser(sub: argparse._SubParsersAction, name: str, what: str, shipped: str,
+                      example: str, exporter: str) -> None:
+    """A ``<name> CKPT --out FILE [--fp32]`` command writing a small inference copy of a
+    training checkpoint with ``exporter`` (``"module:function(src, dst, half) -> bytes"``)."""
     x = sub.add_parser(
-        "kin-export",
-        help="write a small inference-only (fp16) copy of a KinematicsNet checkpoint",
-        description="Drop the optimiser state and store the weights as float16: the form in "
-        "which the default model ships (grip/assets/kinematics_default.pt).",
-        epilog="example: grip kin-export runs/kin/best.pt --out grip/assets/kinematics_default.pt",
+        name,
+        help=f"write a small inference-only (fp16) copy of a {what} checkpoint",
+        description=f"Drop the optimiser state and store the weights as float16: {shipped}.",
+        epilog=f"example: {example}",
     )
     x.add_argument("checkpoint", type=Path, help="training checkpoint (RUN/best.pt)")
     x.add_argument("--out", required=True, type=Path, help="output .pt")
     x.add_argument("--fp32", action="store_true", help="keep float32 weights")
-    x.set_defaults(func=cmd_export)
+    x.set_defaults(func=cmd_export, exporter=exporter)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
-    from grip.kinematics.train import export_for_inference
+    import importlib
 
+    from grip.cli.main import CliError
+
+    module, func = args.exporter.split(":")
+    export = getattr(importlib.import_module(module), func)
     try:
-        size = export_for_inference(args.checkpoint, args.out, half=not args.fp32)
+        size = export(args.checkpoint, args.out, half=not args.fp32)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e)) from e
     print(f"wrote {args.out} ({size / 1e6:.1f} MB)")

@@ -65,10 +65,11 @@ import numpy as np
 from grip.core import metrics as M
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write_text
-from grip.core.body import GRAVITY, BodyParams, build_body
+from grip.core.body import BodyParams, build_body
 from grip.core.fk import sole_points
 from grip.core.reconstruction import Reconstruction
 from grip.eval.methods import METHODS, Method, MethodFactory, MethodOptions, make_method
+from grip.kinematics.features import GroundTruth, ground_truth
 
 __all__ = [
     "METRIC_KEYS",
@@ -83,8 +84,6 @@ __all__ = [
     "foot_penetration_mm",
     "foot_sliding_mps",
     "ground_truth",
-    "gt_foot_contacts",
-    "insole_vertical_force_n",
     "list_segments",
     "load_rows",
     "markdown_table",
@@ -119,45 +118,12 @@ class BenchError(ValueError):
 
 
 # ------------------------------------------------------------------ metric pieces (shared)
-def gt_foot_contacts(rec, gt_pos: np.ndarray, fps: float) -> np.ndarray:
-    """Ground-truth foot contacts for foot sliding.
-
-    Args:
-        rec: The recording (``Recording``) the ground truth comes from.
-        gt_pos: ``(T, 24, 3)`` ground-truth joint positions, world, m (``T`` may be shorter than
-            the recording: the insole streams are cut to it).
-        fps: Frame rate, Hz.
-
-    Returns:
-        ``(T, 2)`` bool (L, R): the insole's front or back contact where both insoles exist,
-        else :func:`grip.core.metrics.contacts_from_motion` of the true foot joints.
-    """
-    t = len(gt_pos)
-    if all(f in rec.insole for f in _FEET):
-        return np.stack([np.asarray(rec.insole[f].contacts[:t], dtype=bool).any(axis=1)
-                         for f in _FEET], axis=1)  # fmt: skip
-    return M.contacts_from_motion(np.asarray(gt_pos)[:, list(sk.FOOT_JOINTS)], fps)
-
-
-def insole_vertical_force_n(rec, mass_kg: float, n_frames: int | None = None) -> np.ndarray | None:
-    """``(T, 2)`` vertical force of the left and right insole, N, or ``None`` without insoles.
-
-    The insole force is stored in body weights; it is scaled by ``mass_kg * g``.
-    """
-    if not all(f in rec.insole for f in _FEET):
-        return None
-    t = rec.n_frames if n_frames is None else n_frames
-    bw = np.stack([np.asarray(rec.insole[f].force[:t, 0], dtype=np.float64) for f in _FEET],
-                  axis=1)  # fmt: skip
-    return bw * (mass_kg * GRAVITY)
-
-
 def foot_sliding_mps(pos: np.ndarray, contacts: np.ndarray, fps: float) -> float:
     """Foot sliding (m/s) of the predicted feet over ``contacts`` frames; NaN under 2 frames.
 
     Args:
         pos: ``(T, 24, 3)`` predicted joint positions, world, m.
-        contacts: ``(T, 2)`` bool ground-truth contacts (:func:`gt_foot_contacts`).
+        contacts: ``(T, 2)`` bool ground-truth contacts (``GroundTruth.foot_contacts``).
         fps: Frame rate, Hz.
     """
     if len(pos) < 2:
@@ -184,39 +150,6 @@ def vgrf_error_n(pred_fz_n: np.ndarray | None, insole_fz_n: np.ndarray | None) -
 
 
 # ------------------------------------------------------------------ one segment's metrics
-@dataclass(frozen=True)
-class GroundTruth:
-    """Ground truth of one segment.
-
-    Attributes:
-        joint_pos: ``(T, 24, 3)`` joint positions on the subject's body model, world, m.
-        global_rot: ``(T, 24, 3, 3)`` global joint rotations.
-        contacts: ``(T, 2)`` bool foot contacts (:func:`gt_foot_contacts`).
-        insole_fz_n: ``(T, 2)`` insole vertical force, N, or ``None``.
-        body: The subject's body parameters.
-        fps: Frame rate, Hz.
-    """
-
-    joint_pos: np.ndarray
-    global_rot: np.ndarray
-    contacts: np.ndarray
-    insole_fz_n: np.ndarray | None
-    body: BodyParams
-    fps: float
-
-
-def ground_truth(rec) -> GroundTruth:
-    """The ground truth of a recording: its ``smpl_params`` posed on the subject's body."""
-    from grip.kinematics.features import recording_body, targets
-
-    tg = targets(rec)
-    pos = tg.joint_pos + tg.root_pos[:, None]
-    body = recording_body(rec)
-    fps = float(rec.fps)
-    return GroundTruth(pos, tg.global_rot, gt_foot_contacts(rec, pos, fps),
-                       insole_vertical_force_n(rec, body.mass_kg), body, fps)  # fmt: skip
-
-
 def segment_metrics(
     recon: Reconstruction, gt: GroundTruth, can_fall: bool
 ) -> tuple[dict[str, float], dict[str, np.ndarray]]:
@@ -242,9 +175,9 @@ def segment_metrics(
         "PA_MPJPE_mm": float(M.pa_mpjpe(pos, gt.joint_pos)),
         "MPJRE_deg": float(M.mpjre(rot, gt.global_rot)),
         "Acc_mps2": float(M.acceleration_error(pos, gt.joint_pos, fps)) if len(pos) >= 3 else nan,
-        "FS_mps": foot_sliding_mps(pos, gt.contacts, fps),
+        "FS_mps": foot_sliding_mps(pos, gt.foot_contacts, fps),
         "FP_mm": foot_penetration_mm(rot, pos, gt.body),
-        "vGRF_N": vgrf_error_n(None if recon.grf is None else recon.grf[..., 2], gt.insole_fz_n),
+        "vGRF_N": vgrf_error_n(None if recon.grf is None else recon.grf[..., 2], gt.insole_force_n),
         "success_rate": M.success_rate([recon.fell]) if can_fall else nan,
     }
     per_joint = {
@@ -538,11 +471,13 @@ class _State:
 _WORKER_STATE: _State | None = None
 
 
+_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
 def _init_worker() -> None:
-    """Worker process set-up: one thread for the numeric libraries."""
+    """Worker process set-up (the BLAS thread count comes from :func:`_pool_round`'s
+    environment: a worker has imported numpy before its initializer runs)."""
     global _WORKER_STATE
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = "1"
     _WORKER_STATE = _State(one_thread=True)
 
 
@@ -683,6 +618,21 @@ def _pool_round(tasks, out_dir: Path, save, workers: int, done) -> list:
     """Run ``tasks`` in one pool; returns the tasks lost when a worker process died."""
     ctx = mp.get_context(_start_method())
     lost = []
+    # one BLAS thread per worker: set before the workers (and the forkserver) start, because
+    # OpenBLAS reads it when numpy is first imported
+    saved = {v: os.environ.get(v) for v in _THREAD_VARS}
+    os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
+    try:
+        return _pool_round_in_env(ctx, tasks, out_dir, save, workers, done, lost)
+    finally:
+        for v, old in saved.items():
+            if old is None:
+                os.environ.pop(v, None)
+            else:
+                os.environ[v] = old
+
+
+def _pool_round_in_env(ctx, tasks, out_dir: Path, save, workers: int, done, lost) -> list:
     with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx,
                              initializer=_init_worker) as pool:  # fmt: skip
         futures = {pool.submit(_run_task, run, seg, out_dir, save(seg)): (run, seg)
@@ -941,8 +891,8 @@ def plot_sample(
     fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True, constrained_layout=True)
     with_forces = {k: r for k, r in recons.items() if r.grf is not None}
     for i, (ax, foot) in enumerate(zip(axes, _FEET, strict=True)):
-        if gt.insole_fz_n is not None:
-            ax.plot(t, gt.insole_fz_n[:, i], "k-", lw=2, label="insole")
+        if gt.insole_force_n is not None:
+            ax.plot(t, gt.insole_force_n[:, i], "k-", lw=2, label="insole")
         for label, r in with_forces.items():
             ax.plot(t, r.grf[:, i, 2], label=label)
         ax.set(ylabel=f"{foot} vertical force (N)")

@@ -236,6 +236,21 @@ def grip_method(options: MethodOptions) -> Grip:
 
 
 # ------------------------------------------------------------------ PIP physics on KinematicsNet
+def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float, cfg=None):
+    """PIP's optimiser on a kinematic estimate of ``rec``, from its true first-frame root."""
+    from grip.baselines.pip_physics import PipPhysics
+    from grip.core.metrics import global_to_local_rot
+    from grip.kinematics.features import recording_body, targets
+
+    root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+    pip = PipPhysics(recording_body(rec), cfg)
+    out = pip.reconstruct(global_to_local_rot(global_rot), joint_vel, contact_prob, root0,
+                          name=rec.name)  # fmt: skip
+    out.method = name
+    out.ms_per_frame = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
+    return out
+
+
 class KinematicsPip:
     """PIP's physics optimiser (:mod:`grip.baselines.pip_physics`) on KinematicsNet's estimate.
 
@@ -255,28 +270,18 @@ class KinematicsPip:
         self.cfg = cfg
 
     def reconstruct(self, rec) -> Reconstruction:
-        from grip.baselines.pip_physics import PipPhysics, backward_velocity
-        from grip.core.metrics import global_to_local_rot
-        from grip.kinematics.features import recording_body
-        from prism_tools.schema import FEET
+        from grip.baselines.pip_physics import backward_velocity
+        from grip.kinematics.baselines import insole_contact_prob
 
         t0 = time.perf_counter()
+        try:
+            prob = insole_contact_prob(rec)
+        except KeyError as e:
+            raise ValueError(f"{rec.name}: kin+pip needs both insoles ({e})") from e
         est = self.estimator.predict([rec])[0]
         pos = est.joint_pos - est.joint_pos[:, :1] + est.root_pos[:, None]
         vel = backward_velocity(pos, float(rec.fps))
-        import numpy as np
-
-        if all(f in rec.insole for f in FEET):
-            prob = np.stack([rec.insole[f].contacts.any(axis=1) for f in FEET], axis=1)
-            prob = prob.astype(float)
-        else:
-            raise ValueError(f"{rec.name}: kin+pip needs both insoles for the foot contacts")
-        pip = PipPhysics(recording_body(rec), self.cfg)
-        out = pip.reconstruct(global_to_local_rot(est.global_rot), vel, prob, est.root_pos[0],
-                              name=rec.name)  # fmt: skip
-        out.method = self.name
-        out.ms_per_frame = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
-        return out
+        return _pip_physics(rec, est.global_rot, vel, prob, self.name, t0, self.cfg)
 
 
 def kinematics_pip_method(options: MethodOptions) -> KinematicsPip:
@@ -343,19 +348,10 @@ class Pip:
         self.cfg = cfg
 
     def reconstruct(self, rec) -> Reconstruction:
-        from grip.baselines.pip_physics import PipPhysics
-        from grip.core.metrics import global_to_local_rot
-        from grip.kinematics.features import recording_body, targets
-
         t0 = time.perf_counter()
         est = self.estimator.predict([rec])[0]
-        root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
-        pip = PipPhysics(recording_body(rec), self.cfg)
-        out = pip.reconstruct(global_to_local_rot(est.global_rot), est.joint_vel,
-                              est.contact_prob, root0, name=rec.name)  # fmt: skip
-        out.method = self.name
-        out.ms_per_frame = 1e3 * (time.perf_counter() - t0) / rec.n_frames
-        return out
+        return _pip_physics(rec, est.global_rot, est.joint_vel, est.contact_prob, self.name, t0,
+                            self.cfg)  # fmt: skip
 
 
 def transpose_method(options: MethodOptions) -> TransPose:

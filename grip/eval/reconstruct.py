@@ -78,6 +78,7 @@ def simulate_clip(
     runner,
     clip_index: int,
     recovery: RecoveryConfig = RecoveryConfig(),
+    stop_at_fall: bool = False,
 ) -> tuple[Reconstruction, dict]:
     """Play one reference clip from its first frame with the policy and fall recovery.
 
@@ -86,6 +87,8 @@ def simulate_clip(
         runner: A :class:`policies.runner.PolicyRunner`.
         clip_index: Clip of ``env.reference`` to play.
         recovery: Fall detection and recovery settings.
+        stop_at_fall: End at the first fall that is not recovered (``grip eval-policy``: a fall
+            fails the segment and the metrics cover the frames until then).
 
     Returns:
         The reconstruction (method ``"grip"``, forces and torques from the simulation) and
@@ -131,6 +134,8 @@ def simulate_clip(
             floor = t + 1
         elif fell and not down:
             falls.append((t, t))
+            if stop_at_fall:
+                break
         if not recovery.enabled:
             down = low
         if unstable and not recovery.enabled:
@@ -144,7 +149,7 @@ def simulate_clip(
         name=clip.name, method="grip", fps=clip.fps,
         joint_pos=tr.pos[sl], global_rot=tr.rot[sl], grf=tr.grf[sl], cop=tr.cop[sl],
         torques=tr.torques[sl], contacts=tr.contacts[sl],
-        falls=np.array(falls, dtype=np.int64).reshape(-1, 2),
+        falls=np.minimum(np.array(falls, dtype=np.int64).reshape(-1, 2), last),
         ms_per_frame=1e3 * sim_s / max(last + 1, 1),
         notes={"blowups": env.blowups - blowups0, "recovery": recovery.enabled},
     )  # fmt: skip

@@ -34,18 +34,16 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 import numpy as np
 
-from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
-from grip.core.body import CANONICAL_TO_WORLD, GRAVITY, BodyModel, BodyParams, build_body
+from grip.core.body import CANONICAL_TO_WORLD, BodyModel, BodyParams, build_body
 from grip.core.fk import forward_kinematics
-from grip.core.metrics import global_to_local_rot
 from grip.core.reconstruction import Reconstruction
+from grip.kinematics.features import GroundTruth, ground_truth
 
 __all__ = [
     "FORMATS",
@@ -56,7 +54,7 @@ __all__ = [
     "check_ground_truth",
     "export_reconstruction",
     "fk_mismatch_m",
-    "ground_truth_from_recording",
+    "ground_truth",
     "posed_body",
     "write_file",
 ]
@@ -120,74 +118,6 @@ def fk_mismatch_m(recon: Reconstruction, body: BodyParams | BodyModel | None = N
     return float(np.linalg.norm(pos - recon.joint_pos, axis=-1).max())
 
 
-@dataclass(frozen=True, eq=False)
-class GroundTruth:
-    """Ground truth of one recording, on the subject's body model (T frames at ``fps``).
-
-    Attributes:
-        name: Recording name.
-        fps: Frame rate, Hz.
-        body: The subject's parameters (from the recording; defaults where it is silent).
-        joint_pos: ``(T, 24, 3)`` world joint positions, m.
-        global_rot: ``(T, 24, 3, 3)`` world joint rotations.
-        insole_force_n: ``(T, 2)`` vertical insole force of the left, right foot, N, or ``None``
-            when the recording lacks an insole.
-        insole_contacts: ``(T, 2)`` bool, insole contact (front or back) per foot, or ``None``.
-    """
-
-    name: str
-    fps: float
-    body: BodyParams
-    joint_pos: np.ndarray
-    global_rot: np.ndarray
-    insole_force_n: np.ndarray | None = None
-    insole_contacts: np.ndarray | None = None
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.joint_pos.shape[0])
-
-    @property
-    def root_pos(self) -> np.ndarray:
-        """``(T, 3)`` pelvis trajectory, world, m."""
-        return self.joint_pos[:, 0]
-
-    @property
-    def local_rot(self) -> np.ndarray:
-        """``(T, 24, 3, 3)`` rotations relative to the parent (row 0 = root world rotation)."""
-        return global_to_local_rot(self.global_rot)
-
-
-def ground_truth_from_recording(rec) -> GroundTruth:
-    """Ground truth of a PRISM-format recording (:class:`prism_tools.schema.Recording`).
-
-    Poses come from ``smpl_params`` on the subject's body model
-    (:func:`grip.kinematics.features.targets`: root-relative joints plus the pelvis at
-    ``trans + root_offset``). Insole forces are stored in body weights and converted to N with
-    the subject's mass (``force * mass_kg * 9.81``), as :mod:`grip.eval.policy` does.
-    """
-    from grip.kinematics.features import recording_body, targets
-
-    tg = targets(rec)
-    params = recording_body(rec)
-    force = contacts = None
-    if all(f in rec.insole for f in sk.FEET):
-        weight_n = params.mass_kg * GRAVITY
-        force = np.stack([np.asarray(rec.insole[f].force, dtype=np.float64)[:, 0]
-                          for f in sk.FEET], axis=1) * weight_n  # fmt: skip
-        contacts = np.stack([np.asarray(rec.insole[f].contacts, dtype=bool).any(axis=1)
-                             for f in sk.FEET], axis=1)  # fmt: skip
-    return GroundTruth(
-        name=str(rec.name),
-        fps=float(rec.fps),
-        body=params,
-        joint_pos=tg.joint_pos + tg.root_pos[:, None],
-        global_rot=tg.global_rot,
-        insole_force_n=force,
-        insole_contacts=contacts,
-    )
-
-
 def check_ground_truth(recon: Reconstruction, gt: GroundTruth) -> None:
     """Raise :class:`ExportError` unless ``gt`` covers the same frames as ``recon``."""
     if gt.n_frames != recon.n_frames:
@@ -235,7 +165,7 @@ def export_reconstruction(
     out = Path(out_dir)
     gt = None
     if recording is not None and getattr(recording, "smpl_params", None) is not None:
-        gt = ground_truth_from_recording(recording)
+        gt = ground_truth(recording)
         check_ground_truth(recon, gt)
         body = body or gt.body
     written: list[Path] = []

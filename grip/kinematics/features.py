@@ -156,3 +156,80 @@ def targets(rec) -> Targets:
         root_pos=pos[:, 0],
         global_rot=g_rot,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class GroundTruth:
+    """Ground truth of one recording in the world frame, on the subject's body model: what
+    every evaluation (``grip bench``, ``grip eval-policy``, the exports' summary) compares with.
+
+    Attributes:
+        name: Recording name.
+        fps: Frame rate, Hz.
+        body: The subject's parameters (:func:`recording_body`).
+        joint_pos: ``(T, 24, 3)`` world joint positions, m.
+        global_rot: ``(T, 24, 3, 3)`` world joint rotations.
+        insole_force_n: ``(T, 2)`` vertical insole force of the left, right foot, N (stored in
+            body weights, scaled by ``mass_kg * g``), or ``None`` without both insoles.
+        insole_contacts: ``(T, 2)`` bool insole contact (front or back) per foot, or ``None``.
+    """
+
+    name: str
+    fps: float
+    body: BodyParams
+    joint_pos: np.ndarray
+    global_rot: np.ndarray
+    insole_force_n: np.ndarray | None = None
+    insole_contacts: np.ndarray | None = None
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.joint_pos.shape[0])
+
+    @property
+    def root_pos(self) -> np.ndarray:
+        """``(T, 3)`` pelvis trajectory, world, m."""
+        return self.joint_pos[:, 0]
+
+    @property
+    def foot_contacts(self) -> np.ndarray:
+        """``(T, 2)`` bool foot contacts for foot sliding: the insoles' where both exist, else
+        :func:`grip.core.metrics.contacts_from_motion` of the true foot joints (TransPose's
+        rule)."""
+        if self.insole_contacts is not None:
+            return self.insole_contacts
+        from grip.core.metrics import contacts_from_motion
+
+        return contacts_from_motion(self.joint_pos[:, list(sk.FOOT_JOINTS)], self.fps)
+
+    @property
+    def local_rot(self) -> np.ndarray:
+        """``(T, 24, 3, 3)`` rotations relative to the parent (row 0 = root world rotation)."""
+        from grip.core.metrics import global_to_local_rot
+
+        return global_to_local_rot(self.global_rot)
+
+    def head(self, n: int) -> GroundTruth:
+        """The first ``n`` frames."""
+        cut = lambda a: None if a is None else a[:n]  # noqa: E731
+        return GroundTruth(self.name, self.fps, self.body, self.joint_pos[:n],
+                           self.global_rot[:n], cut(self.insole_force_n),
+                           cut(self.insole_contacts))  # fmt: skip
+
+
+def ground_truth(rec) -> GroundTruth:
+    """The :class:`GroundTruth` of a PRISM-format recording: ``smpl_params`` posed on the
+    subject's body (:func:`targets`: root-relative joints plus the pelvis at
+    ``trans + root_offset``) and its insoles."""
+    from grip.core.body import GRAVITY
+
+    tg = targets(rec)
+    body = recording_body(rec)
+    force = contacts = None
+    if all(f in rec.insole for f in sk.FEET):
+        force = np.stack([np.asarray(rec.insole[f].force, dtype=np.float64)[:, 0]
+                          for f in sk.FEET], axis=1) * (body.mass_kg * GRAVITY)  # fmt: skip
+        contacts = np.stack([np.asarray(rec.insole[f].contacts, dtype=bool).any(axis=1)
+                             for f in sk.FEET], axis=1)  # fmt: skip
+    return GroundTruth(str(rec.name), float(rec.fps), body, tg.joint_pos + tg.root_pos[:, None],
+                       tg.global_rot, force, contacts)  # fmt: skip

@@ -83,7 +83,7 @@ class Oracle:
             raise RuntimeError(f"solver diverged on {rec.name}")
         gt = B.ground_truth(rec)
         grf = np.zeros((rec.n_frames, 2, 3))
-        grf[..., 2] = gt.insole_fz_n + self.grf_offset_n
+        grf[..., 2] = gt.insole_force_n + self.grf_offset_n
         falls = np.array([[rec.n_frames - 5, rec.n_frames - 2]]) if self.fall else None
         return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
                               joint_pos=gt.joint_pos + self.shift, global_rot=gt.global_rot,
@@ -142,8 +142,8 @@ def test_ground_truth_reconstruction_has_zero_errors(seg_rec) -> None:
         assert m[k] == pytest.approx(0.0, abs=1e-6), k
     assert m["success_rate"] == 100.0
     # Foot sliding and penetration are properties of the motion itself: the ground truth's.
-    assert gt.contacts.any() and m["FS_mps"] == pytest.approx(
-        M.foot_sliding(gt.joint_pos, gt.contacts, 100.0)
+    assert gt.foot_contacts.any() and m["FS_mps"] == pytest.approx(
+        M.foot_sliding(gt.joint_pos, gt.foot_contacts, 100.0)
     )
     assert m["FP_mm"] >= 0.0 and math.isfinite(m["FP_mm"])
     assert per_joint["MPJPE_mm"].shape == (24,) and np.allclose(per_joint["MPJPE_mm"], 0.0)
@@ -177,17 +177,18 @@ def test_hand_made_errors(seg_rec) -> None:
 def test_contacts_and_insole_force_fall_back_without_insoles(seg_rec) -> None:
     gt = B.ground_truth(seg_rec)
     np.testing.assert_array_equal(
-        gt.contacts, np.stack([seg_rec.insole[f].contacts.any(axis=1) for f in B._FEET], 1)
+        gt.foot_contacts, np.stack([seg_rec.insole[f].contacts.any(axis=1) for f in B._FEET], 1)
     )
     bare = dataclasses.replace(seg_rec, insole={}, insole_combined=None)
     gt_bare = B.ground_truth(bare)
     np.testing.assert_array_equal(
-        gt_bare.contacts, M.contacts_from_motion(gt.joint_pos[:, [10, 11]], 100.0)
+        gt_bare.foot_contacts, M.contacts_from_motion(gt.joint_pos[:, [10, 11]], 100.0)
     )
-    assert gt_bare.insole_fz_n is None
-    force = B.insole_vertical_force_n(seg_rec, 70.0)
-    np.testing.assert_allclose(force[:, 0], seg_rec.insole["L_Foot"].force[:, 0] * 70.0 * 9.81,
-                               rtol=1e-3)  # fmt: skip
+    assert gt_bare.insole_force_n is None
+    mass = gt.body.mass_kg
+    np.testing.assert_allclose(gt.insole_force_n[:, 0],
+                               seg_rec.insole["L_Foot"].force[:, 0] * mass * 9.81, rtol=1e-3)
+    assert gt.head(7).n_frames == 7 and gt.head(7).insole_force_n.shape == (7, 2)
 
 
 # ---------------------------------------------------------------------------------- runner

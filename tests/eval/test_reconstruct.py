@@ -94,6 +94,13 @@ def test_without_recovery_each_fall_is_reported_once_and_the_body_stays_down(env
     assert recon.joint_pos[-1, 0, 2] < 0.3
 
 
+def test_evaluation_mode_stops_at_the_first_fall(env) -> None:
+    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, RecoveryConfig(enabled=False),
+                             stop_at_fall=True)  # fmt: skip
+    assert recon.falls.tolist() == [[recon.n_frames - 1] * 2]
+    assert recon.joint_pos[-1, 0, 2] < 0.3 < recon.joint_pos[0, 0, 2]
+
+
 def test_teleport_puts_the_body_on_the_ground(env) -> None:
     env.reset(options={"clip": 0, "start": 0})
     clip = env.clip

@@ -18,7 +18,7 @@ from grip.export import (
     ExportError,
     check_ground_truth,
     fk_mismatch_m,
-    ground_truth_from_recording,
+    ground_truth,
     posed_body,
 )
 from grip.export.bvh import hierarchy_order, motion_channels, write_bvh
@@ -41,7 +41,7 @@ def rec():
 
 @pytest.fixture(scope="module")
 def gt(rec):
-    return ground_truth_from_recording(rec)
+    return ground_truth(rec)
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import pytest
 
 from grip.cli.main import main
 from grip.core.reconstruction import Reconstruction
-from grip.export import ground_truth_from_recording
+from grip.export import ground_truth
 from prism_tools.io import save_recording
 from prism_tools.synthetic import make_recording
 
@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 def files(tmp_path_factory) -> tuple[Path, Path]:
     d = tmp_path_factory.mktemp("export_cli")
     rec = make_recording(T, seed=5)
-    gt = ground_truth_from_recording(rec)
+    gt = ground_truth(rec)
     grf = np.zeros((T, 2, 3))
     grf[:, :, 2] = gt.insole_force_n
     recon = Reconstruction(name=rec.name, method="test", fps=gt.fps, joint_pos=gt.joint_pos,
