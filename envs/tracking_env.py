@@ -301,19 +301,41 @@ class GripTrackingEnv(gym.Env):
         f[13 + 2 * A.N_HINGES :] = ((pvw[0, _KEY] - pvw[0, 0]) @ h).reshape(-1)
         return f
 
-    def _per_clip_arrays(self, clip: ReferenceClip) -> None:
-        """Per-clip arrays laid out for the step (gathered once per episode, not per step)."""
+    def _per_clip_arrays(self, clip: ReferenceClip, start: int = 0) -> None:
+        """Per-clip arrays laid out for the step (gathered once per episode, not per step);
+        ``start``: only frames from there on changed (a growing
+        :class:`grip.core.reference.LiveClip`)."""
         sim, cfg = self._sim, self.cfg
-        if self._cache_key != (clip, sim):
+        rows = len(clip.gt_qpos)  # a live clip's capacity, else its length
+        if self._cache_key != (clip, sim) or len(self._ref_target) != rows:
             self._cache_key = (clip, sim)
-            self._gt_pvw = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1)
-            self._est_leaf_rot = clip.est_rot[:, O.IMU_JOINTS]
-            self._est_leaf_angvel = clip.est_angvel[:, O.IMU_JOINTS]
-            ref = clip.est_hinge
-            if cfg.velocity_feedforward:
-                ref = ref + sim.kd_over_kp * clip.est_hinge_vel
-            self._ref_target = ref  # PD target of a relative action of 0
+            start = 0
+            n_imu = len(O.IMU_JOINTS)
+            self._gt_pvw = np.empty((rows, 3, sk.N_JOINTS, 3))
+            self._est_leaf_rot = np.empty((rows, n_imu, 3, 3))
+            self._est_leaf_angvel = np.empty((rows, n_imu, 3))
+            self._ref_target = np.empty((rows, 3 * (sk.N_JOINTS - 1)))
             self._action_gain = cfg.action_scale * sim.half
+        sl = slice(start, clip.n_frames)
+        for k, key in enumerate(("gt_pos", "gt_vel", "gt_angvel")):
+            self._gt_pvw[sl, k] = getattr(clip, key)[sl]
+        self._est_leaf_rot[sl] = clip.est_rot[sl, O.IMU_JOINTS]
+        self._est_leaf_angvel[sl] = clip.est_angvel[sl, O.IMU_JOINTS]
+        ref = self._ref_target[sl]  # PD target of a relative action of 0
+        ref[:] = clip.est_hinge[sl]
+        if cfg.velocity_feedforward:
+            ref += sim.kd_over_kp * clip.est_hinge_vel[sl]
+
+    def refresh_reference(self, start: int = 0) -> dict[str, np.ndarray]:
+        """The current clip changed from frame ``start`` on (a streaming
+        :class:`grip.core.reference.LiveClip` grew by a frame): update the env's copies of it
+        and return the observation of the current state against it, which replaces the one
+        the last :meth:`reset`, :meth:`step` or :meth:`teleport` returned."""
+        self._per_clip_arrays(self._clip, start)
+        pvw, rot = self._sim_state()
+        obs = self._observe(pvw, rot)
+        self._last_obs = obs
+        return obs
 
     def _set_state(self, clip: ReferenceClip, t: int) -> None:
         sim = self._sim

@@ -31,7 +31,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 
@@ -40,7 +40,9 @@ from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics, integrate_root
 from grip.core.rotations import (
     angular_velocity,
+    angular_velocity_at,
     euler_to_matrix,
+    matrix_to_6d,
     matrix_to_euler,
     matrix_to_quat,
     quat_to_matrix,
@@ -213,6 +215,135 @@ class ReferenceClip:
         }
         for k, v in derived.items():
             setattr(self, k, v)
+
+
+def _unwrap_step(dd: np.ndarray) -> np.ndarray:
+    """The phase correction :func:`numpy.unwrap` adds for a step ``dd`` (period 2 pi), written
+    out so that a stream can unwrap one frame at a time with the same values."""
+    ddmod = np.mod(dd + np.pi, 2 * np.pi) - np.pi
+    np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (dd > 0))
+    corr = ddmod - dd
+    np.copyto(corr, 0, where=np.abs(dd) < np.pi)
+    return corr
+
+
+class LiveClip:
+    """A reference clip that grows one estimated frame at a time (streaming reconstruction).
+
+    It has the attributes :class:`envs.tracking_env.GripTrackingEnv` reads from a
+    :class:`ReferenceClip`, as arrays of :attr:`capacity` rows (at least :attr:`n_frames`; they
+    grow by doubling, :attr:`capacity` tells the env when). The values of frames
+    ``0 .. n_frames - 1`` are those a :class:`ReferenceClip` of the frames so far would have:
+    the derivatives of the newest frame are one-sided (as at a clip's end) and turn central when
+    the next frame arrives, the hinge angles are unwrapped as :func:`numpy.unwrap` does.
+
+    Ground truth: only the calibration is known. Every ``gt_*`` row holds the calibration
+    frame of ``head`` (pose and velocity): what the env starts from; its reward and error
+    ``info`` are meaningless while streaming (its observations and actions never read them).
+
+    Args:
+        head: A :class:`ReferenceClip` of the recording's first frames (its ground truth at
+            frame 0 and the velocity there; its estimate is not used).
+        sensor_dim: Width of the sensor features.
+        capacity: Rows allocated at first.
+    """
+
+    _EST: ClassVar[dict[str, tuple[int, ...]]] = {
+        "est_pos": (sk.N_JOINTS, 3), "est_rot6d": (sk.N_JOINTS, 6),
+        "est_rot": (sk.N_JOINTS, 3, 3), "est_vel": (len(sk.VELOCITY_JOINTS), 3),
+        "est_angvel": (sk.N_JOINTS, 3), "est_hinge": (N_HINGES,),
+        "est_hinge_vel": (N_HINGES,), "est_root_pos": (3,),
+    }  # fmt: skip
+    _GT = ("gt_qpos", "gt_qvel", "gt_pos", "gt_rot", "gt_vel", "gt_angvel")
+
+    def __init__(self, head: ReferenceClip, sensor_dim: int, capacity: int = 1024) -> None:
+        self.name, self.category, self.fps = head.name, head.category, float(head.fps)
+        self.body, self.objects = head.body, head.objects
+        self._head = head
+        self._sensor_dim = int(sensor_dim)
+        self._n = 0
+        self._raw_prev = np.zeros(N_HINGES)  # hinge angles of the previous frame, wrapped
+        self._corr = np.zeros(N_HINGES)  # accumulated unwrap correction
+        self._disp = np.zeros(3)  # integrated root displacement up to the newest frame
+        self._alloc(max(int(capacity), 2))
+
+    def _alloc(self, rows: int) -> None:
+        old = {k: getattr(self, k) for k in (*self._EST, "sensor")} if self._n else {}
+        for k, shape in self._EST.items():
+            setattr(self, k, np.zeros((rows, *shape)))
+        self.sensor = np.zeros((rows, self._sensor_dim))
+        for k, a in old.items():
+            getattr(self, k)[: self._n] = a[: self._n]
+        for k in self._GT:
+            row = getattr(self._head, k)[0]
+            setattr(self, k, np.broadcast_to(row, (rows, *row.shape)))
+
+    @property
+    def n_frames(self) -> int:
+        """Frames appended so far."""
+        return self._n
+
+    @property
+    def capacity(self) -> int:
+        """Rows of the arrays (they are reallocated, doubled, when a frame does not fit)."""
+        return int(self.sensor.shape[0])
+
+    def append(self, joint_pos: np.ndarray, global_rot: np.ndarray, velocity: np.ndarray,
+               features: np.ndarray) -> int:  # fmt: skip
+        """Add the estimate of the next frame; returns its index.
+
+        Args:
+            joint_pos: ``(24, 3)`` estimated joints minus the root, world axes, m.
+            global_rot: ``(24, 3, 3)`` estimated global rotations.
+            velocity: ``(6, 3)`` estimated velocities of the velocity joints, m/s.
+            features: ``(F,)`` the KinematicsNet inputs of the frame.
+        """
+        i = self._n
+        vals = {"est_pos": joint_pos, "est_rot": global_rot, "est_vel": velocity}
+        for k, v in vals.items():
+            v = np.asarray(v, dtype=np.float64)
+            if v.shape != self._EST[k] or not np.isfinite(v).all():
+                raise ReferenceError(f"clip {self.name!r} frame {i}: {k} must be finite "
+                                     f"{self._EST[k]}, got {v.shape}")  # fmt: skip
+        f = np.asarray(features, dtype=np.float64).reshape(-1)
+        if f.shape != (self._sensor_dim,):
+            raise ReferenceError(f"clip {self.name!r} frame {i}: features must have "
+                                 f"{self._sensor_dim} values, got {f.shape}")  # fmt: skip
+        if i == self.capacity:
+            self._alloc(2 * self.capacity)
+        fps = self.fps
+        self.est_pos[i] = joint_pos
+        self.est_rot6d[i] = matrix_to_6d(np.asarray(global_rot, dtype=np.float64))
+        self.est_rot[i] = sixd_to_matrix(self.est_rot6d[i])
+        self.est_vel[i] = velocity
+        self.sensor[i] = f
+        # hinge angles, unwrapped over time (hinge_angles / numpy.unwrap, one frame)
+        rot = self.est_rot[i]
+        raw = hinges_from_local(np.swapaxes(rot[list(sk.PARENTS[1:])], -1, -2) @ rot[1:])
+        if i > 0:
+            self._corr = self._corr + _unwrap_step(raw - self._raw_prev)
+            self.est_hinge[i] = raw + self._corr
+        else:
+            self.est_hinge[i] = raw
+        self._raw_prev = raw
+        # root: forward Euler on the estimated pelvis velocity (integrate_root)
+        if i > 0:
+            self._disp = self._disp + self.est_vel[i - 1, -1] / fps
+            self.est_root_pos[i] = self._disp + self._head.gt_qpos[0, :3]
+        else:
+            self.est_root_pos[i] = self._head.gt_qpos[0, :3]
+        self._n = i + 1
+        # derivatives (numpy.gradient, angular_velocity): frame i one-sided, i - 1 central
+        h, r = self.est_hinge, self.est_rot
+        if i > 0:
+            self.est_hinge_vel[i] = (h[i] - h[i - 1]) / 1.0 * fps
+            self.est_angvel[i] = angular_velocity_at(r[: i + 1], i, fps)
+            self.est_angvel[i - 1] = angular_velocity_at(r[: i + 1], i - 1, fps)
+            if i > 1:
+                self.est_hinge_vel[i - 1] = (h[i] - h[i - 2]) / 2.0 * fps
+            else:
+                self.est_hinge_vel[0] = self.est_hinge_vel[1]
+        return i
 
 
 class ReferenceSource(Protocol):

@@ -361,3 +361,20 @@ def angular_velocity(rot: np.ndarray, fps: float, local: bool = False) -> np.nda
     rel = nxt @ rt if not local else rt @ nxt  # world: R1 R0^T ; local: R0^T R1
     w = matrix_to_axis_angle(rel)
     return w * (fps / steps.reshape(-1, *([1] * (w.ndim - 1))))
+
+
+def angular_velocity_at(rot: np.ndarray, i: int, fps: float) -> np.ndarray:
+    """``angular_velocity(rot, fps)[i]`` (world frame) computed for frame ``i`` alone, with the
+    same values: the one-frame update of a stream.
+
+    Args:
+        rot: ``(T, ..., 3, 3)`` rotations (only frames ``i - 1 .. i + 1`` are read).
+        i: Frame, ``0 <= i < T``.
+        fps: Sample rate, Hz.
+    """
+    n = rot.shape[0]
+    if n < 2:
+        return np.zeros(rot.shape[1:-1])
+    lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+    rel = _as_float(rot[hi]) @ np.swapaxes(_as_float(rot[lo]), -1, -2)
+    return matrix_to_axis_angle(rel) * (fps / float(hi - lo))

@@ -62,7 +62,8 @@ class RecoveryConfig:
 
 
 class _Trace:
-    """Per-frame output arrays of one simulated recording."""
+    """Per-frame output arrays of one simulated recording (grown by doubling when a stream
+    outruns them)."""
 
     def __init__(self, n: int) -> None:
         self.pos = np.full((n, sk.N_JOINTS, 3), np.nan)
@@ -71,6 +72,120 @@ class _Trace:
         self.cop = np.full((n, 2, 3), np.nan)
         self.torques = np.full((n, 3 * (sk.N_JOINTS - 1)), np.nan)
         self.contacts = np.zeros((n, 2), dtype=bool)
+
+    def ensure(self, t: int) -> None:
+        """Make room for frame ``t``."""
+        n = self.pos.shape[0]
+        if t < n:
+            return
+        grown = _Trace(max(2 * n, t + 1))
+        for k, a in vars(self).items():
+            getattr(grown, k)[:n] = a
+        vars(self).update(vars(grown))
+
+
+class ClipPlayer:
+    """Plays one clip of an inference env with the policy and GRIP's fall recovery, one control
+    step at a time: the loop of :func:`simulate_clip` and of
+    :class:`grip.eval.stream.GripStream`.
+
+    Args:
+        env: An inference env (:func:`inference_env`).
+        runner: A :class:`policies.runner.PolicyRunner`.
+        recovery: Fall detection and recovery settings.
+        stop_at_fall: End at the first fall that is not recovered.
+
+    After :meth:`start`, :attr:`obs` is the observation the next action is computed from (a
+    stream replaces it when its clip grows, :meth:`envs.tracking_env.GripTrackingEnv.
+    refresh_reference`), :attr:`t` the frame the simulation is at, :attr:`trace` the outputs.
+    """
+
+    def __init__(self, env: GripTrackingEnv, runner, recovery: RecoveryConfig = RecoveryConfig(),
+                 stop_at_fall: bool = False) -> None:  # fmt: skip
+        self.env, self.runner, self.recovery = env, runner, recovery
+        self.stop_at_fall = stop_at_fall
+        self.obs: dict | None = None
+        self.t = self.last = 0
+        self.done = False
+        self.falls: list[tuple[int, int]] = []
+
+    def start(self, clip_index: int, frames_hint: int | None = None) -> None:
+        """Reset the env to the clip's first frame (its ground truth) and record it."""
+        env = self.env
+        self.obs, _ = env.reset(options={"clip": clip_index, "start": 0})
+        self.clip: ReferenceClip = env.clip
+        sim = env._sim
+        self._ix = sim.index
+        self._feet = FootContacts(sim.model, self._ix)
+        self.trace = _Trace(frames_hint or self.clip.n_frames)
+        self._blowups0 = env.blowups
+        self._floor = 0  # frames before this were replaced by a recovery: the buffer starts after
+        self._down = False  # (recovery off) the humanoid is down: one fall until it is up
+        self.t = self.last = 0
+        self.done = False
+        self.falls = []
+        self._record(0)
+
+    @property
+    def blowups(self) -> int:
+        """Simulation blow-ups since :meth:`start`."""
+        return self.env.blowups - self._blowups0
+
+    def _record(self, t: int) -> None:
+        d, ix, tr = self.env.data, self._ix, self.trace
+        tr.ensure(t)
+        tr.pos[t] = d.xpos[ix.body_ids]
+        tr.rot[t] = d.xmat[ix.body_ids].reshape(-1, 3, 3)
+        tr.grf[t], tr.cop[t] = self._feet(d)
+        tr.torques[t] = d.actuator_force[ix.actuator_ids]
+        tr.contacts[t] = tr.grf[t, :, 2] > CONTACT_FORCE_N
+
+    def advance(self) -> bool:
+        """One control step with fall detection and recovery; returns whether the clip is over
+        (its last frame, a fall with ``stop_at_fall``, or a blow-up without recovery)."""
+        env, rec = self.env, self.recovery
+        obs, _, terminated, truncated, info = env.step(self.runner.act(self.obs))
+        self.obs = obs
+        t = self.t = info["frame"]
+        unstable = bool(info.get("sim_unstable"))
+        if not unstable:
+            self._record(t)
+        self.last = t if not unstable or rec.enabled else t - 1
+        low = unstable or info["root_height_m"] < rec.fall_height_m
+        fell = low and (
+            unstable
+            or self.runner.disc is None
+            or self.runner.fall_probability(info["amp_obs"])[0] < rec.fall_probability
+        )
+        end = False
+        if fell and rec.enabled:
+            s = max(self._floor, t - rec.history_frames, 0)
+            self.obs = _recover(env, self.clip, self.trace, s, t)
+            self.falls.append((s, t))
+            self._floor = t + 1
+        elif fell and not self._down:
+            self.falls.append((t, t))
+            end = self.stop_at_fall
+        if not rec.enabled:
+            self._down = low
+        end = end or (unstable and not rec.enabled)  # MuJoCo reset the state: nothing follows
+        end = end or t >= self.clip.n_frames - 1 or terminated or truncated
+        self.done = end
+        return end
+
+    def reconstruction(self, ms_per_frame: float = float("nan")) -> Reconstruction:
+        """The frames played so far (method ``"grip"``)."""
+        tr, last, clip = self.trace, self.last, self.clip
+        sl = slice(0, last + 1)
+        return Reconstruction(
+            name=clip.name, method="grip", fps=clip.fps,
+            joint_pos=tr.pos[sl].copy(), global_rot=tr.rot[sl].copy(), grf=tr.grf[sl].copy(),
+            cop=tr.cop[sl].copy(), torques=tr.torques[sl].copy(),
+            contacts=tr.contacts[sl].copy(),
+            falls=np.minimum(np.array(self.falls, dtype=np.int64).reshape(-1, 2), last),
+            ms_per_frame=ms_per_frame,
+            notes={"blowups": self.blowups, "recovery": self.recovery.enabled},
+        )  # fmt: skip
 
 
 def simulate_clip(
@@ -95,65 +210,13 @@ def simulate_clip(
         ``{"blowups": int, "sim_s": float}``.
     """
     t0 = time.perf_counter()
-    obs, info = env.reset(options={"clip": clip_index, "start": 0})
-    clip: ReferenceClip = env.clip
-    sim = env._sim
-    ix, n = sim.index, clip.n_frames
-    feet = FootContacts(sim.model, ix)
-    tr = _Trace(n)
-    blowups0 = env.blowups
-
-    def record(t: int) -> None:
-        d = env.data
-        tr.pos[t] = d.xpos[ix.body_ids]
-        tr.rot[t] = d.xmat[ix.body_ids].reshape(-1, 3, 3)
-        tr.grf[t], tr.cop[t] = feet(d)
-        tr.torques[t] = d.actuator_force[ix.actuator_ids]
-        tr.contacts[t] = tr.grf[t, :, 2] > CONTACT_FORCE_N
-
-    record(0)
-    falls: list[tuple[int, int]] = []
-    floor = 0  # frames before this were replaced by a recovery: the buffer starts after them
-    down = False  # (recovery off) the humanoid is down: report a fall once until it is up
-    while True:
-        obs, _, terminated, truncated, info = env.step(runner.act(obs))
-        t = info["frame"]
-        unstable = bool(info.get("sim_unstable"))
-        if not unstable:
-            record(t)
-        low = unstable or info["root_height_m"] < recovery.fall_height_m
-        fell = low and (
-            unstable
-            or runner.disc is None
-            or runner.fall_probability(info["amp_obs"])[0] < recovery.fall_probability
-        )
-        if fell and recovery.enabled:
-            s = max(floor, t - recovery.history_frames, 0)
-            obs = _recover(env, clip, tr, s, t)
-            falls.append((s, t))
-            floor = t + 1
-        elif fell and not down:
-            falls.append((t, t))
-            if stop_at_fall:
-                break
-        if not recovery.enabled:
-            down = low
-        if unstable and not recovery.enabled:
-            break  # MuJoCo reset the state itself: nothing meaningful follows
-        if t >= n - 1 or terminated or truncated:
-            break
-    last = t if not unstable or recovery.enabled else t - 1
+    player = ClipPlayer(env, runner, recovery, stop_at_fall)
+    player.start(clip_index)
+    while not player.advance():
+        pass
     sim_s = time.perf_counter() - t0
-    sl = slice(0, last + 1)
-    recon = Reconstruction(
-        name=clip.name, method="grip", fps=clip.fps,
-        joint_pos=tr.pos[sl], global_rot=tr.rot[sl], grf=tr.grf[sl], cop=tr.cop[sl],
-        torques=tr.torques[sl], contacts=tr.contacts[sl],
-        falls=np.minimum(np.array(falls, dtype=np.int64).reshape(-1, 2), last),
-        ms_per_frame=1e3 * sim_s / max(last + 1, 1),
-        notes={"blowups": env.blowups - blowups0, "recovery": recovery.enabled},
-    )  # fmt: skip
-    return recon, {"blowups": env.blowups - blowups0, "sim_s": sim_s}
+    recon = player.reconstruction(1e3 * sim_s / max(player.last + 1, 1))
+    return recon, {"blowups": player.blowups, "sim_s": sim_s}
 
 
 def kinematic_frames(clip: ReferenceClip, root0: np.ndarray, s: int, t: int):
@@ -211,6 +274,13 @@ class GripReconstructor:
         from policies.runner import PolicyRunner
 
         return cls(PolicyRunner.load(policy), KinematicsEstimator.from_checkpoint(kin), recovery)
+
+    def stream(self, calibration):
+        """A :class:`grip.eval.stream.GripStream` (one frame in, one frame out) with these
+        models, starting from ``calibration``: a recording's first frames with ground truth."""
+        from grip.eval.stream import GripStream
+
+        return GripStream(self.runner, self.estimator, calibration, self.recovery)
 
     def reconstruct(
         self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16

@@ -14,6 +14,7 @@ world-frame velocities of the leaf joints and the pelvis.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +22,12 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics
-from grip.core.rotations import angular_velocity, axis_angle_to_matrix, matrix_to_6d
+from grip.core.rotations import (
+    angular_velocity,
+    angular_velocity_at,
+    axis_angle_to_matrix,
+    matrix_to_6d,
+)
 
 DEFAULT_SITES: tuple[str, ...] = ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist")
 """GRIP's 4 wearables, in its channel order."""
@@ -96,6 +102,149 @@ def input_features(rec, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:
         bad = int(np.argwhere(~np.isfinite(feats))[0][0])
         raise ValueError(f"recording {rec.name}: non-finite sensor values (first at frame {bad})")
     return feats.astype(np.float32)
+
+
+@dataclass(frozen=True, eq=False)
+class SensorFrame:
+    """One frame of the wearables as a live system delivers it (the streaming input).
+
+    Attributes:
+        acc: ``(S, 3)`` world-frame free acceleration of the configured sites, in
+            :attr:`FeatureConfig.sites` order, m/s^2 (the low-pass filtered stream when
+            :attr:`FeatureConfig.use_filtered_acc`, as in the recordings).
+        ori: ``(S, 3, 3)`` sensor orientations, sensor -> world.
+        insole: ``(10,)`` per foot (left, right) ``[force (body weights), CoP x, CoP y (m),
+            front contact, back contact]``, or ``None`` when the features have no insoles.
+    """
+
+    acc: np.ndarray
+    ori: np.ndarray
+    insole: np.ndarray | None = None
+
+
+def sensor_frames(rec, cfg: FeatureConfig = FeatureConfig()) -> Iterator[SensorFrame]:
+    """The frames of a recording one at a time, as :class:`FeatureStream` takes them.
+
+    Raises:
+        KeyError: naming the missing site or foot.
+    """
+    for site in cfg.sites:
+        if site not in rec.imu:
+            raise KeyError(f"recording {rec.name}: no IMU at site {site!r} "
+                           f"(has {sorted(rec.imu)})")  # fmt: skip
+    key = "acc_world_filt" if cfg.use_filtered_acc else "acc_world_raw"
+    acc = np.stack([np.asarray(getattr(rec.imu[s], key), dtype=np.float64) for s in cfg.sites],
+                   axis=1)  # fmt: skip
+    ori = np.stack([np.asarray(rec.imu[s].ori_world, dtype=np.float64) for s in cfg.sites],
+                   axis=1)  # fmt: skip
+    ins = insole_features(rec) if cfg.insoles else None
+    for t in range(acc.shape[0]):
+        yield SensorFrame(acc[t], ori[t], None if ins is None else ins[t])
+
+
+def calibration_orientations(rec, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray | None:
+    """``(S, 3, 3)`` ground-truth sensor orientations at the recording's first frame (the
+    calibration pose, :attr:`FeatureConfig.align_first_frame`), NaN for sites without
+    ground truth; ``None`` when alignment is off."""
+    if not cfg.align_first_frame:
+        return None
+    out = np.full((len(cfg.sites), 3, 3), np.nan)
+    for i, site in enumerate(cfg.sites):
+        if site in rec.imu_gt:
+            out[i] = np.asarray(rec.imu_gt[site].ori_world[0], dtype=np.float64)
+    return out
+
+
+class FeatureStream:
+    """:func:`input_features` one frame at a time, with the same values.
+
+    The angular velocity of frame ``t`` is the central difference of the orientations of
+    ``t - 1`` and ``t + 1`` (as in training), so the row of frame ``t`` comes out when frame
+    ``t + 1`` goes in: :meth:`push` returns the previous frame's row (``None`` for the first
+    frame) and :meth:`finish` the last one (one-sided difference, as offline).
+
+    Args:
+        cfg: The feature settings of the network that reads the rows.
+        fps: Frame rate, Hz.
+        calibration: :func:`calibration_orientations` of the recording (``None``: no
+            re-alignment).
+        name: Recording name for messages.
+    """
+
+    def __init__(self, cfg: FeatureConfig, fps: float, calibration: np.ndarray | None = None,
+                 name: str = "<stream>") -> None:  # fmt: skip
+        self.cfg, self.fps, self.name = cfg, float(fps), name
+        self._calib = calibration
+        self._offset: np.ndarray | None = None  # (S, 3, 3) sensor-to-segment offsets
+        self._rot: list[np.ndarray] = []  # aligned orientations of the last (up to) 3 frames
+        self._rest: list[np.ndarray] = []  # [acc / scale, insole] of the same frames
+        self._n = 0
+
+    @classmethod
+    def for_recording(cls, rec, cfg: FeatureConfig = FeatureConfig()) -> FeatureStream:
+        """A stream calibrated on a recording's first frame (its ``imu_gt``)."""
+        return cls(cfg, float(rec.fps), calibration_orientations(rec, cfg), str(rec.name))
+
+    @property
+    def frames_in(self) -> int:
+        """Frames pushed so far."""
+        return self._n
+
+    def push(self, frame: SensorFrame) -> np.ndarray | None:
+        """Take frame ``t``; return the ``(F,)`` float32 row of frame ``t - 1`` (or ``None``).
+
+        Raises:
+            ValueError: A wrong shape or a non-finite value (naming the frame).
+        """
+        cfg, s = self.cfg, len(self.cfg.sites)
+        acc = np.asarray(frame.acc, dtype=np.float64)
+        ori = np.asarray(frame.ori, dtype=np.float64)
+        where = f"{self.name}: frame {self._n}"
+        if acc.shape != (s, 3) or ori.shape != (s, 3, 3):
+            raise ValueError(f"{where}: expected acc ({s}, 3) and ori ({s}, 3, 3) for sites "
+                             f"{cfg.sites}, got {acc.shape} and {ori.shape}")  # fmt: skip
+        parts = [(acc / cfg.acc_scale).reshape(-1)]
+        if cfg.insoles:
+            if frame.insole is None:
+                raise ValueError(f"{where}: the features need the 10 insole values, got None")
+            ins = np.asarray(frame.insole, dtype=np.float64).reshape(-1)
+            if ins.shape != (10,):
+                raise ValueError(f"{where}: insole must have 10 values, got {ins.shape}")
+            parts.append(ins)
+        rest = np.concatenate(parts)
+        if not (np.isfinite(rest).all() and np.isfinite(ori).all()):
+            raise ValueError(f"{self.name}: non-finite sensor values at frame {self._n}")
+        if self._offset is None:
+            self._offset = np.broadcast_to(np.eye(3), (s, 3, 3)).copy()
+            if self._calib is not None:
+                for i in range(s):
+                    if np.isfinite(self._calib[i]).all():
+                        self._offset[i] = ori[i].T @ self._calib[i]
+        self._rot.append(ori @ self._offset)
+        self._rest.append(rest)
+        self._n += 1
+        if len(self._rot) > 3:
+            del self._rot[0], self._rest[0]
+        if self._n < 2:
+            return None
+        # the row of the previous frame: central difference inside, one-sided at the start
+        return self._row(len(self._rot) - 2)
+
+    def finish(self) -> np.ndarray | None:
+        """The row of the last frame pushed (``None`` if nothing was pushed)."""
+        if self._n == 0:
+            return None
+        return self._row(len(self._rot) - 1)
+
+    def _row(self, i: int) -> np.ndarray:
+        """Row of buffered frame ``i`` with the frames around it (as :func:`angular_velocity`
+        does for a whole sequence)."""
+        gyr = angular_velocity_at(np.stack(self._rot), i, self.fps)
+        s = len(self.cfg.sites)
+        rest = self._rest[i]
+        imu = np.concatenate([rest[: 3 * s].reshape(s, 3), gyr, self._rot[i].reshape(s, 9)],
+                             axis=-1).reshape(-1)  # fmt: skip
+        return np.concatenate([imu, rest[3 * s :]]).astype(np.float32)
 
 
 def insole_features(rec) -> np.ndarray:

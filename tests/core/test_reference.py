@@ -37,3 +37,55 @@ def test_bad_clips_and_files_are_refused_with_the_key_named(clip, tmp_path) -> N
     np.savez(tmp_path / "x.npz", a=np.zeros(3))
     with pytest.raises(ReferenceError, match=r"x\.npz.*__meta__"):
         ReferenceSet.load(tmp_path / "x.npz")
+
+
+_EST = ("est_pos", "est_rot", "est_vel", "est_angvel", "est_hinge", "est_hinge_vel",
+        "est_root_pos", "sensor")  # fmt: skip
+
+
+def _head(clip: ReferenceClip, n: int) -> ReferenceClip:
+    return ReferenceClip(clip.name, clip.category, clip.fps, clip.body, clip.gt_qpos[:n],
+                         clip.est_pos[:n], clip.est_rot6d[:n], clip.est_vel[:n], clip.sensor[:n])
+
+
+def test_live_clip_grows_to_the_offline_clip_frame_by_frame(clip) -> None:
+    from grip.core.reference import LiveClip
+
+    rec = make_recording(120, seed=9)
+    full = oracle_reference_clip(rec)
+    live = LiveClip(_head(full, 2), full.sensor.shape[1], capacity=8)
+    for i in range(full.n_frames):
+        assert live.append(full.est_pos[i], full.est_rot[i], full.est_vel[i], full.sensor[i]) == i
+        if i in (1, 2, 37):  # the frames so far equal a clip that ends here
+            part = _head(full, i + 1)
+            for k in _EST:
+                np.testing.assert_allclose(getattr(live, k)[: i + 1], getattr(part, k),
+                                           atol=1e-9, err_msg=k)  # fmt: skip
+    assert live.n_frames == full.n_frames and live.capacity == 128  # 8 doubled four times
+    for k in _EST:
+        np.testing.assert_allclose(getattr(live, k)[: full.n_frames], getattr(full, k),
+                                   atol=1e-9, err_msg=k)  # fmt: skip
+    # ground truth: the calibration frame, with its velocity
+    np.testing.assert_allclose(live.gt_qpos[: full.n_frames], np.broadcast_to(
+        full.gt_qpos[0], full.gt_qpos.shape))  # fmt: skip
+    np.testing.assert_allclose(live.gt_qvel[5], full.gt_qvel[0], atol=1e-9)
+    with pytest.raises(ReferenceError, match="frame 120: est_vel"):
+        live.append(full.est_pos[0], full.est_rot[0], np.full((6, 3), np.nan), full.sensor[0])
+    with pytest.raises(ReferenceError, match="features must have 70"):
+        live.append(full.est_pos[0], full.est_rot[0], full.est_vel[0], full.sensor[0, :5])
+
+
+def test_live_clip_unwraps_hinge_angles_as_numpy_does() -> None:
+    from grip.core.reference import _unwrap_step
+
+    rng = np.random.default_rng(0)
+    p = np.cumsum(rng.uniform(-3.5, 3.5, size=(300, 5)), axis=0)
+    wrapped = np.angle(np.exp(1j * p))
+    wrapped[10, 0] = np.pi  # the boundary case numpy.unwrap treats specially
+    wrapped[11, 0] = -np.pi
+    up = np.empty_like(wrapped)
+    up[0], corr = wrapped[0], np.zeros(5)
+    for i in range(1, len(p)):
+        corr = corr + _unwrap_step(wrapped[i] - wrapped[i - 1])
+        up[i] = wrapped[i] + corr
+    np.testing.assert_array_equal(up, np.unwrap(wrapped, axis=0))

@@ -105,3 +105,13 @@ def test_angular_velocity_of_constant_spin():
     np.testing.assert_allclose(R.angular_velocity(m, fps), np.broadcast_to(w, (50, 3)), atol=1e-9)
     np.testing.assert_allclose(R.angular_velocity(m, fps, local=True),
                                np.broadcast_to(w, (50, 3)), atol=1e-9)  # fmt: skip
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7])
+def test_angular_velocity_at_one_frame_equals_the_whole_track(n) -> None:
+    from grip.core.rotations import angular_velocity, angular_velocity_at, axis_angle_to_matrix
+
+    rot = axis_angle_to_matrix(np.random.default_rng(n).normal(size=(n, 5, 3)))
+    whole = angular_velocity(rot, 60.0)
+    for i in range(n):
+        np.testing.assert_allclose(angular_velocity_at(rot, i, 60.0), whole[i], atol=1e-12)

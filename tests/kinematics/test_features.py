@@ -2,7 +2,14 @@ import numpy as np
 import pytest
 
 from grip.core.rotations import sixd_to_matrix
-from grip.kinematics.features import FeatureConfig, input_features, targets
+from grip.kinematics.features import (
+    FeatureConfig,
+    FeatureStream,
+    SensorFrame,
+    input_features,
+    sensor_frames,
+    targets,
+)
 from prism_tools.synthetic import make_recording
 
 
@@ -53,3 +60,33 @@ def test_targets_are_root_relative_with_global_rotation(rec):
     fps = rec.fps
     disp = np.cumsum(t.velocity[:-1, -1], axis=0) / fps
     np.testing.assert_allclose(t.root_pos[-1] - t.root_pos[0], disp[-1], atol=0.05)
+
+
+@pytest.mark.parametrize("insoles", [True, False])
+def test_feature_stream_gives_the_offline_rows_one_frame_later(rec, insoles):
+    cfg = FeatureConfig(sites=("L_Foot", "R_Foot", "L_Wrist", "R_Wrist", "Head"),
+                        insoles=insoles)  # fmt: skip
+    offline = input_features(rec, cfg)
+    fs = FeatureStream.for_recording(rec, cfg)
+    rows = [fs.push(f) for f in sensor_frames(rec, cfg)]
+    assert rows[0] is None  # the first row needs the second frame (central difference)
+    rows = [*rows[1:], fs.finish()]
+    np.testing.assert_allclose(np.stack(rows), offline, atol=1e-6)
+
+
+def test_feature_stream_of_one_frame_and_bad_frames(rec):
+    one = rec.slice_frames(0, 1)
+    fs = FeatureStream.for_recording(one)
+    frame = next(sensor_frames(one))
+    assert fs.push(frame) is None
+    np.testing.assert_allclose(fs.finish(), input_features(one)[0], atol=1e-6)
+    fs = FeatureStream.for_recording(rec)
+    with pytest.raises(ValueError, match=r"frame 0.*insole"):
+        fs.push(SensorFrame(frame.acc, frame.ori, None))
+    with pytest.raises(ValueError, match=r"acc \(4, 3\)"):
+        fs.push(SensorFrame(frame.acc[:3], frame.ori, frame.insole))
+    acc = frame.acc.copy()
+    acc[1, 2] = np.nan
+    fs.push(frame)
+    with pytest.raises(ValueError, match=r"non-finite.*frame 1"):
+        fs.push(SensorFrame(acc, frame.ori, frame.insole))
