@@ -36,6 +36,7 @@ import numpy as np
 
 from grip.core.atomic import atomic_write
 from prism_tools.errors import RecordingError
+from prism_tools.gaps import fill_gaps as _fill_gaps
 from prism_tools.schema import EXTRAS_KEY, ForceUnit, Recording, validate
 
 __all__ = [
@@ -256,7 +257,9 @@ def take_name_from_path(path: str | os.PathLike[str]) -> str:
     return p.stem
 
 
-def load_recording(path: str | os.PathLike[str], *, force_unit: ForceUnit = "auto") -> Recording:
+def load_recording(
+    path: str | os.PathLike[str], *, force_unit: ForceUnit = "auto", fill_gaps: int = 0
+) -> Recording:
     """Loads and validates a recording from a ``.pkl`` (PRISM or ours) or ``.npz`` file.
 
     Accepts both PRISM layouts, ``<root>/<subject>/<take>.pkl`` and flat ``subj001_take002.pkl``.
@@ -264,24 +267,48 @@ def load_recording(path: str | os.PathLike[str], *, force_unit: ForceUnit = "aut
     from the path (``"subj001_take002"``) and the insole force unit is decided from the data (see
     :meth:`Recording.from_prism_dict`).
 
+    Degraded mode (``fill_gaps > 0``): short sensor dropouts (runs of at most ``fill_gaps``
+    frames holding NaN/inf in the ``imu``, ``imu_gt`` and ``insole`` streams) are filled before
+    validation by :func:`prism_tools.gaps.fill_gaps` (linear interpolation, slerp for
+    orientations, the nearest valid frame held at the start/end). When anything was filled,
+    ``extras["filled_gaps"]`` lists the runs as ``{"key": "imu.L_Wrist.acc_world_filt",
+    "first": 10, "last": 12}`` (inclusive frame ranges); it is absent otherwise. Longer gaps are
+    left and the file is rejected.
+
     Args:
         path: File path.
         force_unit: Stored insole force unit, ``"auto"`` to decide from the data (or the file's
             own declaration), ``"body_weight"`` or ``"n_per_kg"``.
+        fill_gaps: Longest sensor dropout to fill, frames (5 frames = 50 ms at 100 fps);
+            ``0`` (default) fills nothing and any non-finite value rejects the file.
 
     Returns:
         The validated recording, insole forces in body weights.
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
-        RecordingError: Anything wrong with the file or its content. Every message starts with
-            the file path.
+        RecordingError: Anything wrong with the file or its content, including non-finite values
+            not filled (gaps longer than ``fill_gaps`` frames). Every message starts with the
+            file path.
     """
     path = Path(path)
     d = load_prism_dict(path)
-    rec = Recording.from_prism_dict(d, source=str(path), force_unit=force_unit)
+    filled: list[dict[str, Any]] = []
+    if fill_gaps > 0:
+        d, filled = _fill_gaps(d, fill_gaps, source=str(path))
+    try:
+        rec = Recording.from_prism_dict(d, source=str(path), force_unit=force_unit)
+    except RecordingError as e:
+        if fill_gaps > 0 and "non-finite" in str(e):
+            raise RecordingError(
+                f"{e} (a gap longer than fill_gaps={fill_gaps} frames, or outside the "
+                "imu/imu_gt/insole streams, is not filled)"
+            ) from None
+        raise
     if EXTRAS_KEY not in d and "take_name" not in rec.extras:
         rec = _with_extras(rec, take_name=take_name_from_path(path))
+    if filled:
+        rec = _with_extras(rec, filled_gaps=filled)
     return rec
 
 

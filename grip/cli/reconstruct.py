@@ -21,7 +21,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "rotations, root trajectory, per-foot GRF and CoP, joint torques, contacts, fall\n"
             "events; keys in grip/core/reconstruction.py) plus the exports of --formats, and\n"
             "OUT/summary.json. Recordings already reconstructed in OUT are skipped (resume).\n"
-            "The recording's first frame is the calibration pose the humanoid starts from."
+            "The recording's first frame is the calibration pose the humanoid starts from.\n"
+            "Sensor dropouts (NaN runs) up to --fill-gaps frames are interpolated; a recording\n"
+            "with longer ones, or without a sensor the models read (an IMU site, an insole),\n"
+            "is reported and skipped, the others go on (exit status 1)."
         ),
         epilog="example: grip reconstruct data/prism_synth/sequences/*walk*.npz --out recon\n"
         "         grip reconstruct take.pkl --out recon --formats npz,bvh,png --workers 2",
@@ -42,6 +45,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="crop each recording to its first N frames (0: all)")
     p.add_argument("--formats", default="npz",
                    help="comma-separated: npz (always), bvh, glb, mp4, png (default npz)")
+    p.add_argument("--fill-gaps", type=int, default=10, metavar="N",
+                   help="interpolate sensor dropouts (NaN runs) of up to N frames, listed in "
+                        "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
+                        "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
     p.set_defaults(func=cmd_reconstruct)
 
@@ -69,11 +76,14 @@ _LOADED: dict = {}
 
 
 def _work(job: tuple) -> list[dict]:
-    """One worker: reconstruct a share of the recordings and write their files."""
-    files, out, policy, kin, recovery, max_frames, formats = job
+    """One worker: reconstruct a share of the recordings and write their files. A recording
+    that cannot be read or does not carry the sensors the models need gives a row with an
+    ``"error"`` (the others go on)."""
+    files, out, policy, kin, recovery, max_frames, formats, fill_gaps = job
     import torch
 
     torch.set_num_threads(1)
+    from grip.cli.main import CliError
     from grip.cli.recordings import load_recordings
     from grip.eval.reconstruct import GripReconstructor
 
@@ -84,15 +94,28 @@ def _work(job: tuple) -> list[dict]:
         g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
     rows = []
     for f in files:
-        (rec,) = load_recordings([f], max_frames=max_frames)
-        (recon,) = g.reconstruct([rec])
+        try:
+            (rec,) = load_recordings([f], max_frames=max_frames, fill_gaps=fill_gaps)
+            (recon,) = g.reconstruct([rec])
+        except (CliError, KeyError, ValueError, OSError) as e:
+            msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+            if isinstance(e, KeyError):  # a sensor the models read is missing
+                feats = g.estimator.cfg.features
+                msg += (f"; the models read the IMUs {list(feats.sites)}"
+                        f"{' and both insoles' if feats.insoles else ''}, so a model trained "
+                        "for the sensors present is needed (grip train-kin --set "
+                        "features.sites=[...] --set features.insoles=false, and a policy on "
+                        "its estimates)")  # fmt: skip
+            rows.append({"file": str(f), "error": msg})
+            continue
         dst = Path(out) / f"{safe_name(rec.name)}.npz"
         recon.save(dst)
         files, failed = _exports(recon, rec, Path(out), formats)
         rows.append({"file": str(f), "name": rec.name, "frames": recon.n_frames,
                      "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
                      "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *files],
-                     "failed": failed})  # fmt: skip
+                     "failed": failed,
+                     "filled_gaps": rec.extras.get("filled_gaps", [])})  # fmt: skip
     return rows
 
 
@@ -130,6 +153,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise CliError(f"no such recording file(s): {', '.join(missing)}")
     if args.workers < 1 or args.history < 1:
         raise CliError("--workers and --history must be >= 1")
+    if args.fill_gaps < 0:
+        raise CliError("--fill-gaps must be >= 0")
     policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
     recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -147,11 +172,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     def save() -> None:
         rows = list(done.values())
         meta = {"policy": str(policy), "kin": str(kin), "recovery": recovery.enabled,
-                "history_frames": recovery.history_frames}
-        atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows}, indent=1))
+                "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps}
+        atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
+                                                    "errors": errors}, indent=1))  # fmt: skip
 
-    jobs = [([f], str(args.out), str(policy), str(kin), recovery, args.max_frames, formats)
-            for f in todo]  # fmt: skip
+    errors: dict[str, str] = {}
+    jobs = [([f], str(args.out), str(policy), str(kin), recovery, args.max_frames, formats,
+             args.fill_gaps) for f in todo]  # fmt: skip
     with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
         if args.workers == 1 or len(todo) <= 1:
             results = map(_work, jobs)
@@ -162,6 +189,9 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         try:
             for rows in results:
                 for r in rows:
+                    if "error" in r:
+                        errors[r["file"]] = r["error"]
+                        continue
                     done[r["file"]] = r
                     bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
                 save()
@@ -179,4 +209,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     failed = [(r["name"], fmt, msg) for r in rows for fmt, msg in r.get("failed", {}).items()]
     for name, fmt, msg in failed:
         print(f"grip: error: {fmt} of {name}: {msg}", file=sys.stderr)
-    return 1 if failed else 0
+    for f, msg in errors.items():
+        print(f"grip: error: {f}: not reconstructed: {msg}", file=sys.stderr)
+    gaps = [(r["name"], g) for r in rows for g in r.get("filled_gaps", [])]
+    if gaps:
+        print(f"filled {len(gaps)} sensor dropout(s) of at most {args.fill_gaps} frames by "
+              "interpolation (listed in summary.json)")  # fmt: skip
+    return 1 if failed or errors else 0

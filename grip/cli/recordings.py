@@ -28,10 +28,14 @@ def load_recordings(
     segment_frames: int = 0,
     max_frames: int = 0,
     limit: int = 0,
+    fill_gaps: int = 0,
 ) -> list:
     """Load recordings, keeping those whose category matches a glob of ``categories`` (all when
     empty); crop each to ``max_frames``, or cut it into ``segment_frames``-frame segments (a
-    shorter tail is left out); stop at ``limit`` recordings or segments (0: no limit).
+    shorter tail is left out); stop at ``limit`` recordings or segments (0: no limit). Sensor
+    dropouts (NaN runs) of at most ``fill_gaps`` frames are interpolated
+    (:func:`prism_tools.gaps.fill_gaps`, listed in ``extras["filled_gaps"]``); longer ones are
+    an error.
 
     Raises:
         CliError: A file cannot be read (the message names it), or nothing is selected.
@@ -43,7 +47,7 @@ def load_recordings(
     recs: list = []
     for f in files:
         try:
-            rec = load_recording(f)
+            rec = load_recording(f, fill_gaps=fill_gaps)
         except (OSError, ValueError) as e:
             raise CliError(str(e)) from e
         cat = rec.category or "unknown"
