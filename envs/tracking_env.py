@@ -39,7 +39,12 @@ from grip.core import skeleton as sk
 from grip.core.body import BodyParams
 from grip.core.mjcf import build_mjcf
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
-from grip.sim.model import HumanoidIndex, write_pose_vector, write_velocity_vector
+from grip.sim.model import (
+    HumanoidIndex,
+    ModelVariants,
+    write_pose_vector,
+    write_velocity_vector,
+)
 
 SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_reference.npz"
 """The small bundled reference set used when the env is made without a reference."""
@@ -65,7 +70,8 @@ _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a c
 
 @dataclass(eq=False)
 class _Sim:
-    """A compiled humanoid (one body and scene) with its data and index arrays."""
+    """A compiled humanoid (one scene; the subject's body switched in by ``variants``) with
+    its data and index arrays."""
 
     model: mujoco.MjModel
     data: mujoco.MjData
@@ -86,6 +92,7 @@ class _Sim:
     act_force: np.ndarray
     warnings: np.ndarray  # live view of MjData.warning.number
     act: slice | np.ndarray  # actuator_ids, as a slice when they are 0..68 in order
+    variants: ModelVariants  # the bodies of the clips played on this scene
 
 
 class GripTrackingEnv(gym.Env):
@@ -176,12 +183,8 @@ class GripTrackingEnv(gym.Env):
             return ("objects", i) if clip.objects else ("flat",)
         return (self.cfg.terrain,)
 
-    def _sim_for(self, clip: ReferenceClip, i: int) -> _Sim:
-        body: BodyParams = clip.body
-        key = (body.height_m, body.mass_kg, *self._scene_key(clip, i))
-        sim = self._sims.get(key)
-        if sim is not None:
-            return sim
+    def _compile(self, clip: ReferenceClip, i: int) -> tuple[mujoco.MjModel, HeightField | None]:
+        """The humanoid of the clip's subject in the clip's scene, compiled."""
         kind = self._scene_key(clip, i)[0]
         if kind == "objects":
             objs = {n: types.SimpleNamespace(vertices=v, faces=f)
@@ -189,25 +192,47 @@ class GripTrackingEnv(gym.Env):
             scene = make_scene("objects", objects=objs)
         else:
             scene = make_scene(kind)
-        xml = build_mjcf(body, self.cfg.mjcf)
+        xml = build_mjcf(clip.body, self.cfg.mjcf)
         hf = None if scene.is_flat else rasterize(scene, self.cfg.heightfield_cell_m)
         if hf is not None:
             xml = add_heightfield(xml, hf)
-        model = mujoco.MjModel.from_xml_string(xml)
+        return mujoco.MjModel.from_xml_string(xml), hf
+
+    def _sim_for(self, clip: ReferenceClip, i: int) -> _Sim:
+        """The simulation of the clip's scene with the clip's subject switched in: one model
+        per scene; a new subject is compiled once and then swapped in by copying arrays
+        (:class:`grip.sim.model.ModelVariants`), so that resets across the many subjects of a
+        training set do not compile models."""
+        body: BodyParams = clip.body
+        skey, bkey = self._scene_key(clip, i), (body.height_m, body.mass_kg)
+        sim = self._sims.get(skey)
+        if sim is not None:
+            if sim.variants.key != bkey:
+                if bkey not in sim.variants:
+                    sim.variants.add(bkey, self._compile(clip, i)[0])
+                sim.variants.switch(bkey)
+                sim.kd_over_kp = self._kd_over_kp(sim.model, sim.index)
+            return sim
+        model, hf = self._compile(clip, i)
         index = HumanoidIndex.from_model(model)
         act = index.actuator_ids
         rng = model.actuator_ctrlrange[act]
-        kp, kd = model.actuator_gainprm[act, 0], -model.actuator_biasprm[act, 2]
         d = mujoco.MjData(model)
         pelvis = int(index.body_ids[0])
-        sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis, kd / kp,
-                   0.5 * (rng[:, 1] - rng[:, 0]),
+        sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis,
+                   self._kd_over_kp(model, index), 0.5 * (rng[:, 1] - rng[:, 0]),
                    d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel,
-                   d.actuator_force, d.warning.number, _as_slice(act))  # fmt: skip
-        if len(self._sims) >= 16:  # bounded cache: drop the oldest compiled model
+                   d.actuator_force, d.warning.number, _as_slice(act),
+                   ModelVariants(model, bkey))  # fmt: skip
+        if len(self._sims) >= 16:  # bounded cache: drop the oldest scene
             self._sims.pop(next(iter(self._sims)))
-        self._sims[key] = sim
+        self._sims[skey] = sim
         return sim
+
+    @staticmethod
+    def _kd_over_kp(model: mujoco.MjModel, index: HumanoidIndex) -> np.ndarray:
+        act = index.actuator_ids
+        return -model.actuator_biasprm[act, 2] / model.actuator_gainprm[act, 0]
 
     @property
     def model(self) -> mujoco.MjModel:

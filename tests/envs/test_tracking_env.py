@@ -224,3 +224,32 @@ def test_align_root_xy_ignores_a_horizontal_offset(align: bool) -> None:
         assert rewards[1] == pytest.approx(rewards[0], rel=1e-6)
     else:
         assert rewards[1] < 0.01 * rewards[0]
+
+
+def test_switching_subjects_equals_a_model_compiled_for_each(reference) -> None:
+    """Clips of other subjects share one model per scene, their body arrays swapped in
+    (ModelVariants): the simulation is the one on the subject's own compiled model."""
+    from grip.core.body import BodyParams
+    from grip.core.reference import ReferenceSet
+
+    base = reference.clip(0)
+    bodies = (BodyParams(1.62, 58.0), BodyParams(1.88, 92.0))
+    clips = [dataclasses.replace(base, name=f"b{k}", body=b) for k, b in enumerate(bodies)]
+    both = ReferenceSet([base, *clips], reference.sensor_sites, reference.insoles)
+    cfg = TrackingEnvConfig(random_start=False, termination_dist_m=0.0, amp_window=2)
+    actions = np.random.default_rng(0).uniform(-0.3, 0.3, size=(25, 69))
+
+    def play(env, i):
+        env.reset(options={"clip": i, "start": 0})
+        for a in actions:
+            env.step(a)
+        return env.data.qpos.copy(), env.data.actuator_force.copy()
+
+    shared = GripTrackingEnv(cfg, both)
+    runs = [play(shared, i) for i in (1, 2, 0, 2)]  # switch to each body and back
+    assert len(shared._sims) == 1
+    for (q, f), i in zip(runs, (1, 2, 0, 2), strict=True):
+        own = GripTrackingEnv(cfg, ReferenceSet([both.clip(i)], both.sensor_sites, both.insoles))
+        q_own, f_own = play(own, 0)
+        np.testing.assert_array_equal(q, q_own)
+        np.testing.assert_array_equal(f, f_own)
