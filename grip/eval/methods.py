@@ -237,15 +237,21 @@ def grip_method(options: MethodOptions) -> Grip:
 
 # ------------------------------------------------------------------ PIP physics on KinematicsNet
 def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float, cfg=None):
-    """PIP's optimiser on a kinematic estimate of ``rec``, from its true first-frame root."""
+    """PIP's optimiser on a kinematic estimate of ``rec``, started from the true first-frame
+    state (the GRIP protocol: the ground-truth pose and root at frame 0, the estimate after).
+
+    Starting from the estimate's own first pose instead can leave a foot deep in the floor at
+    the true root height, which makes every later QP infeasible (PIP-4's nets: 20 deg off at
+    frame 0 on some segments, 498 of 500 QPs failed and the body drifted off)."""
     from grip.baselines.pip_physics import PipPhysics
     from grip.core.metrics import global_to_local_rot
     from grip.kinematics.features import recording_body, targets
 
-    root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+    first = targets(rec.slice_frames(0, 2))
+    local = global_to_local_rot(global_rot)
+    local[0] = global_to_local_rot(first.global_rot[:1])[0]
     pip = PipPhysics(recording_body(rec), cfg)
-    out = pip.reconstruct(global_to_local_rot(global_rot), joint_vel, contact_prob, root0,
-                          name=rec.name)  # fmt: skip
+    out = pip.reconstruct(local, joint_vel, contact_prob, first.root_pos[0], name=rec.name)
     out.method = name
     out.ms_per_frame = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
     return out
