@@ -438,3 +438,23 @@ def test_vgrf_leaves_out_frames_without_forces() -> None:
     ins = np.array([[90.0, 200.0], [500.0, 500.0], [110.0, 200.0]])
     assert B.vgrf_error_n(pred, ins) == pytest.approx(5.0)
     assert math.isnan(B.vgrf_error_n(np.full((2, 2), np.nan), ins[:2]))
+
+
+@pytest.mark.parametrize("name", ["transpose", "pip"])
+def test_shipped_baselines_start_at_the_true_first_frame(name) -> None:
+    """The shipped TransPose-4 / PIP-4 networks load by default and reconstruct a real walk
+    (the bundled sample; the synthetic recordings float above the floor) from the ground truth
+    at its first frame (PIP: pose and root; TransPose: the root)."""
+    from prism_tools.io import load_recording
+
+    rec = load_recording(REPO_ROOT / "grip/assets/sample_recording.npz").slice_frames(0, FRAMES)
+    method = make_method(name, MethodOptions())
+    recon = method.reconstruct(rec)
+    gt = B.ground_truth(rec)
+    assert recon.n_frames == FRAMES and np.isfinite(recon.joint_pos).all()
+    np.testing.assert_allclose(recon.joint_pos[0, 0], gt.joint_pos[0, 0], atol=1e-6)
+    if name == "pip":
+        np.testing.assert_allclose(recon.global_rot[0], gt.global_rot[0], atol=1e-6)
+        assert recon.notes["qp_failures"] < FRAMES // 10
+    m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
+    assert m["MPJRE_deg"] < 60
