@@ -242,10 +242,11 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
                  "--policy", str(exported)]) == 2  # fmt: skip
     assert "missing.npz" in capsys.readouterr().err
     assert main([*argv[:-1], "npz,gif"]) == 2
-    # the demo: the bundled sample with GRIP, kinematics only and PIP physics, then exports
+    # the demo: the bundled sample with GRIP and the four other methods, the stream, exports
     demo = tmp_path / "demo"
     assert main(["demo", "--out", str(demo), "--policy", str(exported), "--no-video"]) == 0
     table = (demo / "metrics.md").read_text()
-    assert all(f"| {m} |" in table for m in ("grip", "kinematics", "kin+pip"))
-    assert len(list(demo.glob("*.npz"))) == 3 and len(list(demo.glob("*.png"))) == 1
+    assert all(f"| {m} |" in table for m in ("grip", "kinematics", "kin+pip", "transpose", "pip"))
+    assert "frames pushed" in capsys.readouterr().out
+    assert len(list(demo.glob("*.npz"))) == 5 and len(list(demo.glob("*.png"))) == 1
     assert len(list(demo.glob("*.bvh"))) == 1 and len(list(demo.glob("*.glb"))) == 1
