@@ -58,9 +58,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
-    from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
 
+    from grip.cli.kinematics import fit_run
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
     from grip.kinematics.baselines import (
@@ -69,7 +68,6 @@ def cmd_train(args: argparse.Namespace) -> int:
         load_baseline_sequences,
         n_inputs,
     )
-    from grip.kinematics.train import write_run_config
 
     config = args.config
     if config is None:
@@ -96,33 +94,5 @@ def cmd_train(args: argparse.Namespace) -> int:
         trainer = BaselineTrainer(cfg, train, val, out)
     except ValueError as e:
         raise CliError(str(e)) from e
-    last = out / "last.pt"
-    if last.exists():
-        try:
-            trainer.load(last)
-        except ValueError as e:
-            raise CliError(f"{e}; use another --out or the same settings") from e
-        print(f"resuming {last} at epoch {trainer.epoch}/{cfg.train.epochs}")
-    write_run_config(out, cfg, {"method": args.name, "data": str(args.data.resolve()),
-                                "train_frames": n_frames})  # fmt: skip
-    tc = cfg.train
-    total = tc.epochs * tc.steps_per_epoch
-    done = trainer.epoch * tc.steps_per_epoch
-    with SummaryWriter(str(out / "tb")) as writer, tqdm(total=total, initial=done,
-                                                          unit="step") as bar:  # fmt: skip
-
-        def progress(info: dict) -> None:
-            bar.set_postfix(epoch=info["epoch"], loss=f"{info['loss']:.4f}")
-            bar.update(1)
-
-        t1 = time.perf_counter()
-        trainer.fit(writer=writer, progress=progress)
-    dt = time.perf_counter() - t1
-    steps = total - done
-    if steps:
-        fps = steps * tc.batch_size * tc.window_frames / dt
-        print(f"trained {steps} steps in {dt:.0f} s ({steps / dt:.3f} steps/s, {fps:.0f} frames/s)")
-    if trainer.history:
-        print(f"final validation losses: {trainer.history[-1]['val']}")
-    print(f"checkpoints: {out / 'last.pt'} and {out / 'best.pt'}")
-    return 0
+    info = {"method": args.name, "data": str(args.data.resolve()), "train_frames": n_frames}
+    return fit_run(trainer, cfg, out, info, epochs=cfg.train.epochs, postfix="epoch")

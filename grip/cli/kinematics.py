@@ -127,14 +127,10 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def _train_one(data: Path, out: Path, cfg) -> int:
-    from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
-
     from grip.cli.main import CliError
     from grip.kinematics.dataset import load_split_sequences
-    from grip.kinematics.train import Trainer, write_run_config
+    from grip.kinematics.train import Trainer
 
-    last = out / "last.pt"
     t0 = time.perf_counter()
     try:
         train = load_split_sequences(data, "train", cfg.features)
@@ -146,20 +142,37 @@ def _train_one(data: Path, out: Path, cfg) -> int:
           f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, train, val, out)
+    return fit_run(trainer, cfg, out, {"data": str(data.resolve()), "train_frames": n_frames},
+                   epochs=cfg.total_epochs(), postfix="phase")  # fmt: skip
+
+
+def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -> int:
+    """The training loop of ``grip train-kin`` and ``grip train-baseline``: resume ``trainer``
+    from ``OUT/last.pt`` when it exists, write the run config (with ``info``), fit with a
+    progress bar (``postfix``: the progress key shown next to the loss) and TensorBoard scalars,
+    and print the throughput and where the checkpoints are."""
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.kinematics.train import write_run_config
+
+    last = out / "last.pt"
     if last.exists():
         try:
             trainer.load(last)
         except ValueError as e:
             raise CliError(f"{e}; use another --out or the same settings") from e
-        print(f"resuming {last} at epoch {trainer.epoch}/{cfg.total_epochs()}")
-    write_run_config(out, cfg, {"data": str(data.resolve()), "train_frames": n_frames})
-    total = cfg.total_epochs() * cfg.train.steps_per_epoch
-    done = trainer.epoch * cfg.train.steps_per_epoch
+        print(f"resuming {last} at epoch {trainer.epoch}/{epochs}")
+    write_run_config(out, cfg, info)
+    tc = cfg.train
+    total = epochs * tc.steps_per_epoch
+    done = trainer.epoch * tc.steps_per_epoch
     with SummaryWriter(str(out / "tb")) as writer, tqdm(total=total, initial=done,
                                                           unit="step") as bar:  # fmt: skip
 
-        def progress(info: dict) -> None:
-            bar.set_postfix(phase=info["phase"], loss=f"{info['loss']:.4f}")
+        def progress(p: dict) -> None:
+            bar.set_postfix({postfix: p[postfix], "loss": f"{p['loss']:.4f}"})
             bar.update(1)
 
         t1 = time.perf_counter()
@@ -167,8 +180,9 @@ def _train_one(data: Path, out: Path, cfg) -> int:
     dt = time.perf_counter() - t1
     steps = total - done
     if steps:
-        fps = steps * cfg.train.batch_size * cfg.train.window_frames / dt
-        print(f"trained {steps} steps in {dt:.0f} s ({fps:.0f} frames/s)")
+        fps = steps * tc.batch_size * tc.window_frames / dt
+        print(f"trained {steps} steps in {dt:.0f} s ({steps / dt:.3f} steps/s, {fps:.0f} "
+              "frames/s)")
     if trainer.history:
         print(f"final validation losses: {trainer.history[-1]['val']}")
     print(f"checkpoints: {out / 'last.pt'} and {out / 'best.pt'}")

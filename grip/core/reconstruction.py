@@ -61,8 +61,31 @@ class ReconstructionError(ValueError):
     """A reconstruction (or its file) is malformed; the message names the file and the key."""
 
 
+class PoseTrack:
+    """What a motion with ``joint_pos (T, 24, 3)`` and ``global_rot (T, 24, 3, 3)`` (world
+    frame) derives: shared by :class:`Reconstruction` and the ground truth
+    (:class:`grip.kinematics.features.GroundTruth`)."""
+
+    joint_pos: np.ndarray
+    global_rot: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.joint_pos.shape[0])
+
+    @property
+    def root_pos(self) -> np.ndarray:
+        """``(T, 3)`` pelvis trajectory, world, m."""
+        return self.joint_pos[:, 0]
+
+    @property
+    def local_rot(self) -> np.ndarray:
+        """``(T, 24, 3, 3)`` rotations relative to the parent (row 0 = root world rotation)."""
+        return global_to_local_rot(self.global_rot)
+
+
 @dataclass(eq=False)
-class Reconstruction:
+class Reconstruction(PoseTrack):
     """Reconstructed motion of one recording (see the module docstring for every array).
 
     Attributes:
@@ -117,19 +140,6 @@ class Reconstruction:
             raise ReconstructionError(f"{where}: fall events {f.tolist()} outside 0..{t - 1}")
         self.falls = f
 
-    @property
-    def n_frames(self) -> int:
-        return int(self.joint_pos.shape[0])
-
-    @property
-    def root_pos(self) -> np.ndarray:
-        """``(T, 3)`` pelvis trajectory, m."""
-        return self.joint_pos[:, 0]
-
-    @property
-    def local_rot(self) -> np.ndarray:
-        """``(T, 24, 3, 3)`` rotations relative to the parent (row 0 = root world rotation)."""
-        return global_to_local_rot(self.global_rot)
 
     @property
     def fell(self) -> bool:

@@ -28,9 +28,10 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import LiveClip, ReferenceClip, ReferenceSet
-from grip.core.rotations import matrix_to_6d, sixd_to_matrix
+from grip.core.rotations import matrix_to_6d
 from grip.eval.reconstruct import ClipPlayer, RecoveryConfig, inference_env
 from grip.kinematics.features import FeatureStream, SensorFrame, recording_body
+from grip.kinematics.inference import decode_outputs
 from grip.kinematics.reference import gt_qpos
 
 LATENCY_FRAMES = 2
@@ -65,7 +66,8 @@ class StreamFrame:
 
 def calibration_clip(calibration, sensor_dim: int) -> ReferenceClip:
     """A :class:`ReferenceClip` of a recording's first two frames of ground truth (one frame:
-    the body at rest), the start of a stream; its estimate arrays are placeholders."""
+    the body at rest), the start of a stream. Only its ground truth is read (by
+    :class:`grip.core.reference.LiveClip`); its estimate arrays are zeros and identities."""
     n = min(calibration.n_frames, 2)
     q = gt_qpos(calibration.slice_frames(0, n))
     if n == 1:
@@ -158,13 +160,9 @@ class GripStream:
 
     def _next(self, row: np.ndarray) -> StreamFrame | None:
         """Estimate the frame of ``row``; add it to the clip; play one control step."""
-        o = self._kin.step(row)
-        i = self.clip.append(
-            o["fp"].astype(np.float64).reshape(sk.N_JOINTS, 3),
-            sixd_to_matrix(o["fa"].astype(np.float64).reshape(sk.N_JOINTS, 6)),
-            o["lv"].astype(np.float64).reshape(len(sk.VELOCITY_JOINTS), 3),
-            row,
-        )  # fmt: skip
+        o = {k: v.astype(np.float64) for k, v in self._kin.step(row).items()}
+        joint_pos, global_rot, vel = decode_outputs(o, 1)
+        i = self.clip.append(joint_pos[0], global_rot[0], vel[0], row)
         if i == 1:  # the first two estimates are in: the humanoid starts at the calibration
             ref = ReferenceSet([self.clip], self._sites, self._insoles, "<stream>")
             self.env = inference_env(self.runner, ref)

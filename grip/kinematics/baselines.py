@@ -71,6 +71,7 @@ from grip.kinematics.train import (
     export_for_inference,
     git_hash,
     load_checkpoint,
+    log_epoch,
     rotate_batch,
 )
 
@@ -728,12 +729,7 @@ class BaselineTrainer:
                       "train": {k: v / tc.steps_per_epoch for k, v in sums.items()},
                       "val": val}  # fmt: skip
             self.history.append(record)
-            if writer is not None:
-                for k, v in record["train"].items():
-                    writer.add_scalar(f"train/{k}", v, self.epoch)
-                for k, v in val.items():
-                    writer.add_scalar(f"val/{k}", v, self.epoch)
-                writer.flush()
+            log_epoch(writer, record)
             self.epoch += 1
             self.update_best(val)
             self._write(self.run_dir / "best.pt", self.best_state())

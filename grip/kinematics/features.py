@@ -22,6 +22,7 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics
+from grip.core.reconstruction import PoseTrack
 from grip.core.rotations import (
     angular_velocity,
     angular_velocity_at,
@@ -308,7 +309,7 @@ def targets(rec) -> Targets:
 
 
 @dataclass(frozen=True, eq=False)
-class GroundTruth:
+class GroundTruth(PoseTrack):
     """Ground truth of one recording in the world frame, on the subject's body model: what
     every evaluation (``grip bench``, ``grip eval-policy``, the exports' summary) compares with.
 
@@ -332,15 +333,6 @@ class GroundTruth:
     insole_contacts: np.ndarray | None = None
 
     @property
-    def n_frames(self) -> int:
-        return int(self.joint_pos.shape[0])
-
-    @property
-    def root_pos(self) -> np.ndarray:
-        """``(T, 3)`` pelvis trajectory, world, m."""
-        return self.joint_pos[:, 0]
-
-    @property
     def foot_contacts(self) -> np.ndarray:
         """``(T, 2)`` bool foot contacts for foot sliding: the insoles' where both exist, else
         :func:`grip.core.metrics.contacts_from_motion` of the true foot joints (TransPose's
@@ -350,13 +342,6 @@ class GroundTruth:
         from grip.core.metrics import contacts_from_motion
 
         return contacts_from_motion(self.joint_pos[:, list(sk.FOOT_JOINTS)], self.fps)
-
-    @property
-    def local_rot(self) -> np.ndarray:
-        """``(T, 24, 3, 3)`` rotations relative to the parent (row 0 = root world rotation)."""
-        from grip.core.metrics import global_to_local_rot
-
-        return global_to_local_rot(self.global_rot)
 
     def head(self, n: int) -> GroundTruth:
         """The first ``n`` frames."""

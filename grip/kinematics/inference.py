@@ -37,6 +37,14 @@ class KinematicEstimate:
     root_pos: np.ndarray
 
 
+def decode_outputs(o: dict[str, np.ndarray], n: int) -> tuple[np.ndarray, ...]:
+    """KinematicsNet outputs of ``n`` frames (``(n, dim)`` or flat, float64) -> root-relative
+    joints ``(n, 24, 3)``, global rotations ``(n, 24, 3, 3)`` and the velocities of the
+    velocity joints ``(n, 6, 3)``: what offline and streaming inference hand on."""
+    return (o["fp"].reshape(n, 24, 3), sixd_to_matrix(o["fa"].reshape(n, 24, 6)),
+            o["lv"].reshape(n, 6, 3))  # fmt: skip
+
+
 class KinematicsEstimator:
     """A trained KinematicsNet with its normaliser and feature settings."""
 
@@ -89,13 +97,13 @@ class KinematicsEstimator:
         return res
 
     def _estimate(self, o: dict[str, np.ndarray], rec, n: int) -> KinematicEstimate:
-        vel = o["lv"].reshape(n, 6, 3)
+        joint_pos, global_rot, vel = decode_outputs(o, n)
         root0 = np.asarray(rec.smpl_params.trans[0], dtype=np.float64) + np.asarray(
             rec.smpl_params.root_offset, dtype=np.float64)  # fmt: skip
         return KinematicEstimate(
             leaf_pos=o["lp"].reshape(n, 5, 3),
-            joint_pos=o["fp"].reshape(n, 24, 3),
-            global_rot=sixd_to_matrix(o["fa"].reshape(n, 24, 6)),
+            joint_pos=joint_pos,
+            global_rot=global_rot,
             velocity=vel,
             root_pos=integrate_root(root0, vel[:, -1], rec.fps),
         )

@@ -171,6 +171,17 @@ def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------------- training
+def log_epoch(writer, record: dict) -> None:
+    """Write an epoch's ``record["train"]`` and ``record["val"]`` losses to TensorBoard
+    (``writer``: a ``SummaryWriter`` or ``None``)."""
+    if writer is None:
+        return
+    for part in ("train", "val"):
+        for k, v in record[part].items():
+            writer.add_scalar(f"{part}/{k}", v, record["epoch"])
+    writer.flush()
+
+
 class Trainer:
     """Owns the model, optimiser, data and the run folder."""
 
@@ -282,12 +293,7 @@ class Trainer:
                 "val": val,
             }
             self.history.append(record)
-            if writer is not None:
-                for k, v in record["train"].items():
-                    writer.add_scalar(f"train/{k}", v, self.epoch)
-                for k, v in val.items():
-                    writer.add_scalar(f"val/{k}", v, self.epoch)
-                writer.flush()
+            log_epoch(writer, record)
             self.epoch += 1
             if phase == "joint" and val["total"] < self.best_val:
                 self.best_val = val["total"]
