@@ -52,8 +52,8 @@ Per frame (state ``q, qd``; inputs pose ``phi``, joint velocities ``v``, contact
 The QP is solved with quadprog (the solver PIP used) or daqp, through ``qpsolvers``. A failed
 solve (no solution, a non-finite one, or ``|[qdd, lambda, tau]| > 1e4`` as in PIP's code) is
 retried with the other solver (section 1.6 names proxqp for the retry; it is not installed
-here); if that fails too the frame keeps ``qdd = 0`` (the body coasts) and the failure is
-counted in the notes.
+here); if that fails too the frame has ``qdd = 0`` and, by default, the body stops there
+(:attr:`PipConfig.on_failure`); the failure is counted in the notes.
 
 Frame 0 of :meth:`PipPhysics.reconstruct` outputs the reference pose unchanged at the given
 initial root position, with the state at rest unless an initial velocity is given (PIP's code).
@@ -114,6 +114,7 @@ _ENUMS = {
     "pd_joints": ("code", "all"),
     "weight_form": ("code", "paper"),
     "contact_rule": ("code", "paper"),
+    "on_failure": ("stop", "coast"),
     "solver": SOLVERS,
 }
 
@@ -161,6 +162,12 @@ class PipConfig:
         max_solution_norm: A solution ``[qdd, lambda, tau]`` with a larger norm counts as a
             failure (PIP code: 1e4).
         regularization: Added to the QP's Hessian diagonal (quadprog needs strict convexity).
+        on_failure: What a frame whose QP failed does (``qdd = 0`` either way): ``"stop"``
+            also zeroes the velocity (the body halts, and the next QP starts from rest);
+            ``"coast"`` keeps it. Coasting never recovers once the failures chain: without
+            gravity or contact forces a body dropping onto the floor keeps its speed and
+            sinks through it (a lie-down segment: 323 of 500 frames failed, 1.9 m under
+            the floor), while from rest the QP is feasible again.
     """
 
     fps: float = 100.0
@@ -192,6 +199,7 @@ class PipConfig:
     fallback_solver: str | None = "auto"
     max_solution_norm: float = 1e4
     regularization: float = 1e-8
+    on_failure: str = "stop"
 
     def __post_init__(self) -> None:
         for name, allowed in _ENUMS.items():
@@ -566,6 +574,8 @@ class PipPhysics:
         qdd, lam = y[:nv], y[nv:].reshape(nc, 3)
         tau = k_mat @ y + h
 
+        if failed and cfg.on_failure == "stop":
+            qvel = np.zeros_like(qvel)
         if integrate:
             if cfg.integrator == "semi_implicit":
                 d.qvel[:] = qvel + qdd * dt

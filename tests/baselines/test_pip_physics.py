@@ -288,6 +288,23 @@ def test_failed_qp_keeps_going_and_is_counted(body, monkeypatch) -> None:
     assert np.isfinite(rec.torques).all() and np.abs(rec.residual[:, 2]).min() > 100.0
 
 
+@pytest.mark.parametrize("mode", ["stop", "coast"])
+def test_a_failed_frame_stops_or_coasts(body, monkeypatch, mode: str) -> None:
+    monkeypatch.setattr(pip, "_solve_qp", lambda *a: None)
+    cfg = pip.PipConfig(on_failure=mode, fallback_solver=None)
+    phys, rot, root = _standing(body, cfg)
+    rot_s, vel, prob, _ = _sequence(rot, root, 6)
+    qvel0 = np.zeros(phys.nv)
+    qvel0[2] = -2.0  # dropping at 2 m/s, as onto the floor when lying down
+    rec = phys.reconstruct(rot_s, vel, prob, root, qvel0=qvel0)
+    assert rec.notes["qp_failures"] == 6  # frame 0 solves too (its forces), without advancing
+    drop = rec.joint_pos[0, 0, 2] - rec.joint_pos[-1, 0, 2]
+    if mode == "stop":  # halts at the first failed frame: no further motion
+        assert drop == pytest.approx(0.0, abs=1e-12)
+    else:  # keeps 2 m/s for 5 frames, without gravity or forces
+        assert drop == pytest.approx(5 * 2.0 / cfg.fps, rel=1e-9)
+
+
 def test_retry_with_the_fallback_solver(body, monkeypatch) -> None:
     inner = pip._solve_qp
     phys, rot, root = _standing(body)
