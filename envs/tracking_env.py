@@ -176,6 +176,14 @@ class GripTrackingEnv(gym.Env):
         self._amp_buf = np.empty(A.FRAME_DIM)
         self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
         self._weights = tuple((k, float(getattr(cfg.reward.weights, k))) for k in R.TERMS)
+        self.termination_dist_m = cfg.termination_dist_m
+
+    def set_termination_dist(self, dist_m: float) -> None:
+        """Change the early-termination distance (m, 0 = off) from the next step on: the
+        training curriculum loosens it at first (:class:`policies.config.StageConfig`)."""
+        if not dist_m >= 0:
+            raise ValueError(f"termination distance must be >= 0 m, got {dist_m}")
+        self.termination_dist_m = float(dist_m)
 
     # ------------------------------------------------------------------ models
     def _scene_key(self, clip: ReferenceClip, i: int) -> tuple:
@@ -465,9 +473,8 @@ class GripTrackingEnv(gym.Env):
             reward += wk * terms[k]
         dist = np.sqrt(sq[0])
         err = float(dist.max())  # (the unstable check above also makes this never NaN)
-        terminated = (cfg.termination_dist_m > 0 and err > cfg.termination_dist_m) or (
-            pvw[0, 0, 2] < cfg.fall_height_m
-        )
+        tau = self.termination_dist_m
+        terminated = (tau > 0 and err > tau) or (pvw[0, 0, 2] < cfg.fall_height_m)
         truncated = t >= clip.n_frames - 1 or (
             cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
         )

@@ -147,9 +147,11 @@ def load_vecnorm_state(vn: VecNormalize, state: dict[str, np.ndarray]) -> None:
 class TrainingCallback(BaseCallback):
     """Discriminator updates, logging, progress bar and checkpoints of a training run."""
 
-    def __init__(self, trainer: PolicyTrainer, stage_name: str, bar) -> None:
+    def __init__(self, trainer: PolicyTrainer, stage_name: str, stage: StageConfig,
+                 bar) -> None:  # fmt: skip
         super().__init__()
-        self.trainer, self.stage_name, self.bar = trainer, stage_name, bar
+        self.trainer, self.stage_name, self.stage, self.bar = trainer, stage_name, stage, bar
+        self.termination_m = stage.termination_dist_m
         self.sums: dict[str, float] = defaultdict(float)
         self.n = 0
         self.episodes: list[tuple[bool, float]] = []  # (success, mean MPJPE m)
@@ -162,6 +164,14 @@ class TrainingCallback(BaseCallback):
         n = self.training_env.num_envs
         self.ep_err, self.ep_len = np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
+        self._set_termination()
+
+    def _set_termination(self) -> None:
+        """The termination curriculum: the stage's distance after the steps done so far."""
+        tau = self.stage.termination_at(self.trainer.stage_done)
+        if tau != self.termination_m or self.rollouts == 0:
+            self.training_env.env_method("set_termination_dist", tau)
+            self.termination_m = tau
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
@@ -194,9 +204,10 @@ class TrainingCallback(BaseCallback):
             log("episode/success_rate", float(ok.mean()))
             log("episode/mpjpe_mm", 1000 * float(np.mean([e[1] for e in self.episodes])))
             log("episode/count", len(self.episodes))
+        log("episode/termination_m", self.termination_m)
         row = {"timesteps": int(tr.total_done()), "stage": self.stage_name,
-               "wall_s": tr.wall_s(), **{f"reward/{k}": self.sums[k] / max(self.n, 1)
-                                         for k in INFO_TERMS},
+               "wall_s": tr.wall_s(), "termination_m": self.termination_m,
+               **{f"reward/{k}": self.sums[k] / max(self.n, 1) for k in INFO_TERMS},
                **{f"amp/{k}": v for k, v in stats.items()}}  # fmt: skip
         if self.episodes:
             row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
@@ -210,6 +221,7 @@ class TrainingCallback(BaseCallback):
         self.n = 0
         self.episodes = []
         self.rollouts += 1
+        self._set_termination()
         if self.rollouts % tr.cfg.checkpoint_every == 0:
             tr.save_checkpoint()
 
@@ -369,7 +381,7 @@ class PolicyTrainer:
             self.model.set_env(self.venv)
         self._apply_fixed_std()
         self.stage_done0 = self.stage_done
-        cb = TrainingCallback(self, name, bar if bar is not None else tqdm(disable=True))
+        cb = TrainingCallback(self, name, stage, bar if bar is not None else tqdm(disable=True))
         self.model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False,
                          tb_log_name="ppo", progress_bar=False)  # fmt: skip
         self.stage_done = stage.timesteps

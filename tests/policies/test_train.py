@@ -20,7 +20,8 @@ def _tiny() -> PolicyRunConfig:
                       net_arch=(32, 32)),
         amp=AmpConfig(window=3, hidden=(32,), batch_size=32, updates_per_rollout=1,
                       replay_size=500),
-        stage1=StageConfig(timesteps=128, max_episode_frames=40, categories=("walk*",)),
+        stage1=StageConfig(timesteps=128, max_episode_frames=40, categories=("walk*",),
+                           termination_start_m=0.6, termination_anneal_steps=64),
         stage2=StageConfig(timesteps=64, termination_dist_m=0.0, fall_height_m=0.3,
                            max_episode_frames=50),
         checkpoint_every=1,
@@ -47,6 +48,29 @@ def test_training_runs_both_stages_and_logs_every_term(run):
     state = json.loads((path / "checkpoint" / "state.json").read_text())
     assert state["stage_index"] == 1 and state["stage_done"] == 64
     assert (path / "tb").is_dir()
+    # the termination curriculum: 0.6 m tightening to 0.25 m within stage 1, off in stage 2
+    tau = [h["termination_m"] for h in tr.history]
+    s1 = tau[: stages.count("stage1")]
+    assert s1[0] == pytest.approx(0.6) and s1[-1] == pytest.approx(0.25)
+    assert tau[-1] == 0.0
+
+
+def test_termination_schedule_and_env_setting():
+    st = StageConfig(termination_dist_m=0.25, termination_start_m=0.65,
+                     termination_anneal_steps=1000)  # fmt: skip
+    assert st.termination_at(0) == pytest.approx(0.65)
+    assert st.termination_at(500) == pytest.approx(0.45)
+    assert st.termination_at(5000) == pytest.approx(0.25)
+    assert StageConfig(termination_dist_m=0.25).termination_at(0) == 0.25
+    env = GripTrackingEnv()
+    env.set_termination_dist(1e-6)  # any motion at all is "too far": ends at the first step
+    env.reset(seed=0)
+    assert env.step(np.zeros(env.action_space.shape))[2]
+    env.set_termination_dist(0.0)  # off
+    env.reset(seed=0)
+    assert not env.step(np.zeros(env.action_space.shape))[2]
+    with pytest.raises(ValueError, match="termination"):
+        env.set_termination_dist(-1.0)
 
 
 def test_resume_extends_the_last_stage(run, tmp_path):
