@@ -71,6 +71,8 @@ class PPOConfig:
         n_epochs: Passes over each rollout.
         learning_rate: Adam learning rate.
         gamma, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm: PPO as in SB3.
+        target_kl: Stop a rollout's update epochs early once the approximate KL divergence
+            passes 1.5 x this (SB3); 0 = off.
         normalize_reward: Scale rewards by a running return std (SB3 VecNormalize).
         clip_obs: Normalised observations are clipped to +- this.
         threads: Torch threads of the learner (0: all cores).
@@ -93,6 +95,7 @@ class PPOConfig:
     ent_coef: float = 0.0
     vf_coef: float = 0.5
     max_grad_norm: float = 1.0
+    target_kl: float = 0.0
     normalize_reward: bool = True
     clip_obs: float = 10.0
     threads: int = 0

@@ -314,14 +314,21 @@ class PolicyTrainer:
         return VecNormalize(mon, norm_obs=True, norm_reward=p.normalize_reward,
                             clip_obs=p.clip_obs, gamma=p.gamma)  # fmt: skip
 
+    def _ppo_settings(self) -> dict:
+        """The PPO settings of the config that a resumed run takes over from the config, not
+        from the checkpoint (so ``--set ppo.learning_rate=...`` applies to a resumed run)."""
+        p = self.cfg.ppo
+        return {"learning_rate": p.learning_rate, "n_steps": p.n_steps,
+                "batch_size": p.batch_size, "n_epochs": p.n_epochs, "gae_lambda": p.gae_lambda,
+                "clip_range": p.clip_range, "ent_coef": p.ent_coef, "vf_coef": p.vf_coef,
+                "max_grad_norm": p.max_grad_norm,
+                "target_kl": p.target_kl if p.target_kl > 0 else None}  # fmt: skip
+
     def _new_model(self, venv: VecNormalize) -> PPO:
         p = self.cfg.ppo
-        return PPO("MultiInputPolicy", venv, learning_rate=p.learning_rate, n_steps=p.n_steps,
-                   batch_size=p.batch_size, n_epochs=p.n_epochs, gamma=p.gamma,
-                   gae_lambda=p.gae_lambda, clip_range=p.clip_range, ent_coef=p.ent_coef,
-                   vf_coef=p.vf_coef, max_grad_norm=p.max_grad_norm,
-                   policy_kwargs=self._policy_kwargs(), tensorboard_log=str(self.run_dir / "tb"),
-                   seed=self.cfg.seed, device=p.device, verbose=0)  # fmt: skip
+        return PPO("MultiInputPolicy", venv, gamma=p.gamma, policy_kwargs=self._policy_kwargs(),
+                   tensorboard_log=str(self.run_dir / "tb"), seed=self.cfg.seed,
+                   device=p.device, verbose=0, **self._ppo_settings())  # fmt: skip
 
     def _apply_fixed_std(self) -> None:
         if self.cfg.ppo.fixed_std:
@@ -373,7 +380,7 @@ class PolicyTrainer:
             with np.load(self.ckpt_dir / "vecnorm.npz", allow_pickle=False) as z:
                 load_vecnorm_state(self.venv, dict(z))
             self.model = PPO.load(self.ckpt_dir / "model.zip", env=self.venv,
-                                  device=self.cfg.ppo.device)  # fmt: skip
+                                  device=self.cfg.ppo.device, **self._ppo_settings())  # fmt: skip
         elif self.model is None:
             self.model = self._new_model(self.venv)
         else:

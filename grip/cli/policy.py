@@ -88,8 +88,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     x.set_defaults(func=cmd_export)
 
 
-RESUMABLE: tuple[str, ...] = ("stage2.", "checkpoint_every", "ppo.threads", "ppo.device")
-"""Settings (dotted prefixes) that may differ when a run is resumed."""
+RESUMABLE: tuple[str, ...] = (
+    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
+    "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
+    "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm", "ppo.target_kl",
+)  # fmt: skip
+"""Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
+run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:

@@ -85,6 +85,18 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     tr2.train()
     assert tr2.total_done() == 128 + 128
     assert len(tr2.history) > len(tr.history)
+    # a resumed run takes its optimiser settings from the config, not from the checkpoint
+    assert tr2.model.learning_rate == cfg.ppo.learning_rate
+    copy2 = tmp_path / "resumed_lr"
+    shutil.copytree(path, copy2)
+    slower = dataclasses.replace(
+        longer, ppo=dataclasses.replace(cfg.ppo, learning_rate=1e-5, n_epochs=2, target_kl=0.02)
+    )
+    tr3 = PolicyTrainer(slower, copy2, SAMPLE_REFERENCE)
+    tr3.train()
+    assert tr3.model.learning_rate == 1e-5 and tr3.model.n_epochs == 2
+    assert tr3.model.target_kl == 0.02
+    assert tr3.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
 
 
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
