@@ -154,7 +154,7 @@ class TrainingCallback(BaseCallback):
         self.termination_m = stage.termination_dist_m
         self.sums: dict[str, float] = defaultdict(float)
         self.n = 0
-        self.episodes: list[tuple[bool, float]] = []  # (success, mean MPJPE m)
+        self.episodes: list[tuple[bool, float, int]] = []  # (success, mean MPJPE m, frames)
         self.ep_err = np.zeros(0)
         self.ep_len = np.zeros(0)
         self.rollouts = 0
@@ -184,7 +184,8 @@ class TrainingCallback(BaseCallback):
                 self.ep_len[i] += 1
             if done:
                 ok = bool(info.get("TimeLimit.truncated", False))
-                self.episodes.append((ok, self.ep_err[i] / max(self.ep_len[i], 1)))
+                n_ep = int(self.ep_len[i])
+                self.episodes.append((ok, self.ep_err[i] / max(n_ep, 1), n_ep))
                 self.ep_err[i] = self.ep_len[i] = 0
         self.n += len(infos)
         self.bar.update(len(infos))
@@ -212,6 +213,7 @@ class TrainingCallback(BaseCallback):
         if self.episodes:
             row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
             row["mpjpe_mm"] = 1000 * float(np.mean([e[1] for e in self.episodes]))
+            row["ep_len"] = float(np.mean([e[2] for e in self.episodes]))
         tr.history.append(row)
         d_acc = (stats["acc_real"] + stats["acc_fake"]) / 2
         succ, err = row.get("success_rate", 0.0), row.get("mpjpe_mm", 0.0)

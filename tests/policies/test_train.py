@@ -53,6 +53,19 @@ def test_training_runs_both_stages_and_logs_every_term(run):
     s1 = tau[: stages.count("stage1")]
     assert s1[0] == pytest.approx(0.6) and s1[-1] == pytest.approx(0.25)
     assert tau[-1] == 0.0
+    ended = [h for h in tr.history if "ep_len" in h]
+    assert ended and all(1 <= h["ep_len"] <= 50 for h in ended)  # episodes of at most 50 frames
+
+
+def test_learning_curves_png(run, tmp_path):
+    from policies.report import plot_curves
+
+    _, tr = run
+    out = tmp_path / "curves.png"
+    plot_curves(tr.history, out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    plot_curves([], tmp_path / "empty.png")  # a run without a rollout yet still gets a figure
+    assert (tmp_path / "empty.png").stat().st_size > 0
 
 
 def test_termination_schedule_and_env_setting():
