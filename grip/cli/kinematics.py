@@ -57,26 +57,36 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.set_defaults(func=cmd_train)
     add_eval_parser(sub)
-    add_export_parser(sub, "kin-export", "KinematicsNet",
-                      "the form in which the default model ships "
-                      "(grip/assets/kinematics_default.pt)",
-                      "grip kin-export runs/kin/best.pt --out grip/assets/kinematics_default.pt",
-                      "grip.kinematics.train:export_for_inference")
+    add_export_parser(
+        sub,
+        "kin-export",
+        "KinematicsNet",
+        "the form in which the default model ships (grip/assets/kinematics_default.pt)",
+        "grip kin-export runs/kin/best.pt --out grip/assets/kinematics_default.pt",
+        "grip.kinematics.train:export_for_inference",
+    )
 
 
-def add_export_parser(sub: argparse._SubParsersAction, name: str, what: str, shipped: str,
-                      example: str, exporter: str) -> None:
-    """A ``<name> CKPT --out FILE [--fp32]`` command writing a small inference copy of a
-    training checkpoint with ``exporter`` (``"module:function(src, dst, half) -> bytes"``)."""
+def add_export_parser(
+    sub: argparse._SubParsersAction, name: str, what: str, shipped: str, example: str, exporter: str
+) -> None:
+    """A ``<name> CKPT --out FILE [--precision P]`` command writing a small inference copy of a
+    training checkpoint with ``exporter`` (``"module:function(src, dst, precision) -> bytes"``)."""
     x = sub.add_parser(
         name,
-        help=f"write a small inference-only (fp16) copy of a {what} checkpoint",
-        description=f"Drop the optimiser state and store the weights as float16: {shipped}.",
+        help=f"write a small inference-only copy of a {what} checkpoint",
+        description=f"Drop the optimiser state and store the weights as float16 (or int8 with "
+        f"a scale per row, or float32): {shipped}.",
         epilog=f"example: {example}",
     )
     x.add_argument("checkpoint", type=Path, help="training checkpoint (RUN/best.pt)")
     x.add_argument("--out", required=True, type=Path, help="output .pt")
-    x.add_argument("--fp32", action="store_true", help="keep float32 weights")
+    x.add_argument(
+        "--precision",
+        choices=("fp32", "fp16", "int8"),
+        default="fp16",
+        help="weight storage (default fp16; int8 halves the file again)",
+    )
     x.set_defaults(func=cmd_export, exporter=exporter)
 
 
@@ -88,7 +98,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     module, func = args.exporter.split(":")
     export = getattr(importlib.import_module(module), func)
     try:
-        size = export(args.checkpoint, args.out, half=not args.fp32)
+        size = export(args.checkpoint, args.out, precision=args.precision)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e)) from e
     print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
@@ -181,8 +191,7 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
     steps = total - done
     if steps:
         fps = steps * tc.batch_size * tc.window_frames / dt
-        print(f"trained {steps} steps in {dt:.0f} s ({steps / dt:.3f} steps/s, {fps:.0f} "
-              "frames/s)")
+        print(f"trained {steps} steps in {dt:.0f} s ({steps / dt:.3f} steps/s, {fps:.0f} frames/s)")
     if trainer.history:
         print(f"final validation losses: {trainer.history[-1]['val']}")
     print(f"checkpoints: {out / 'last.pt'} and {out / 'best.pt'}")

@@ -73,6 +73,7 @@ from grip.kinematics.train import (
     load_checkpoint,
     log_epoch,
     rotate_batch,
+    unpack_weights,
 )
 
 METHODS: tuple[str, ...] = ("transpose", "pip")
@@ -819,15 +820,16 @@ def replace_train(cfg: RunConfig, **kw) -> RunConfig:
     return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, **kw))
 
 
-def export_baseline(src: str | os.PathLike, dst: str | os.PathLike, half: bool = True) -> int:
-    """Write a small inference-only copy of a baseline checkpoint (float16 weights with
-    ``half``, no optimiser state). Returns the file size, bytes.
+def export_baseline(src: str | os.PathLike, dst: str | os.PathLike, precision: str = "fp16") -> int:
+    """Write a small inference-only copy of a baseline checkpoint (weights at ``precision``,
+    :func:`grip.kinematics.train.pack_weights`; no optimiser state). Returns the file size,
+    bytes.
 
     Raises:
         ValueError: ``src`` is not a TransPose/PIP baseline checkpoint.
     """
     config_from_json(load_checkpoint(src)["config"], str(src))
-    return export_for_inference(src, dst, half=half)
+    return export_for_inference(src, dst, precision=precision)
 
 
 # ---------------------------------------------------------------------------- inference
@@ -872,7 +874,7 @@ class BaselineEstimator:
         cfg = config_from_json(ck["config"], str(path))
         nets = build_nets(cfg)
         try:
-            nets.load_state_dict({k: v.float() for k, v in ck["model"].items()})
+            nets.load_state_dict(unpack_weights(ck["model"]))
         except RuntimeError as e:
             raise ValueError(f"{path}: weights do not match the configuration ({e})") from e
         norm = Normalizer(ck["norm_mean"].float().numpy(), ck["norm_std"].float().numpy())

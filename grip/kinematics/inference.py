@@ -14,7 +14,7 @@ from grip.core.rotations import sixd_to_matrix
 from grip.kinematics.dataset import TARGET_KEYS, Normalizer
 from grip.kinematics.features import input_features, targets
 from grip.kinematics.model import KinematicsNet
-from grip.kinematics.train import load_checkpoint, run_config_from_dict
+from grip.kinematics.train import load_checkpoint, run_config_from_dict, unpack_weights
 
 
 @dataclass
@@ -58,8 +58,7 @@ class KinematicsEstimator:
         ck = load_checkpoint(path)
         cfg = run_config_from_dict(json.loads(ck["config"]))
         model = KinematicsNet(cfg.net_config())
-        state = {k: v.float() for k, v in ck["model"].items()}
-        model.load_state_dict(state)
+        model.load_state_dict(unpack_weights(ck["model"]))
         norm = Normalizer(ck["norm_mean"].float().numpy(), ck["norm_std"].float().numpy())
         return cls(model, norm, cfg)
 

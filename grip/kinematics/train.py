@@ -364,17 +364,51 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     return ck
 
 
-def export_for_inference(src: str | os.PathLike, dst: str | os.PathLike, half: bool = True) -> int:
+PRECISIONS: tuple[str, ...] = ("fp32", "fp16", "int8")
+"""Weight storage of inference exports (:func:`pack_weights`)."""
+
+_SCALE = "@scale"
+
+
+def pack_weights(state: dict[str, torch.Tensor], precision: str) -> dict[str, torch.Tensor]:
+    """A state dict stored at ``precision``: ``"fp32"``, ``"fp16"``, or ``"int8"`` (every weight
+    matrix of at least 256 entries as int8 with one float32 scale per row, under
+    ``<name>@scale``, symmetric: ``w = q * scale``; the rest float16). :func:`unpack_weights`
+    restores float32 tensors."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r}: use one of {list(PRECISIONS)}")
+    out: dict[str, torch.Tensor] = {}
+    for k, v in state.items():
+        if not v.is_floating_point() or precision == "fp32":
+            out[k] = v
+        elif precision == "int8" and v.dim() == 2 and v.numel() >= 256:
+            w = v.float()
+            scale = w.abs().amax(dim=1, keepdim=True) / 127.0
+            scale[scale == 0] = 1.0
+            out[k] = torch.round(w / scale).to(torch.int8)
+            out[k + _SCALE] = scale
+        else:
+            out[k] = v.half()
+    return out
+
+
+def unpack_weights(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Float32 tensors of a state dict written by :func:`pack_weights` (any precision)."""
+    return {k: v.float() * state[k + _SCALE] if k + _SCALE in state else v.float()
+            for k, v in state.items() if not k.endswith(_SCALE)}  # fmt: skip
+
+
+def export_for_inference(src: str | os.PathLike, dst: str | os.PathLike,
+                         precision: str = "fp16") -> int:  # fmt: skip
     """Write a small inference-only copy of a training checkpoint (no optimiser state).
 
-    Weights are stored as float16 with ``half`` (they are cast back to float32 on load); the
+    Weights are stored at ``precision`` (:func:`pack_weights`; float32 again on load); the
     normaliser, the configuration and the training history stay. Returns the file size, bytes.
     """
     ck = load_checkpoint(src)
-    model = {k: (v.half() if half and v.is_floating_point() else v) for k, v in ck["model"].items()}
     out = {k: ck[k] for k in ("version", "config", "norm_mean", "norm_std", "epoch", "history")
            if k in ck}  # fmt: skip
-    out["model"] = model
+    out["model"] = pack_weights(ck["model"], precision)
     buf = io.BytesIO()
     torch.save(out, buf)
     atomic_write(dst, lambda f: f.write(buf.getvalue()))

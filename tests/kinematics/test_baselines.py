@@ -272,6 +272,11 @@ def test_checkpoints_resume_per_net_best_and_export(tmp_path):
     full = BaselineEstimator.from_checkpoint(tmp_path / "last.pt").predict([rec])[0]
     half = BaselineEstimator.from_checkpoint(tmp_path / "small.pt").predict([rec])[0]
     np.testing.assert_allclose(half.joint_pos, full.joint_pos, atol=5e-3)
+    # int8: smaller (about half on real nets; pickling overhead dominates this tiny one)
+    size8 = export_baseline(tmp_path / "last.pt", tmp_path / "int8.pt", precision="int8")
+    assert size8 < 0.9 * size
+    q = BaselineEstimator.from_checkpoint(tmp_path / "int8.pt").predict([rec])[0]
+    np.testing.assert_allclose(q.joint_pos, full.joint_pos, atol=2e-2)
 
 
 def json_roundtrip(obj):

@@ -90,3 +90,29 @@ def test_corrupt_checkpoint_is_a_clean_error(tmp_path):
     bad.write_bytes(b"not a checkpoint")
     with pytest.raises(ValueError, match=r"x\.pt"):
         load_checkpoint(bad)
+
+
+def test_pack_weights_round_trip():
+    from grip.kinematics.train import pack_weights, unpack_weights
+
+    g = torch.Generator().manual_seed(0)
+    state = {"w": torch.randn(64, 128, generator=g), "b": torch.randn(64, generator=g),
+             "small": torch.randn(4, 4, generator=g), "zero": torch.zeros(64, 64),
+             "steps": torch.tensor(7)}  # fmt: skip
+    for precision in ("fp32", "fp16", "int8"):
+        back = unpack_weights(pack_weights(state, precision))
+        assert set(back) == set(state) and int(back["steps"]) == 7
+        for k in ("w", "b", "small", "zero"):
+            v = state[k]
+            if precision == "fp32":
+                bound = torch.zeros(())
+            elif precision == "int8" and k in ("w", "zero"):  # half a step of the row's scale
+                bound = v.abs().amax(dim=1, keepdim=True) / 254 + 1e-7
+            else:  # fp16: 11 significant bits
+                bound = v.abs() * 2**-11 + 1e-7
+            assert torch.all((back[k] - v).abs() <= bound), (precision, k)
+    packed = pack_weights(state, "int8")
+    assert packed["w"].dtype == torch.int8 and packed["w@scale"].shape == (64, 1)
+    assert packed["small"].dtype == torch.float16  # small matrices stay fp16
+    with pytest.raises(ValueError, match="precision"):
+        pack_weights(state, "int4")
