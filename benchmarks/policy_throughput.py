@@ -2,11 +2,13 @@
 
 In one run: the bare environment's step rate (one GripTrackingEnv, zero actions, as
 ``grip bench-env``), then short PPO + AMP trainings (rollout collection, discriminator updates
-and PPO updates all included) with each vector-env layout. Prints env steps/s of each and its
-ratio to the bare env.
+and PPO updates all included) with each vector-env layout. Prints env steps/s (simulated
+frames per second) of each and its ratio to the bare env; with an action repeat k the policy
+decides every k frames, so a training step covers k env steps.
 
     python benchmarks/policy_throughput.py                       # defaults of configs/policy
     python benchmarks/policy_throughput.py --layouts dummy:16,subproc:2,subproc:8 --rollouts 4
+    python benchmarks/policy_throughput.py --layouts dummy:16 --action-repeat 1,3
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ def training_rate(cfg, rollouts: int) -> float:
         tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE)
         t = time.perf_counter()
         tr.train()
-        return tr.total_done() / (time.perf_counter() - t)
+        return tr.total_done() * cfg.env.action_repeat / (time.perf_counter() - t)
     finally:
         shutil.rmtree(run, ignore_errors=True)
 
@@ -65,6 +67,11 @@ def main() -> None:
     ap.add_argument("--rollouts", type=int, default=3, help="PPO rollouts per layout")
     ap.add_argument("--env-steps", type=int, default=3000, help="steps of the bare-env reference")
     ap.add_argument("--threads", type=int, default=0, help="learner torch threads (0: default)")
+    ap.add_argument(
+        "--action-repeat",
+        default="",
+        help="comma-separated action repeats to measure (default: the config's)",
+    )
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
 
@@ -75,15 +82,21 @@ def main() -> None:
     ref = bare_env_rate(args.env_steps)
     print(f"bare env (1 env, zero actions): {ref:8.0f} steps/s")
     out = {"bare_env_steps_per_s": ref, "layouts": {}}
+    repeats = [int(k) for k in args.action_repeat.split(",") if k] or [base.env.action_repeat]
     for item in args.layouts.split(","):
         kind, n = item.split(":")
         n = int(n)
         n_steps = max(base.ppo.n_steps, -(-base.ppo.batch_size // n))  # same batch per update
-        cfg = dataclasses.replace(base, ppo=dataclasses.replace(
-            base.ppo, vec_env=kind, n_envs=n, n_steps=n_steps, threads=args.threads))  # fmt: skip
-        rate = training_rate(cfg, args.rollouts)
-        out["layouts"][item] = {"steps_per_s": rate, "ratio_to_bare_env": rate / ref}
-        print(f"PPO+AMP training {item:>12}: {rate:8.0f} steps/s  ratio {rate / ref:.3f}")
+        for k in repeats:
+            cfg = dataclasses.replace(
+                base, env=dataclasses.replace(base.env, action_repeat=k),
+                ppo=dataclasses.replace(base.ppo, vec_env=kind, n_envs=n, n_steps=n_steps,
+                                        threads=args.threads),
+            )  # fmt: skip
+            rate = training_rate(cfg, args.rollouts)
+            name = f"{item} repeat {k}"
+            out["layouts"][name] = {"steps_per_s": rate, "ratio_to_bare_env": rate / ref}
+            print(f"PPO+AMP training {name:>20}: {rate:8.0f} env steps/s  ratio {rate / ref:.3f}")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 

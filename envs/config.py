@@ -91,6 +91,10 @@ class TrackingEnvConfig:
         min_episode_frames: Random starts leave at least this many frames to play.
         amp_window: AMP frames in ``info["amp_obs"]`` (the discriminator's input, see
             :mod:`envs.amp`); 0 leaves it out.
+        action_repeat: The controller's decision period in frames: a policy action is held for
+            this many frames (the environment itself always advances one frame per step; the
+            training wrapper :class:`envs.wrappers.ActionRepeat` and the inference loop
+            :class:`grip.eval.reconstruct.ClipPlayer` hold it). 1 = a decision every frame.
         pin_root: Drive the pelvis along the ground-truth root trajectory (position and
             orientation written before every substep): a physics check of the PD tracking, not
             a training mode.
@@ -116,6 +120,7 @@ class TrackingEnvConfig:
     max_episode_frames: int = 0
     min_episode_frames: int = 10
     pin_root: bool = False
+    action_repeat: int = 1
     amp_window: int = 10
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
@@ -127,6 +132,7 @@ class TrackingEnvConfig:
             (self.reward.form in REWARD_FORMS, f"reward.form must be one of {REWARD_FORMS}"),
             (self.terrain in TERRAINS, f"terrain must be one of {TERRAINS}"),
             (self.substeps >= 1, "substeps must be >= 1"),
+            (self.action_repeat >= 1, "action_repeat must be >= 1"),
             (self.heightmap_size >= 1, "heightmap_size must be >= 1"),
             (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),
             (self.amp_window >= 0, "amp_window must be >= 0 (0 = no AMP observation)"),

@@ -86,6 +86,10 @@ class EnvFactory:
 
         ref = select_clips(load_reference(self.env_cfg.reference), self.categories)
         env = GripTrackingEnv(self.env_cfg, ref)
+        if self.env_cfg.action_repeat > 1:
+            from envs.wrappers import ActionRepeat
+
+            env = ActionRepeat(env, self.env_cfg.action_repeat)
         env.reset(seed=self.seed)
         return env
 
@@ -155,14 +159,15 @@ class TrainingCallback(BaseCallback):
         self.sums: dict[str, float] = defaultdict(float)
         self.n = 0
         self.episodes: list[tuple[bool, float, int]] = []  # (success, mean MPJPE m, frames)
-        self.ep_err = np.zeros(0)
-        self.ep_len = np.zeros(0)
+        self.ep_err = np.zeros(0)  # sum over the episode's decisions of the MPJPE, m
+        self.ep_len = np.zeros(0)  # decisions with a finite MPJPE
+        self.ep_frames = np.zeros(0)  # frames played (decisions x action repeat)
         self.rollouts = 0
         self.start_steps = 0
 
     def _on_training_start(self) -> None:
         n = self.training_env.num_envs
-        self.ep_err, self.ep_len = np.zeros(n), np.zeros(n)
+        self.ep_err, self.ep_len, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
         self._set_termination()
 
@@ -182,11 +187,13 @@ class TrainingCallback(BaseCallback):
             if np.isfinite(err):
                 self.ep_err[i] += err
                 self.ep_len[i] += 1
+            self.ep_frames[i] += info.get("frames", 1)
             if done:
                 ok = bool(info.get("TimeLimit.truncated", False))
-                n_ep = int(self.ep_len[i])
-                self.episodes.append((ok, self.ep_err[i] / max(n_ep, 1), n_ep))
-                self.ep_err[i] = self.ep_len[i] = 0
+                n_ep = max(int(self.ep_len[i]), 1)
+                frames = int(self.ep_frames[i])
+                self.episodes.append((ok, self.ep_err[i] / n_ep, frames))
+                self.ep_err[i] = self.ep_len[i] = self.ep_frames[i] = 0
         self.n += len(infos)
         self.bar.update(len(infos))
         self.trainer.stage_done = self.num_timesteps - self.start_steps + self.trainer.stage_done0
@@ -205,6 +212,7 @@ class TrainingCallback(BaseCallback):
             log("episode/success_rate", float(ok.mean()))
             log("episode/mpjpe_mm", 1000 * float(np.mean([e[1] for e in self.episodes])))
             log("episode/count", len(self.episodes))
+            log("episode/frames", float(np.mean([e[2] for e in self.episodes])))
         log("episode/termination_m", self.termination_m)
         row = {"timesteps": int(tr.total_done()), "stage": self.stage_name,
                "wall_s": tr.wall_s(), "termination_m": self.termination_m,

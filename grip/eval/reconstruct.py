@@ -124,6 +124,8 @@ class ClipPlayer:
         self.t = self.last = 0
         self.done = False
         self.falls = []
+        self._action: np.ndarray | None = None
+        self._held = 0  # frames the current action has been played (env_cfg.action_repeat)
         self._record(0)
 
     @property
@@ -144,7 +146,10 @@ class ClipPlayer:
         """One control step with fall detection and recovery; returns whether the clip is over
         (its last frame, a fall with ``stop_at_fall``, or a blow-up without recovery)."""
         env, rec = self.env, self.recovery
-        obs, _, terminated, truncated, info = env.step(self.runner.act(self.obs))
+        if self._action is None or self._held >= self.runner.env_cfg.action_repeat:
+            self._action, self._held = self.runner.act(self.obs), 0
+        self._held += 1
+        obs, _, terminated, truncated, info = env.step(self._action)
         self.obs = obs
         t = self.t = info["frame"]
         unstable = bool(info.get("sim_unstable"))
@@ -161,6 +166,7 @@ class ClipPlayer:
         if fell and rec.enabled:
             s = max(self._floor, t - rec.history_frames, 0)
             self.obs = _recover(env, self.clip, self.trace, s, t)
+            self._action = None  # a new decision from the restored state
             self.falls.append((s, t))
             self._floor = t + 1
         elif fell and not self._down:

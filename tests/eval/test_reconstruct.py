@@ -133,3 +133,26 @@ def test_reading_foot_forces_does_not_change_the_simulation(env) -> None:
                 assert (grf[:, 2] >= 0).all()
         final.append(env.data.qpos.copy())
     np.testing.assert_array_equal(final[0], final[1])
+
+
+class _CountingRunner(_Runner):
+    """Counts its decisions; a different action at each."""
+
+    def __init__(self, repeat: int) -> None:
+        super().__init__(0.0, prob=None)
+        self.env_cfg = TrackingEnvConfig(amp_window=2, action_repeat=repeat)
+        self.calls = 0
+
+    def act(self, obs: dict) -> np.ndarray:
+        self.calls += 1
+        return np.full(69, 0.05 * (-1) ** self.calls)
+
+
+def test_the_action_is_held_for_the_policys_action_repeat(env) -> None:
+    clip = env.reference.clip(0)
+    for repeat in (1, 3):
+        runner = _CountingRunner(repeat)
+        recon, _ = simulate_clip(env, runner, 0, RecoveryConfig(enabled=False))
+        frames = clip.n_frames - 1
+        assert runner.calls == -(-frames // repeat)  # one decision per `repeat` frames
+        assert recon.n_frames == clip.n_frames  # and still one output per frame

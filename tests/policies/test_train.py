@@ -185,3 +185,21 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     assert "| **all** |" in markdown_table(s)
     write_rows(rows, s, tmp_path / "out")
     assert (tmp_path / "out" / "segments.csv").read_text().count("\n") == 3
+
+
+def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
+    base = _tiny()
+    cfg = dataclasses.replace(
+        base, env=dataclasses.replace(base.env, action_repeat=3),
+        stage1=dataclasses.replace(base.stage1, timesteps=64, max_episode_frames=45),
+        stage2=dataclasses.replace(base.stage2, timesteps=0),
+    )  # fmt: skip
+    (tmp_path / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
+    tr = PolicyTrainer(cfg, tmp_path, SAMPLE_REFERENCE)
+    tr.train()
+    assert tr.total_done() == 64  # decisions
+    ended = [h["ep_len"] for h in tr.history if "ep_len" in h]
+    # 64 decisions x 3 frames over 2 envs: episodes truncated at 45 frames = 15 decisions
+    assert ended and max(ended) <= 45 and max(ended) > 15
+    export_policy(tmp_path, tmp_path / "p.pt")
+    assert PolicyRunner.load(tmp_path / "p.pt").env_cfg.action_repeat == 3
