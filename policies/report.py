@@ -18,7 +18,9 @@ def plot_curves(history: list[dict], out_png: str | os.PathLike) -> None:
 
     fig, axes = plt.subplots(2, 3, figsize=(15, 7), constrained_layout=True)
     if history:
-        x = np.array([h["timesteps"] / 1e6 for h in history])
+        # simulated frames where the history has them (with an action repeat a step is k frames)
+        key = "frames" if all("frames" in h for h in history) else "timesteps"
+        x = np.array([h[key] / 1e6 for h in history])
         w = max(1, len(history) // 50)  # rolling mean: one rollout holds few episodes
 
         def series(key, smooth=False):
@@ -57,9 +59,9 @@ def plot_curves(history: list[dict], out_png: str | os.PathLike) -> None:
         ax.plot(x, series("amp/acc_fake", True), label="policy")
         ax.set_ylabel("discriminator accuracy")
         ax.legend(fontsize=8)
-        stage2 = next((h["timesteps"] / 1e6 for h in history if h.get("stage") == "stage2"), None)
+        stage2 = next((h[key] / 1e6 for h in history if h.get("stage") == "stage2"), None)
         for a in axes.flat:
-            a.set_xlabel("env steps (M)")
+            a.set_xlabel("simulated frames (M)" if key == "frames" else "env steps (M)")
             a.grid(alpha=0.3)
             if stage2 is not None:
                 a.axvline(stage2, color="grey", ls="--", lw=0.8)

@@ -214,7 +214,8 @@ class TrainingCallback(BaseCallback):
             log("episode/count", len(self.episodes))
             log("episode/frames", float(np.mean([e[2] for e in self.episodes])))
         log("episode/termination_m", self.termination_m)
-        row = {"timesteps": int(tr.total_done()), "stage": self.stage_name,
+        row = {"timesteps": int(tr.total_done()),
+               "frames": int(tr.total_done()) * tr.cfg.env.action_repeat, "stage": self.stage_name,
                "wall_s": tr.wall_s(), "termination_m": self.termination_m,
                **{f"reward/{k}": self.sums[k] / max(self.n, 1) for k in INFO_TERMS},
                **{f"amp/{k}": v for k, v in stats.items()}}  # fmt: skip

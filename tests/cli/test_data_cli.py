@@ -203,6 +203,7 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
             "--set", "ppo.n_epochs=1", "--set", "ppo.net_arch=[16]", "--set", "amp.hidden=[16]",
             "--set", "amp.window=2", "--set", "amp.batch_size=16", "--set", "amp.replay_size=256",
             "--set", "stage1.timesteps=64", "--set", "stage1.categories=[]",
+            "--set", "stage2.categories=[]",
             "--set", "stage2.timesteps=64"]  # fmt: skip
     assert main(args) == 0
     cfg = json.loads((run / "config.json").read_text())

@@ -201,5 +201,6 @@ def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
     ended = [h["ep_len"] for h in tr.history if "ep_len" in h]
     # 64 decisions x 3 frames over 2 envs: episodes truncated at 45 frames = 15 decisions
     assert ended and max(ended) <= 45 and max(ended) > 15
+    assert all(h["frames"] == 3 * h["timesteps"] for h in tr.history)
     export_policy(tmp_path, tmp_path / "p.pt")
     assert PolicyRunner.load(tmp_path / "p.pt").env_cfg.action_repeat == 3
