@@ -160,14 +160,14 @@ class TrainingCallback(BaseCallback):
         self.n = 0
         self.episodes: list[tuple[bool, float, int]] = []  # (success, mean MPJPE m, frames)
         self.ep_err = np.zeros(0)  # sum over the episode's decisions of the MPJPE, m
-        self.ep_len = np.zeros(0)  # decisions with a finite MPJPE
+        self.ep_err_n = np.zeros(0)  # decisions with a finite MPJPE (a blow-up has none)
         self.ep_frames = np.zeros(0)  # frames played (decisions x action repeat)
         self.rollouts = 0
         self.start_steps = 0
 
     def _on_training_start(self) -> None:
         n = self.training_env.num_envs
-        self.ep_err, self.ep_len, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.ep_err, self.ep_err_n, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
         self._set_termination()
 
@@ -186,14 +186,13 @@ class TrainingCallback(BaseCallback):
             err = info.get("mpjpe_m", np.inf)
             if np.isfinite(err):
                 self.ep_err[i] += err
-                self.ep_len[i] += 1
+                self.ep_err_n[i] += 1
             self.ep_frames[i] += info.get("frames", 1)
             if done:
                 ok = bool(info.get("TimeLimit.truncated", False))
-                n_ep = max(int(self.ep_len[i]), 1)
-                frames = int(self.ep_frames[i])
-                self.episodes.append((ok, self.ep_err[i] / n_ep, frames))
-                self.ep_err[i] = self.ep_len[i] = self.ep_frames[i] = 0
+                mean_err = self.ep_err[i] / max(self.ep_err_n[i], 1)
+                self.episodes.append((ok, mean_err, int(self.ep_frames[i])))
+                self.ep_err[i] = self.ep_err_n[i] = self.ep_frames[i] = 0
         self.n += len(infos)
         self.bar.update(len(infos))
         self.trainer.stage_done = self.num_timesteps - self.start_steps + self.trainer.stage_done0
