@@ -23,7 +23,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "         grip train-kin --data data/prism_synth --out runs/kin_small "
         "--set hidden=128 --set train.joint_epochs=5\n"
         "         grip train-kin --data data/prism_synth --out runs/sweep --sweep "
-        "--config configs/kinematics/sweep.toml",
+        "--config configs/kinematics/sweep.toml\n"
+        "         grip train-kin --data data/prism_synth --out runs/kin_ft "
+        "--init grip/assets/kinematics_default.pt\n"
+        "             --set train.stage_epochs=0 --set train.joint_epochs=8 "
+        "--set train.lr_final=1e-5",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
@@ -41,6 +45,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="override one setting, e.g. --set train.lr=3e-4 (repeatable)",
     )
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: all cores)")
+    p.add_argument(
+        "--init",
+        type=Path,
+        default=None,
+        metavar="CKPT",
+        help="fine-tune: start from the weights and normaliser of this checkpoint (a run's "
+        "last.pt or an export with the same network and sensors) instead of random weights; "
+        "usually with --set train.stage_epochs=0 (ignored when OUT resumes)",
+    )
     p.add_argument(
         "--sweep",
         action="store_true",
@@ -116,7 +129,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     if not args.sweep:
-        return _train_one(args.data, args.out, cfg)
+        return _train_one(args.data, args.out, cfg, init=args.init)
+    if args.init is not None:
+        raise CliError("--init fine-tunes one run; it does not combine with --sweep")
     import dataclasses
 
     from grip.kinematics.sweep import parse_counts, sensor_sets
@@ -136,7 +151,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train_one(data: Path, out: Path, cfg) -> int:
+def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.main import CliError
     from grip.kinematics.dataset import load_split_sequences
     from grip.kinematics.train import Trainer
@@ -150,10 +165,17 @@ def _train_one(data: Path, out: Path, cfg) -> int:
     n_frames = sum(len(s.x) for s in train)
     print(f"loaded {len(train)} train / {len(val)} test sequences ({n_frames} train frames) "
           f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    try:
+        trainer = Trainer(cfg, train, val, out)
+        info = {"data": str(data.resolve()), "train_frames": n_frames}
+        if init is not None:
+            trainer.init_from(init)
+            info["init"] = str(init.resolve())
+            print(f"initialised from {init}")
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e)) from e
     out.mkdir(parents=True, exist_ok=True)
-    trainer = Trainer(cfg, train, val, out)
-    return fit_run(trainer, cfg, out, {"data": str(data.resolve()), "train_frames": n_frames},
-                   epochs=cfg.total_epochs(), postfix="phase")  # fmt: skip
+    return fit_run(trainer, cfg, out, info, epochs=cfg.total_epochs(), postfix="phase")
 
 
 def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -> int:

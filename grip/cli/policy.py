@@ -69,6 +69,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="only these motion categories (glob, repeatable)")  # fmt: skip
     e.add_argument("--segment-frames", type=int, default=500, help="frames per segment")
     e.add_argument("--segments", type=int, default=0, help="at most this many segments (0: all)")
+    e.add_argument("--reference", default="estimate", choices=("estimate", "truth"),
+                   help="what the controller follows: the KinematicsNet estimate (default, the "
+                   "method) or the ground truth (a perfect KinematicsNet; tells the "
+                   "controller's own falls from those the estimate causes)")  # fmt: skip
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
@@ -208,7 +212,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     recs = load_recordings(split_paths(args.data, args.split), args.category,
                            args.segment_frames, limit=args.segments)  # fmt: skip
     with tqdm(total=len(recs), unit="seg", desc="episodes") as bar:
-        rows = evaluate_policy(runner, est, recs, progress=bar.update)
+        rows = evaluate_policy(runner, est, recs, progress=bar.update, reference=args.reference)
     summary = summarize_rows(rows)
     print(markdown_table(summary))
     if args.out is not None:

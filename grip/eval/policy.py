@@ -46,12 +46,28 @@ def segment_row(recon, clip, rec) -> dict:
     return row
 
 
-def evaluate_policy(runner, estimator, recs: list, batch: int = 16,
-                    progress: Callable[[int], object] | None = None) -> list[dict]:  # fmt: skip
-    """One row of metrics per recording (segment), with ``name`` and ``category``."""
-    from grip.kinematics.reference import build_reference_set
+REFERENCES: tuple[str, ...] = ("estimate", "truth")
 
-    ref: ReferenceSet = build_reference_set(recs, estimator, batch=batch)
+
+def evaluate_policy(runner, estimator, recs: list, batch: int = 16,
+                    progress: Callable[[int], object] | None = None,
+                    reference: str = "estimate") -> list[dict]:  # fmt: skip
+    """One row of metrics per recording (segment), with ``name`` and ``category``.
+
+    ``reference``: what the controller follows: ``"estimate"`` (KinematicsNet's, the method) or
+    ``"truth"`` (the ground-truth motion, a perfect KinematicsNet: separates the controller's
+    own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0).
+    """
+    from grip.kinematics.reference import build_reference_set, oracle_reference_clip
+
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {list(REFERENCES)}, got {reference!r}")
+    if reference == "truth":
+        cfg = estimator.cfg.features
+        ref = ReferenceSet([oracle_reference_clip(r, cfg) for r in recs], tuple(cfg.sites),
+                           cfg.insoles, "<ground truth>")  # fmt: skip
+    else:
+        ref = build_reference_set(recs, estimator, batch=batch)
     env = inference_env(runner, ref)
     no_recovery = RecoveryConfig(enabled=False)
     rows = []

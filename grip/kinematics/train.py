@@ -51,6 +51,10 @@ class TrainConfig:
         acc_noise: Std of Gaussian noise added to normalised acceleration features.
         ori_noise_rad: Std of random rotation noise (rad) applied to IMU orientations.
         yaw_augment: Rotate each window about the vertical axis by a random angle.
+        mirror_augment: Mirror half of the windows left-right (:func:`mirror_batch`); needs a
+            sensor set that is its own mirror image (every left site with its right partner).
+        lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
+            ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
         val_windows: Validation windows (fixed draw) evaluated after every epoch.
         seed: Seed of windows, noise and initialisation.
     """
@@ -66,6 +70,8 @@ class TrainConfig:
     acc_noise: float = 0.05
     ori_noise_rad: float = 0.02
     yaw_augment: bool = True
+    mirror_augment: bool = False
+    lr_final: float | None = None
     val_windows: int = 256
     seed: int = 0
 
@@ -146,6 +152,77 @@ def rotate_batch(
     return x, out
 
 
+def mirror_site_order(sites: tuple[str, ...]) -> list[int]:
+    """Index of each site's mirror partner in ``sites`` (``L_X`` <-> ``R_X``; ``Head`` and
+    ``Pelvis`` are their own).
+
+    Raises:
+        ValueError: A site's partner is not in the set (such a set has no mirror image).
+    """
+    swap = {"L_": "R_", "R_": "L_"}
+    partner = [swap.get(s[:2], s[:2]) + s[2:] for s in sites]
+    missing = [p for p in partner if p not in sites]
+    if missing:
+        raise ValueError(f"mirror_augment needs every site's left/right partner; "
+                         f"{list(sites)} lacks {missing}")  # fmt: skip
+    return [sites.index(p) for p in partner]
+
+
+_M = torch.tensor([-1.0, 1.0, 1.0])  # the reflection x -> -x, as a diagonal
+_LEAF_MIRROR = [sk.LEAF_JOINTS.index(int(sk.MIRROR[j])) for j in sk.LEAF_JOINTS]
+_VEL_MIRROR = [sk.VELOCITY_JOINTS.index(int(sk.MIRROR[j])) for j in sk.VELOCITY_JOINTS]
+
+
+def mirror_batch(
+    x: torch.Tensor, y: dict[str, torch.Tensor], sites: tuple[str, ...], insoles: bool
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Raw features and targets of the left-right mirror image of each window.
+
+    The world is reflected through the plane ``x = 0`` (``M = diag(-1, 1, 1)``; with random yaw
+    this covers every vertical mirror plane) and left and right swap: positions, velocities and
+    accelerations map to ``M v``, world angular velocities (pseudo-vectors) to ``-M w``,
+    rotations and IMU orientations to ``M R M``, the two insoles swap (their CoP is in the
+    foot's own forward/medial frame, which the mirror keeps), and the rest offsets of the body
+    map to ``M o``. Exact for a mirror-symmetric body with mirror-symmetric sensor mounts.
+
+    Args:
+        x: ``(B, T, F)`` raw (unnormalised) features of ``sites`` (and the insoles).
+        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets (B, 24, 3)``.
+
+    Raises:
+        ValueError: ``sites`` is not closed under the mirror, or ``y`` has an unknown key.
+    """
+    order = mirror_site_order(tuple(sites))
+    b, t, _ = x.shape
+    n = len(sites)
+    m = _M.to(x.dtype)
+    imu = x[..., : 15 * n].reshape(b, t, n, 15)[:, :, order]
+    acc = imu[..., 0:3] * m
+    gyr = -imu[..., 3:6] * m
+    ori = (imu[..., 6:15].reshape(b, t, n, 3, 3) * (m[:, None] * m[None, :])).reshape(b, t, n, 9)
+    parts = [torch.cat([acc, gyr, ori], -1).reshape(b, t, -1)]
+    if insoles:
+        parts.append(x[..., 15 * n : 15 * n + 10].reshape(b, t, 2, 5).flip(2).reshape(b, t, 10))
+    x_out = torch.cat(parts, -1)
+    perm = torch.from_numpy(sk.MIRROR)
+    out = {}
+    for k, v in y.items():
+        if k in ("lp", "fp", "lv"):
+            idx = {"lp": _LEAF_MIRROR, "fp": perm, "lv": _VEL_MIRROR}[k]
+            out[k] = (v.reshape(b, t, -1, 3)[:, :, idx] * m).reshape(b, t, -1)
+        elif k == "fa":
+            cols = v.reshape(b, t, 24, 2, 3)[
+                :, :, perm
+            ]  # columns c0, c1 of R; M R M's: -M c0, M c1
+            sign = torch.stack([-m, m]).to(v.dtype)
+            out[k] = (cols * sign).reshape(b, t, -1)
+        elif k == "offsets":
+            out[k] = v[:, perm] * m
+        else:
+            raise ValueError(f"mirror_batch: no mirror rule for target {k!r}")
+    return x_out, out
+
+
 def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
     """Root-relative joint positions from global 6D rotations.
 
@@ -194,6 +271,8 @@ class Trainer:
         self.train_seqs = train_seqs
         self.val_seqs = val_seqs or train_seqs
         torch.manual_seed(cfg.train.seed)
+        if cfg.train.mirror_augment:
+            mirror_site_order(tuple(cfg.features.sites))  # fails early on a one-sided sensor set
         self.model = KinematicsNet(cfg.net_config())
         self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.norm = Normalizer.fit(train_seqs)
@@ -210,6 +289,12 @@ class Trainer:
         xt = torch.from_numpy(x)
         yt = {k: torch.from_numpy(v) for k, v in y.items()}
         n_sites = len(self.cfg.features.sites)
+        if augment and self.cfg.train.mirror_augment:
+            xm, ym = mirror_batch(xt, yt, self.cfg.features.sites, self.cfg.features.insoles)
+            flip = torch.from_numpy(self.rng.random(x.shape[0]) < 0.5)
+            xt = torch.where(flip[:, None, None], xm, xt)
+            yt = {k: torch.where(flip.view(-1, *([1] * (v.dim() - 1))), ym[k], v)
+                  for k, v in yt.items()}  # fmt: skip
         if augment and self.cfg.train.yaw_augment:
             ang = torch.from_numpy(self.rng.uniform(-np.pi, np.pi, x.shape[0]).astype(np.float32))
             xt, yt = rotate_batch(xt, yt, _yaw_matrices(ang), n_sites)
@@ -265,6 +350,39 @@ class Trainer:
                 return phase
         return "joint"
 
+    def learning_rate(self, epoch: int, step: int) -> float:
+        """The rate of optimiser step ``step`` of ``epoch``: ``lr``, decayed to ``lr_final`` by
+        a half cosine over the joint phase when that is set."""
+        tc = self.cfg.train
+        start = self.cfg.total_epochs() - tc.joint_epochs
+        if tc.lr_final is None or epoch < start or tc.joint_epochs == 0:
+            return tc.lr
+        done = ((epoch - start) * tc.steps_per_epoch + step) / (
+            tc.joint_epochs * tc.steps_per_epoch
+        )
+        return float(
+            tc.lr_final + 0.5 * (tc.lr - tc.lr_final) * (1.0 + np.cos(np.pi * min(done, 1.0)))
+        )
+
+    def init_from(self, path: str | os.PathLike) -> None:
+        """Start from the weights and normaliser of another checkpoint (a training run's or an
+        inference export) with the same network and sensor settings: fine-tuning with this
+        run's data and schedule; the optimiser and the epoch count start afresh.
+
+        Raises:
+            ValueError: naming the file, when it is unreadable or its network differs.
+        """
+        ck = load_checkpoint(path)
+        theirs = run_config_from_dict(json.loads(ck["config"]))
+        if theirs.net_config() != self.cfg.net_config() or theirs.features != self.cfg.features:
+            raise ValueError(f"{path}: its network or sensor settings differ from this run's "
+                             f"({theirs.net_config()}, {theirs.features})")  # fmt: skip
+        try:
+            self.model.load_state_dict(unpack_weights(ck["model"]))
+        except RuntimeError as e:
+            raise ValueError(f"{path}: weights do not fit the network ({e})") from e
+        self.norm = Normalizer(ck["norm_mean"].numpy(), ck["norm_std"].numpy())
+
     def fit(self, writer=None, progress: Callable[[dict], object] | None = None) -> list[dict]:
         """Train until ``total_epochs``; checkpoints after each epoch (resumes from ``epoch``)."""
         tc = self.cfg.train
@@ -272,7 +390,9 @@ class Trainer:
         while self.epoch < self.cfg.total_epochs():
             phase = self.phase_of(self.epoch)
             sums: dict[str, float] = {}
-            for _ in range(tc.steps_per_epoch):
+            for step in range(tc.steps_per_epoch):
+                for group in self.opt.param_groups:
+                    group["lr"] = self.learning_rate(self.epoch, step)
                 x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
                 xt, yt = self._tensors(x, y, augment=True)
                 losses = self.losses(xt, yt, only=None if phase == "joint" else phase)
@@ -333,6 +453,10 @@ class Trainer:
         new = json.loads(json.dumps(asdict(self.cfg)))
         old["train"].pop("joint_epochs")
         new["train"].pop("joint_epochs")
+        defaults = asdict(TrainConfig())
+        for k in set(new["train"]) - set(old["train"]):  # fields added since the run began
+            if new["train"][k] == defaults[k]:
+                new["train"].pop(k)
         if old != new:
             diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
             raise ValueError(f"{path}: checkpoint was trained with another configuration "

@@ -117,6 +117,27 @@ def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None
     assert "lrr" in capsys.readouterr().err
 
 
+def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path, capsys) -> None:
+    small = ["--threads", "1", "--set", "hidden=16", "--set", "layers=1", "--set", "init_hidden=8",
+             "--set", "train.window_frames=30", "--set", "train.batch_size=2",
+             "--set", "train.steps_per_epoch=2", "--set", "train.stage_epochs=0",
+             "--set", "train.val_windows=2"]  # fmt: skip
+    base = ["train-kin", "--data", str(built)]
+    assert main([*base, "--out", str(tmp_path / "a"), *small, "--set", "train.joint_epochs=1"]) == 0
+    ft = [*base, "--out", str(tmp_path / "ft"), *small, "--init", str(tmp_path / "a" / "last.pt"),
+          "--set", "train.joint_epochs=2", "--set", "train.lr_final=1e-5",
+          "--set", "train.mirror_augment=true"]  # fmt: skip
+    assert main(ft) == 0
+    assert "initialised from" in capsys.readouterr().out
+    cfg = json.loads((tmp_path / "ft" / "config.json").read_text())
+    assert cfg["init"].endswith("last.pt") and cfg["config"]["train"]["mirror_augment"] is True
+    wide = [a if a != "hidden=16" else "hidden=24" for a in ft]
+    wide[wide.index(str(tmp_path / "ft"))] = str(tmp_path / "wide")
+    assert main(wide) == 2
+    assert "differ" in capsys.readouterr().err
+    assert main([*ft[:-2], "--sweep"]) == 2
+
+
 def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "run"
     main(["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",

@@ -1,3 +1,7 @@
+import dataclasses
+import itertools
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -116,3 +120,57 @@ def test_pack_weights_round_trip():
     assert packed["small"].dtype == torch.float16  # small matrices stay fp16
     with pytest.raises(ValueError, match="precision"):
         pack_weights(state, "int4")
+
+
+def test_cosine_schedule_decays_over_the_joint_phase_only(seqs, tmp_path):
+    tr = Trainer(_cfg(stage_epochs=1, joint_epochs=2, steps_per_epoch=10, lr=1e-3,
+                      lr_final=1e-5), seqs, seqs, tmp_path)  # fmt: skip
+    assert tr.learning_rate(0, 5) == tr.learning_rate(3, 9) == 1e-3  # stage-wise: constant
+    assert tr.learning_rate(4, 0) == pytest.approx(1e-3)  # joint phase starts at lr
+    assert tr.learning_rate(5, 0) == pytest.approx(0.5 * (1e-3 + 1e-5))  # halfway
+    assert tr.learning_rate(5, 9) == pytest.approx(
+        1e-5 + 0.5 * (1e-3 - 1e-5) * (1 + np.cos(0.95 * np.pi))
+    )
+    rates = [tr.learning_rate(e, s) for e in (4, 5) for s in range(10)]
+    assert all(a > b for a, b in itertools.pairwise(rates))
+    const = Trainer(_cfg(lr=2e-3), seqs, seqs, tmp_path)
+    assert {const.learning_rate(e, 0) for e in range(5)} == {2e-3}
+    tr.fit()
+    assert tr.opt.param_groups[0]["lr"] == pytest.approx(tr.learning_rate(5, 9))  # last step
+    assert type(tr.opt.param_groups[0]["lr"]) is float  # a numpy scalar breaks weights_only
+    Trainer(_cfg(stage_epochs=1, joint_epochs=2, steps_per_epoch=10, lr=1e-3, lr_final=1e-5),
+            seqs, seqs, tmp_path).load(tmp_path / "last.pt")  # fmt: skip
+
+
+def test_init_from_copies_weights_and_normaliser_and_checks_the_network(seqs, tmp_path):
+    src = Trainer(_cfg(), seqs, seqs, tmp_path / "a")
+    src.fit()
+    from grip.kinematics.train import export_for_inference
+
+    export_for_inference(tmp_path / "a" / "last.pt", tmp_path / "a.pt", precision="fp16")
+    for path, tol in ((tmp_path / "a" / "last.pt", 0.0), (tmp_path / "a.pt", 1e-2)):
+        dst = Trainer(_cfg(lr_final=1e-5, joint_epochs=3, stage_epochs=0), seqs[:1], seqs,
+                      tmp_path / "b")  # fmt: skip
+        dst.init_from(path)
+        for (k, v), w in zip(src.model.state_dict().items(), dst.model.state_dict().values(),
+                             strict=True):  # fmt: skip
+            torch.testing.assert_close(w, v, atol=tol, rtol=tol, msg=k)
+        np.testing.assert_array_equal(dst.norm.mean, src.norm.mean)
+        assert dst.epoch == 0
+    other = Trainer(dataclasses.replace(_cfg(), hidden=12), seqs, seqs, tmp_path / "c")
+    with pytest.raises(ValueError, match="network or sensor settings differ"):
+        other.init_from(tmp_path / "a" / "last.pt")
+
+
+def test_runs_begun_before_new_train_fields_still_resume(seqs, tmp_path):
+    tr = Trainer(_cfg(), seqs, seqs, tmp_path)
+    tr.fit()
+    ck = torch.load(tmp_path / "last.pt", weights_only=True)
+    cfg = json.loads(ck["config"])
+    for k in ("mirror_augment", "lr_final"):
+        cfg["train"].pop(k)  # as a checkpoint written before these settings existed
+    ck["config"] = json.dumps(cfg)
+    torch.save(ck, tmp_path / "old.pt")
+    Trainer(_cfg(), seqs, seqs, tmp_path).load(tmp_path / "old.pt")
+    with pytest.raises(ValueError, match="another configuration"):
+        Trainer(_cfg(mirror_augment=True), seqs, seqs, tmp_path).load(tmp_path / "old.pt")

@@ -185,6 +185,12 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     assert "| **all** |" in markdown_table(s)
     write_rows(rows, s, tmp_path / "out")
     assert (tmp_path / "out" / "segments.csv").read_text().count("\n") == 3
+    # Following the ground truth: the reference error is zero, the estimate's is not.
+    truth = evaluate_policy(runner, est, recs, reference="truth")
+    for r, t in zip(rows, truth, strict=True):
+        assert t["kin_MPJPE_mm"] < 1.0 < r["kin_MPJPE_mm"]
+    with pytest.raises(ValueError, match="reference must be"):
+        evaluate_policy(runner, est, recs, reference="oracle")
 
 
 def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
