@@ -41,6 +41,26 @@ def forward_kinematics(
     return g_rot, g_pos
 
 
+def joints_from_global(global_rot: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Root-relative joint positions of a pose given by its global rotations.
+
+    Args:
+        global_rot: ``(..., 24, 3, 3)`` global joint rotations.
+        offsets: ``(24, 3)`` rest offsets of the body (row 0 is ignored).
+
+    Returns:
+        ``(..., 24, 3)`` joint positions with the root at the origin, world axes, m.
+    """
+    global_rot = np.asarray(global_rot, dtype=np.float64)
+    if global_rot.shape[-3:] != (sk.N_JOINTS, 3, 3):
+        raise ValueError(f"global_rot must have shape (..., 24, 3, 3), got {global_rot.shape}")
+    pos = np.zeros((*global_rot.shape[:-2], 3), dtype=np.float64)
+    for j in range(1, sk.N_JOINTS):
+        p = sk.PARENTS[j]
+        pos[..., j, :] = pos[..., p, :] + global_rot[..., p, :, :] @ offsets[j]
+    return pos
+
+
 def body_points(
     global_rot: np.ndarray, joint_pos: np.ndarray, bodies: np.ndarray, local_pos: np.ndarray
 ) -> np.ndarray:

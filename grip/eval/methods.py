@@ -326,6 +326,7 @@ class TransPose:
     def reconstruct(self, rec) -> Reconstruction:
         from grip.baselines.transpose_translation import joint_floor_height, root_translation
         from grip.core.body import build_body
+        from grip.core.fk import joints_from_global
         from grip.kinematics.features import recording_body, targets
 
         t0 = time.perf_counter()
@@ -334,7 +335,8 @@ class TransPose:
         root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
         root = root_translation(est.global_rot, est.contact_prob, est.root_vel, body.offsets,
                                 root0, joint_floor_height(body))  # fmt: skip
-        pos = est.joint_pos - est.joint_pos[:, :1] + root[:, None]
+        # the pose is the rotations, posed on the subject's body (as TransPose evaluates it)
+        pos = joints_from_global(est.global_rot, body.offsets) + root[:, None]
         return Reconstruction(
             name=rec.name, method=self.name, fps=float(rec.fps), joint_pos=pos,
             global_rot=est.global_rot, ms_per_frame=1e3 * (time.perf_counter() - t0) / rec.n_frames,

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grip.core import skeleton as sk
+from grip.core.body import build_body
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import LiveClip, ReferenceClip, ReferenceSet
 from grip.core.rotations import matrix_to_6d
@@ -111,6 +112,7 @@ class GripStream:
         self.clip = LiveClip(calibration_clip(calibration, cfg.n_features), cfg.n_features,
                              capacity)  # fmt: skip
         self._sites, self._insoles = tuple(cfg.sites), bool(cfg.insoles)
+        self._offsets = build_body(recording_body(calibration)).offsets
         self._capacity = capacity
         self.env = None
         self.player: ClipPlayer | None = None
@@ -161,7 +163,7 @@ class GripStream:
     def _next(self, row: np.ndarray) -> StreamFrame | None:
         """Estimate the frame of ``row``; add it to the clip; play one control step."""
         o = {k: v.astype(np.float64) for k, v in self._kin.step(row).items()}
-        joint_pos, global_rot, vel = decode_outputs(o, 1)
+        joint_pos, global_rot, vel = decode_outputs(o, 1, self._offsets)
         i = self.clip.append(joint_pos[0], global_rot[0], vel[0], row)
         if i == 1:  # the first two estimates are in: the humanoid starts at the calibration
             ref = ReferenceSet([self.clip], self._sites, self._insoles, "<stream>")

@@ -1,9 +1,11 @@
 import numpy as np
 import pytest
 
+from grip.core import skeleton as sk
+from grip.core.body import build_body
 from grip.kinematics.dataset import sequence_arrays
-from grip.kinematics.features import FeatureConfig, input_features
-from grip.kinematics.inference import KinematicsEstimator
+from grip.kinematics.features import FeatureConfig, input_features, recording_body
+from grip.kinematics.inference import KinematicsEstimator, decode_outputs
 from grip.kinematics.train import KinematicsRunConfig, TrainConfig, Trainer
 from prism_tools.synthetic import make_recording
 
@@ -30,7 +32,15 @@ def test_offline_batched_equals_single_and_streaming(ckpt):
     feats = input_features(recs[0], est.cfg.features)
     rows = [stream.step(f) for f in feats]
     fp = np.stack([r["fp"] for r in rows]).reshape(80, 24, 3)
-    np.testing.assert_allclose(fp, both[0].joint_pos, atol=1e-5)
+    np.testing.assert_allclose(fp, both[0].fp_joint_pos, atol=1e-5)
+    # the pose's joints: forward kinematics of the streamed rotations on the subject's body
+    rot = decode_outputs({k: np.stack([r[k] for r in rows]) for k in rows[0]}, 80,
+                         build_body(recording_body(recs[0])).offsets)  # fmt: skip
+    np.testing.assert_allclose(rot[0], both[0].joint_pos, atol=1e-5)
+    np.testing.assert_allclose(rot[1], both[0].global_rot, atol=1e-5)
+    bones = np.linalg.norm(both[0].joint_pos[:, 1:] - both[0].joint_pos[:, sk.PARENTS[1:]], axis=-1)
+    rest = np.linalg.norm(build_body(recording_body(recs[0])).offsets[1:], axis=-1)
+    np.testing.assert_allclose(bones, np.broadcast_to(rest, bones.shape), atol=1e-9)
     sp = recs[0].smpl_params
     np.testing.assert_allclose(both[0].root_pos[0], sp.trans[0] + sp.root_offset, atol=1e-6)
 
