@@ -25,9 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "         grip train-kin --data data/prism_synth --out runs/sweep --sweep "
         "--config configs/kinematics/sweep.toml\n"
         "         grip train-kin --data data/prism_synth --out runs/kin_ft "
-        "--init grip/assets/kinematics_default.pt\n"
-        "             --set train.stage_epochs=0 --set train.joint_epochs=8 "
-        "--set train.lr_final=1e-5",
+        "--init runs/kin/last.pt --config configs/kinematics/finetune.toml",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
@@ -243,6 +241,13 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None, help="folder for the table and the plot")
     p.add_argument("--segment-frames", type=int, default=500, help="segment length (frames)")
     p.add_argument(
+        "--joints",
+        default="pose",
+        choices=("pose", "fp"),
+        help="joints of the position metrics: the estimated rotations posed on the subject's "
+        "body (default, what every method is judged on) or the FP stage's direct estimate",
+    )
+    p.add_argument(
         "--sweep",
         type=Path,
         default=None,
@@ -280,7 +285,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     recs = _load_split(args.data, args.split)
     with tqdm(unit="segment", desc="evaluating") as bar:
-        rows = evaluate_recordings(est, recs, args.segment_frames, progress=bar.update)
+        rows = evaluate_recordings(est, recs, args.segment_frames, progress=bar.update,
+                                   joints=args.joints)  # fmt: skip
     agg = aggregate(rows)
     table = markdown_table(agg)
     print(table)
@@ -289,6 +295,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                        "trans_err_m", "MPJPE_mm", "PA_MPJPE_mm", "frames",
                                        "segments")}  # fmt: skip
     figures["model"] = str(model)
+    figures["joints"] = args.joints
     if args.json:
         atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"]},
                                                 indent=1))  # fmt: skip
@@ -333,7 +340,9 @@ def _eval_sweep(args: argparse.Namespace) -> int:
             raise CliError(f"{ck}: trained on {est.cfg.features.sites} "
                            f"(insoles={est.cfg.features.insoles}), not the {s.name} "
                            "configuration its folder names")  # fmt: skip
-        results.append((s, aggregate(evaluate_recordings(est, recs, args.segment_frames))))
+        results.append(
+            (s, aggregate(evaluate_recordings(est, recs, args.segment_frames, joints=args.joints)))
+        )
     table = sweep_table([(s, a["overall"]) for s, a in results])
     print(table)
     if args.json:

@@ -31,14 +31,10 @@ def forward_kinematics(
             f"root_pos shape {root_pos.shape} does not match local_rot {local_rot.shape}"
         )
     g_rot = np.empty_like(local_rot)
-    g_pos = np.empty((*local_rot.shape[:-2], 3), dtype=np.float64)
     g_rot[..., 0, :, :] = local_rot[..., 0, :, :]
-    g_pos[..., 0, :] = root_pos
     for j in range(1, sk.N_JOINTS):
-        p = sk.PARENTS[j]
-        g_rot[..., j, :, :] = g_rot[..., p, :, :] @ local_rot[..., j, :, :]
-        g_pos[..., j, :] = g_pos[..., p, :] + g_rot[..., p, :, :] @ offsets[j]
-    return g_rot, g_pos
+        g_rot[..., j, :, :] = g_rot[..., sk.PARENTS[j], :, :] @ local_rot[..., j, :, :]
+    return g_rot, joints_from_global(g_rot, offsets) + root_pos[..., None, :]
 
 
 def joints_from_global(global_rot: np.ndarray, offsets: np.ndarray) -> np.ndarray:

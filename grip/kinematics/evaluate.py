@@ -15,7 +15,12 @@ METRIC_KEYS: tuple[str, ...] = (
 )  # fmt: skip
 
 
-def segment_metrics(est_out, rec) -> dict[str, float]:
+JOINTS: tuple[str, ...] = ("pose", "fp")
+"""Which joints the position metrics read: the estimated pose (rotations posed on the body,
+:attr:`KinematicEstimate.joint_pos`) or the FP stage's own (``fp_joint_pos``)."""
+
+
+def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
     """Metrics of one estimate against its recording's ground truth.
 
     ``PEL_MPJPE_mm``: root-relative joint error (mm); ``MPJRE_deg``: global joint rotation
@@ -24,16 +29,19 @@ def segment_metrics(est_out, rec) -> dict[str, float]:
     ``MPJPE_mm``: global joint error with the integrated root trajectory (mm);
     ``PA_MPJPE_mm``: joint error after Procrustes alignment per frame (mm).
     """
+    if joints not in JOINTS:
+        raise ValueError(f"joints must be one of {list(JOINTS)}, got {joints!r}")
     gt = targets(rec)
-    est_glob = est_out.joint_pos + est_out.root_pos[:, None]
+    pos = est_out.joint_pos if joints == "pose" else est_out.fp_joint_pos
+    est_glob = pos + est_out.root_pos[:, None]
     gt_glob = gt.joint_pos + gt.root_pos[:, None]
     return {
-        "PEL_MPJPE_mm": float(M.pel_mpjpe(est_out.joint_pos, gt.joint_pos)),
+        "PEL_MPJPE_mm": float(M.pel_mpjpe(pos, gt.joint_pos)),
         "MPJRE_deg": float(M.mpjre(est_out.global_rot, gt.global_rot)),
         "leaf_vel_err_mps": float(np.linalg.norm(est_out.velocity - gt.velocity, axis=-1).mean()),
         "trans_err_m": float(np.linalg.norm(est_out.root_pos - gt.root_pos, axis=-1).mean()),
         "MPJPE_mm": float(M.mpjpe(est_glob, gt_glob)),
-        "PA_MPJPE_mm": float(M.pa_mpjpe(est_out.joint_pos, gt.joint_pos)),
+        "PA_MPJPE_mm": float(M.pa_mpjpe(pos, gt.joint_pos)),
         "frames": int(rec.n_frames),
     }
 
@@ -44,6 +52,7 @@ def evaluate_recordings(
     segment_frames: int = 500,
     batch: int = 32,
     progress: Callable[[int], object] | None = None,
+    joints: str = "pose",
 ) -> list[dict]:
     """Cut recordings into segments (each initialised from its first frame's ground truth, the
     GRIP protocol), run them in batches and return one metrics dict per segment (with
@@ -59,7 +68,7 @@ def evaluate_recordings(
         part = segs[i : i + batch]
         for rec, out in zip(part, est.predict(part), strict=True):
             rows.append({"name": rec.name, "category": rec.category or "unknown",
-                         **segment_metrics(out, rec)})  # fmt: skip
+                         **segment_metrics(out, rec, joints)})  # fmt: skip
         if progress is not None:
             progress(len(part))
     return rows

@@ -26,8 +26,8 @@ class KinematicEstimate:
         leaf_pos: ``(T, 5, 3)`` root-relative leaf joints (the LP stage).
         joint_pos: ``(T, 24, 3)`` root-relative joints of the estimated pose: forward
             kinematics of ``global_rot`` on the subject's body, as TransPose and PIP evaluate
-            their poses (posed SMPL with the true shape). On the test split the shipped model
-            scores 65.2 mm PEL-MPJPE this way and 86.7 mm with the FP stage (README, issue 3).
+            their poses (posed SMPL with the true shape); closer to the truth than the FP
+            stage's own joints (``grip eval-kin --joints fp`` measures those; README, issue 3).
         global_rot: ``(T, 24, 3, 3)`` global joint rotations (the FA stage).
         velocity: ``(T, 6, 3)`` world velocities of the leaves and the pelvis, m/s (LV).
         root_pos: ``(T, 3)`` pelvis trajectory integrated from the estimated pelvis velocity,

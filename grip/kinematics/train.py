@@ -211,9 +211,8 @@ def mirror_batch(
             idx = {"lp": _LEAF_MIRROR, "fp": perm, "lv": _VEL_MIRROR}[k]
             out[k] = (v.reshape(b, t, -1, 3)[:, :, idx] * m).reshape(b, t, -1)
         elif k == "fa":
-            cols = v.reshape(b, t, 24, 2, 3)[
-                :, :, perm
-            ]  # columns c0, c1 of R; M R M's: -M c0, M c1
+            # the columns c0, c1 of R become those of M R M: -M c0, M c1
+            cols = v.reshape(b, t, 24, 2, 3)[:, :, perm]
             sign = torch.stack([-m, m]).to(v.dtype)
             out[k] = (cols * sign).reshape(b, t, -1)
         elif k == "offsets":
@@ -290,11 +289,7 @@ class Trainer:
         yt = {k: torch.from_numpy(v) for k, v in y.items()}
         n_sites = len(self.cfg.features.sites)
         if augment and self.cfg.train.mirror_augment:
-            xm, ym = mirror_batch(xt, yt, self.cfg.features.sites, self.cfg.features.insoles)
-            flip = torch.from_numpy(self.rng.random(x.shape[0]) < 0.5)
-            xt = torch.where(flip[:, None, None], xm, xt)
-            yt = {k: torch.where(flip.view(-1, *([1] * (v.dim() - 1))), ym[k], v)
-                  for k, v in yt.items()}  # fmt: skip
+            xt, yt = self._mirror_half(xt, yt)
         if augment and self.cfg.train.yaw_augment:
             ang = torch.from_numpy(self.rng.uniform(-np.pi, np.pi, x.shape[0]).astype(np.float32))
             xt, yt = rotate_batch(xt, yt, _yaw_matrices(ang), n_sites)
@@ -312,6 +307,20 @@ class Trainer:
             xt[..., idx] += self.cfg.train.acc_noise * torch.from_numpy(
                 self.rng.standard_normal((*xt.shape[:2], len(idx))).astype(np.float32)
             )
+        return xt, yt
+
+    def _mirror_half(self, xt: torch.Tensor, yt: dict[str, torch.Tensor]):
+        """Copies of a batch with a random half of its windows mirrored (:func:`mirror_batch`)."""
+        flip = torch.from_numpy(self.rng.random(xt.shape[0]) < 0.5)
+        if not flip.any():
+            return xt, yt
+        feats = self.cfg.features
+        xm, ym = mirror_batch(xt[flip], {k: v[flip] for k, v in yt.items()}, feats.sites,
+                              feats.insoles)  # fmt: skip
+        xt, yt = xt.clone(), {k: v.clone() for k, v in yt.items()}  # the caller's arrays stay
+        xt[flip] = xm
+        for k, v in yt.items():
+            v[flip] = ym[k]
         return xt, yt
 
     def losses(self, x: torch.Tensor, y: dict[str, torch.Tensor],

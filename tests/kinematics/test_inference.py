@@ -54,3 +54,10 @@ def test_evaluation_rows_and_table(ckpt, tmp_path):
     agg = aggregate(rows)
     assert agg["overall"]["frames"] == 130 and agg["overall"]["PEL_MPJPE_mm"] > 0
     assert "**all**" in markdown_table(agg)
+    # the FP stage's joints instead of the posed rotations: another position error, same MPJRE
+    fp = evaluate_recordings(est, [make_recording(130, seed=3)], segment_frames=50, joints="fp")
+    for a, b in zip(rows, fp, strict=True):
+        assert a["PEL_MPJPE_mm"] != pytest.approx(b["PEL_MPJPE_mm"], rel=1e-3)
+        assert a["MPJRE_deg"] == b["MPJRE_deg"]
+    with pytest.raises(ValueError, match="joints must be"):
+        evaluate_recordings(est, [make_recording(60, seed=3)], segment_frames=50, joints="lp")
