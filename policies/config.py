@@ -75,6 +75,10 @@ class PPOConfig:
             passes 1.5 x this (SB3); 0 = off.
         normalize_reward: Scale rewards by a running return std (SB3 VecNormalize).
         clip_obs: Normalised observations are clipped to +- this.
+        critic_warmup_steps: Steps (decisions, counted from the start of the run) during which
+            only the value network learns and the policy stays as it is: for a run warm-started
+            from an exported policy without a value network (``grip train-policy --init``),
+            whose fresh critic would otherwise feed the policy meaningless advantages.
         threads: Torch threads of the learner (0: all cores).
         device: Torch device of the learner (``"cpu"``, ``"cuda"``, ``"auto"``).
     """
@@ -98,6 +102,7 @@ class PPOConfig:
     target_kl: float = 0.0
     normalize_reward: bool = True
     clip_obs: float = 10.0
+    critic_warmup_steps: int = 0
     threads: int = 0
     device: str = "cpu"
 

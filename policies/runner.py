@@ -41,6 +41,24 @@ def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def _copy_mlp(body: nn.Sequential, head: nn.Linear,
+              activation: str) -> tuple[list[int], nn.Sequential]:  # fmt: skip
+    """A plain MLP (:func:`_mlp`) with the weights of an SB3 network body and its output layer;
+    returns its layer sizes and the MLP."""
+    linears = [m for m in body if isinstance(m, nn.Linear)] + [head]
+    sizes = [linears[0].in_features] + [m.out_features for m in linears]
+    mlp = _mlp(sizes, activation)
+    for dst, src in zip([m for m in mlp if isinstance(m, nn.Linear)], linears, strict=True):
+        dst.load_state_dict(src.state_dict())
+    return sizes, mlp
+
+
+def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
+    mlp = _mlp([int(s) for s in sizes], activation)
+    mlp.load_state_dict({k: v.float() for k, v in state.items()})
+    return mlp
+
+
 class PolicyRunner:
     """Deterministic actions of a trained DynamicsNet, and the discriminator's probability.
 
@@ -52,9 +70,18 @@ class PolicyRunner:
 
     def __init__(self, actor: nn.Sequential, obs_keys: list[str], obs_mean: dict, obs_var: dict,
                  clip_obs: float, env_cfg: TrackingEnvConfig, disc: Discriminator | None,
-                 amp_window: int, info: dict | None = None) -> None:  # fmt: skip
+                 amp_window: int, info: dict | None = None,
+                 config: PolicyRunConfig | None = None, critic: nn.Sequential | None = None,
+                 log_std: torch.Tensor | None = None,
+                 obs_count: float | None = None) -> None:  # fmt: skip
         self.actor = actor.eval()
         self.obs_keys = list(obs_keys)
+        self.obs_mean = {k: np.asarray(obs_mean[k], np.float64) for k in obs_keys}
+        self.obs_var = {k: np.asarray(obs_var[k], np.float64) for k in obs_keys}
+        self.obs_count = obs_count
+        self.config = config
+        self.critic = critic.eval() if critic is not None else None
+        self.log_std = log_std
         self._mean = np.concatenate([np.asarray(obs_mean[k], np.float64) for k in obs_keys])
         self._std = np.sqrt(np.concatenate([np.asarray(obs_var[k], np.float64) for k in obs_keys])
                             + 1e-8)  # fmt: skip
@@ -99,9 +126,11 @@ class PolicyRunner:
             raise ValueError(f"{path}: policy file lacks {missing}")
         try:
             cfg = apply_dict(PolicyRunConfig(), json.loads(ck["config"]), f"{path}: config")
-            sizes = [int(s) for s in ck["actor_sizes"]]
-            actor = _mlp(sizes, cfg.ppo.activation)
-            actor.load_state_dict({k: v.float() for k, v in ck["actor"].items()})
+            actor = _load_mlp(ck["actor_sizes"], ck["actor"], cfg.ppo.activation)
+            critic = None
+            if "critic" in ck:  # files written since the value network is exported
+                critic = _load_mlp(ck["critic_sizes"], ck["critic"], cfg.ppo.activation)
+            log_std = ck["log_std"].float() if "log_std" in ck else None
             disc = None
             if "disc" in ck:
                 disc = Discriminator(cfg.amp.window * int(ck["amp_frame_dim"]), cfg.amp.hidden,
@@ -111,8 +140,10 @@ class PolicyRunner:
         except (KeyError, RuntimeError, ValueError, TypeError) as e:
             raise ValueError(f"{path}: inconsistent policy file ({e})") from e
         env_cfg = dataclasses.replace(cfg.env, amp_window=cfg.amp.window)
+        count = float(ck["obs_count"]) if "obs_count" in ck else None
         return cls(actor, ck["obs_keys"], ck["obs_mean"], ck["obs_var"], float(ck["clip_obs"]),
-                   env_cfg, disc, cfg.amp.window, json.loads(ck.get("info", "{}")))  # fmt: skip
+                   env_cfg, disc, cfg.amp.window, json.loads(ck.get("info", "{}")), config=cfg,
+                   critic=critic, log_std=log_std, obs_count=count)  # fmt: skip
 
 
 def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool = True,
@@ -133,12 +164,9 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
     model = PPO.load(ck_dir / "model.zip", device="cpu")
     pol = model.policy
-    linears = [m for m in pol.mlp_extractor.policy_net if isinstance(m, nn.Linear)]
-    linears.append(pol.action_net)
-    sizes = [linears[0].in_features] + [m.out_features for m in linears]
-    actor = _mlp(sizes, cfg.ppo.activation)
-    for dst, src in zip([m for m in actor if isinstance(m, nn.Linear)], linears, strict=True):
-        dst.load_state_dict(src.state_dict())
+    sizes, actor = _copy_mlp(pol.mlp_extractor.policy_net, pol.action_net, cfg.ppo.activation)
+    critic_sizes, critic = _copy_mlp(pol.mlp_extractor.value_net, pol.value_net,
+                                     cfg.ppo.activation)  # fmt: skip
     cast = (lambda v: v.half()) if half else (lambda v: v)
     with np.load(ck_dir / "vecnorm.npz", allow_pickle=False) as z:
         norm = dict(z)
@@ -150,6 +178,10 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         "obs_keys": keys,
         "obs_mean": {k: torch.as_tensor(norm[f"obs/{k}/mean"]) for k in keys},
         "obs_var": {k: torch.as_tensor(norm[f"obs/{k}/var"]) for k in keys},
+        "obs_count": float(norm[f"obs/{keys[0]}/count"]),
+        "log_std": pol.log_std.detach().clone(),
+        "critic_sizes": critic_sizes,
+        "critic": {k: cast(v) for k, v in critic.state_dict().items()},
         "clip_obs": cfg.ppo.clip_obs, "amp_frame_dim": FRAME_DIM,
         "disc": {k: (cast(v) if k.startswith(("trunk", "head")) else v)
                  for k, v in amp_ck["disc"].items()},

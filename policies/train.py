@@ -170,6 +170,7 @@ class TrainingCallback(BaseCallback):
         self.ep_err, self.ep_err_n, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
         self._set_termination()
+        self.trainer.set_actor_frozen(self.trainer.in_critic_warmup())
 
     def _set_termination(self) -> None:
         """The termination curriculum: the stage's distance after the steps done so far."""
@@ -232,6 +233,10 @@ class TrainingCallback(BaseCallback):
         self.episodes = []
         self.rollouts += 1
         self._set_termination()
+        # the update that follows this rollout trains the value network only during warm-up
+        warm = tr.in_critic_warmup()
+        tr.set_actor_frozen(warm)
+        log("train/critic_warmup", float(warm))
         if self.rollouts % tr.cfg.checkpoint_every == 0:
             tr.save_checkpoint()
 
@@ -245,15 +250,23 @@ class PolicyTrainer:
         run_dir: Run folder (created or resumed).
         reference: Training reference set (``.npz``); copied into the run on first use.
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
+        init: An exported policy (``policy.pt``) to start from instead of random weights
+            (:meth:`warm_start`); ignored when the run resumes from its own checkpoint.
     """
 
     def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
-                 reference: str | os.PathLike,
-                 progress: Callable | None = None) -> None:  # fmt: skip
+                 reference: str | os.PathLike, progress: Callable | None = None,
+                 init: str | os.PathLike | None = None) -> None:  # fmt: skip
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.reference = str(reference)
         self.progress = progress
+        self.init = init
+        self._init_runner = None
+        if init is not None:
+            from policies.runner import PolicyRunner
+
+            self._init_runner = PolicyRunner.load(init)  # fails early, naming the file
         self.stage_index = 0
         self.stage_done = 0
         self.stage_done0 = 0
@@ -344,6 +357,73 @@ class PolicyTrainer:
         if self.cfg.ppo.fixed_std:
             self.model.policy.log_std.requires_grad_(False)
 
+    def _actor_params(self) -> list[torch.nn.Parameter]:
+        pol = self.model.policy
+        params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
+        return params + ([] if self.cfg.ppo.fixed_std else [pol.log_std])
+
+    def set_actor_frozen(self, frozen: bool) -> None:
+        """Freeze the policy (mean network and log std) so that a PPO update trains only the
+        value network (``ppo.critic_warmup_steps``); Adam skips parameters without gradients."""
+        for prm in self._actor_params():
+            prm.requires_grad_(not frozen)
+
+    def in_critic_warmup(self) -> bool:
+        return self.total_done() < self.cfg.ppo.critic_warmup_steps
+
+    def warm_start(self, runner) -> None:
+        """Start from an exported policy (:class:`policies.runner.PolicyRunner`): its policy
+        network and log std, its value network when the file has one, its observation
+        normaliser and its discriminator. PPO's optimiser, the return normaliser and the
+        discriminator's optimiser start afresh.
+
+        Raises:
+            ValueError: naming the file, when its networks or observations do not fit this
+                run's settings.
+        """
+        src = self.init
+        pol = self.model.policy
+        spaces = self.model.observation_space.spaces
+        if list(runner.obs_keys) != list(spaces):
+            raise ValueError(f"{src}: observation parts {runner.obs_keys} differ from this "
+                             f"run's {list(spaces)}")  # fmt: skip
+        for k, space in spaces.items():
+            if runner.obs_mean[k].shape != space.shape:
+                shape = runner.obs_mean[k].shape
+                raise ValueError(f"{src}: observation {k!r} has shape {shape}, this run's "
+                                 f"{space.shape}")  # fmt: skip
+
+        def load(mlp, body, head, what: str) -> None:
+            ours = [m for m in body if isinstance(m, torch.nn.Linear)] + [head]
+            theirs = [m for m in mlp if isinstance(m, torch.nn.Linear)]
+            shapes = [tuple(m.weight.shape) for m in ours]
+            if shapes != [tuple(m.weight.shape) for m in theirs]:
+                raise ValueError(f"{src}: its {what} network has layers "
+                                 f"{[tuple(m.weight.shape) for m in theirs]}, this run's "
+                                 f"{shapes} (set ppo.net_arch to match)")  # fmt: skip
+            with torch.no_grad():
+                for dst, s in zip(ours, theirs, strict=True):
+                    dst.weight.copy_(s.weight)
+                    dst.bias.copy_(s.bias)
+
+        load(runner.actor, pol.mlp_extractor.policy_net, pol.action_net, "policy")
+        if runner.critic is not None:
+            load(runner.critic, pol.mlp_extractor.value_net, pol.value_net, "value")
+        if runner.log_std is not None:
+            with torch.no_grad():
+                pol.log_std.copy_(runner.log_std)
+        count = runner.obs_count if runner.obs_count is not None else 1e6
+        for k, rms in self.venv.obs_rms.items():
+            rms.mean, rms.var = runner.obs_mean[k].copy(), runner.obs_var[k].copy()
+            rms.count = count
+        if runner.disc is not None:
+            disc = self.amp.disc
+            if [p.shape for p in disc.state_dict().values()] != [
+                p.shape for p in runner.disc.state_dict().values()
+            ]:
+                raise ValueError(f"{src}: its discriminator does not fit this run's amp settings")
+            disc.load_state_dict(runner.disc.state_dict())
+
     # -------------------------------------------------------------- run
     def train(self) -> None:
         """Train (or resume) both stages, checkpointing as configured; then export."""
@@ -393,6 +473,8 @@ class PolicyTrainer:
                                   device=self.cfg.ppo.device, **self._ppo_settings())  # fmt: skip
         elif self.model is None:
             self.model = self._new_model(self.venv)
+            if self._init_runner is not None:
+                self.warm_start(self._init_runner)
         else:
             load_vecnorm_state(self.venv, old_norm)
             self.model.set_env(self.venv)

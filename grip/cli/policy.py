@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "         grip train-policy --data data/prism_synth --out runs/p "
         "--set stage1.timesteps=500000\n"
         "         grip train-policy --data data/prism_synth --out runs/grip_size "
-        "--set 'ppo.net_arch=[2048,1536,1024,1024,512,512]'",
+        "--set 'ppo.net_arch=[2048,1536,1024,1024,512,512]'\n"
+        "         grip train-policy --data data/prism_synth --out runs/p_ft "
+        "--init grip/assets/policy_default.pt --config configs/policy/finetune.toml",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
@@ -40,6 +42,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="TOML overrides (default: configs/policy/default.toml)")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override one setting, e.g. --set ppo.n_envs=16 (repeatable)")  # fmt: skip
+    p.add_argument("--init", type=Path, default=None, metavar="POLICY",
+                   help="warm start: begin from an exported policy (e.g. "
+                   "grip/assets/policy_default.pt): its policy, value network (if the file has "
+                   "one), observation normaliser and discriminator; usually with --config "
+                   "configs/policy/finetune.toml (ignored when OUT resumes)")  # fmt: skip
     p.set_defaults(func=cmd_train)
 
     e = sub.add_parser(
@@ -96,6 +103,7 @@ RESUMABLE: tuple[str, ...] = (
     "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
     "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
     "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm", "ppo.target_kl",
+    "ppo.critic_warmup_steps",
 )  # fmt: skip
 """Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
 run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
@@ -130,6 +138,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from policies.train import PolicyTrainer, run_config_dict
 
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
+    if args.init is not None and not args.init.is_file():
+        raise CliError(f"{args.init}: no such policy file")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     kin = kin_checkpoint(args.kin)
@@ -153,15 +163,27 @@ def cmd_train(args: argparse.Namespace) -> int:
         if changed:
             raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
                            f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip
-    atomic_write_text(prev, json.dumps({"config": run_config_dict(cfg), "git": git_hash(),
-                                        "data": str(args.data.resolve()),
-                                        "kin": str(kin.resolve())}, indent=1))  # fmt: skip
+    resuming = (out / "checkpoint" / "state.json").is_file()
+    init = args.init
+    if init is not None and resuming:
+        print(f"{out} resumes from its own checkpoint; --init {init} is ignored")
+        init = None
+    payload = {"config": run_config_dict(cfg), "git": git_hash(),
+               "data": str(args.data.resolve()), "kin": str(kin.resolve())}  # fmt: skip
+    if resuming and prev.is_file() and "init" in json.loads(prev.read_text()):
+        payload["init"] = json.loads(prev.read_text())["init"]  # what the run started from
+    if init is not None:
+        payload["init"] = str(init.resolve())
     try:
-        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm)
+        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init)
     except ValueError as e:
         raise CliError(str(e)) from e
+    atomic_write_text(prev, json.dumps(payload, indent=1))
     t0 = time.perf_counter()
-    trainer.train()
+    try:
+        trainer.train()
+    except ValueError as e:  # a warm-start file that does not fit the run's settings
+        raise CliError(str(e)) from e
     dt = time.perf_counter() - t0
     print(f"trained to {trainer.total_done()} steps ({trainer.wall_s():.0f} s of training in all; "
           f"this call {dt:.0f} s)")  # fmt: skip

@@ -210,3 +210,78 @@ def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
     assert all(h["frames"] == 3 * h["timesteps"] for h in tr.history)
     export_policy(tmp_path, tmp_path / "p.pt")
     assert PolicyRunner.load(tmp_path / "p.pt").env_cfg.action_repeat == 3
+
+
+def _linears(seq) -> list:
+    import torch
+
+    return [m for m in seq if isinstance(m, torch.nn.Linear)]
+
+
+def _warm_cfg(warmup: int) -> PolicyRunConfig:
+    base = _tiny()
+    return dataclasses.replace(
+        base, ppo=dataclasses.replace(base.ppo, critic_warmup_steps=warmup),
+        stage1=dataclasses.replace(base.stage1, timesteps=0),
+        stage2=dataclasses.replace(base.stage2, timesteps=128),
+    )  # fmt: skip
+
+
+def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_critic(run, tmp_path):
+    import torch
+
+    path, _ = run
+    exported = tmp_path / "p.pt"
+    export_policy(path, exported, half=False)
+    src = PolicyRunner.load(exported)
+    assert src.critic is not None and src.log_std is not None and src.obs_count > 0
+
+    # warm-up covering the whole run: the policy stays exactly the exported one
+    frozen = PolicyTrainer(_warm_cfg(10_000), tmp_path / "frozen", SAMPLE_REFERENCE,
+                           init=exported)  # fmt: skip
+    frozen.train()
+    pol = frozen.model.policy
+    ours = [*_linears(pol.mlp_extractor.policy_net), pol.action_net]
+    for a, b in zip(ours, _linears(src.actor), strict=True):
+        assert torch.equal(a.weight, b.weight) and torch.equal(a.bias, b.bias)
+    assert torch.equal(pol.log_std, src.log_std)
+    vf = [*_linears(pol.mlp_extractor.value_net), pol.value_net]
+    moved = [not torch.equal(a.weight, b.weight) for a, b in zip(vf, _linears(src.critic),
+                                                                   strict=True)]  # fmt: skip
+    assert any(moved)  # the critic learned
+    h = [r for r in frozen.history if r["stage"] == "stage2"]
+    assert h and h[0]["timesteps"] == 64  # stage 1 of 0 steps is skipped
+    # the discriminator starts from the file's
+    d0 = torch.load(path / "checkpoint" / "amp.pt", weights_only=False)["disc"]
+    assert set(d0) == set(frozen.amp.disc.state_dict())
+
+    # no warm-up: the policy trains from the exported weights
+    (tmp_path / "free").mkdir()
+    (tmp_path / "free" / "config.json").write_text(
+        json.dumps({"config": run_config_dict(_warm_cfg(0))}))
+    free = PolicyTrainer(_warm_cfg(0), tmp_path / "free", SAMPLE_REFERENCE, init=exported)
+    free.train()
+    pol = free.model.policy
+    ours = [*_linears(pol.mlp_extractor.policy_net), pol.action_net]
+    assert any(not torch.equal(a.weight, b.weight) for a, b in zip(ours, _linears(src.actor),
+                                                                     strict=True))  # fmt: skip
+    # the new run's export is close to the one it started from (a few small updates)
+    export_policy(tmp_path / "free", tmp_path / "free.pt", half=False)
+    env = GripTrackingEnv(src.env_cfg)
+    obs, _ = env.reset(seed=5)
+    a0, a1 = src.act(obs), PolicyRunner.load(tmp_path / "free.pt").act(obs)
+    assert np.abs(a0 - a1).max() < 0.5
+
+
+def test_warm_start_refuses_a_policy_of_another_size(run, tmp_path):
+    path, _ = run
+    exported = tmp_path / "p.pt"
+    export_policy(path, exported)
+    cfg = _warm_cfg(0)
+    wider = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, net_arch=(64, 32)))
+    tr = PolicyTrainer(wider, tmp_path / "wider", SAMPLE_REFERENCE, init=exported)
+    with pytest.raises(ValueError, match=r"p\.pt: its policy network has layers"):
+        tr.train()
+    with pytest.raises(ValueError, match=r"junk\.pt"):
+        (tmp_path / "junk.pt").write_bytes(b"junk")
+        PolicyTrainer(cfg, tmp_path / "j", SAMPLE_REFERENCE, init=tmp_path / "junk.pt")
