@@ -151,18 +151,23 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.main import CliError
-    from grip.kinematics.dataset import load_split_sequences
+    from grip.kinematics.dataset import holdout_split, load_split_sequences
     from grip.kinematics.train import Trainer
 
     t0 = time.perf_counter()
+    tc = cfg.train
     try:
         train = load_split_sequences(data, "train", cfg.features)
-        val = load_split_sequences(data, "test", cfg.features)
+        if tc.val_source == "holdout":
+            train, val = holdout_split(train, tc.val_fraction, tc.seed)
+        else:
+            val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
-        raise CliError(str(e)) from e
+        raise CliError(f"{data}: {e}" if str(data) not in str(e) else str(e)) from e
     n_frames = sum(len(s.x) for s in train)
-    print(f"loaded {len(train)} train / {len(val)} test sequences ({n_frames} train frames) "
-          f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    what = "held-out training" if tc.val_source == "holdout" else "test"
+    print(f"loaded {len(train)} train / {len(val)} validation ({what}) sequences "
+          f"({n_frames} train frames) in {time.perf_counter() - t0:.1f} s")  # fmt: skip
     try:
         trainer = Trainer(cfg, train, val, out)
         info = {"data": str(data.resolve()), "train_frames": n_frames}

@@ -7,6 +7,7 @@ as float32; a typical dataset built from the shared clips (~125k frames) takes ~
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -91,6 +92,35 @@ def load_split_sequences(
         except (KeyError, ValueError) as e:
             raise ValueError(f"{path}: {e}") from e
     return out
+
+
+_CHUNK = re.compile(r"^(?P<clip>.+?)(?:_(?:v\d+|c))?_seq\d+$")
+
+
+def clip_of(sequence_name: str) -> str:
+    """The clip (or take) a sequence was cut from: ``<clip>_v0_seq003`` (``grip data build``:
+    noise variant and chunk) and ``subj001_take002_seq003`` (PRISM) lose their suffixes; other
+    names are their own clip."""
+    m = _CHUNK.match(sequence_name)
+    return m.group("clip") if m else sequence_name
+
+
+def holdout_split(
+    seqs: list[SequenceArrays], fraction: float, seed: int
+) -> tuple[list[SequenceArrays], list[SequenceArrays]]:
+    """``(train, held_out)``: a random ``fraction`` of the clips (at least one, never all) with
+    all their sequences (chunks, noise variants) held out, the rest kept for training.
+
+    Raises:
+        ValueError: fewer than two clips, so nothing can be held out and still train.
+    """
+    clips = sorted({clip_of(s.name) for s in seqs})
+    if len(clips) < 2:
+        raise ValueError(f"holding out validation clips needs at least 2 clips, got {clips}")
+    n = min(max(1, round(fraction * len(clips))), len(clips) - 1)
+    held = set(np.random.default_rng(seed).permutation(clips)[:n].tolist())
+    return ([s for s in seqs if clip_of(s.name) not in held],
+            [s for s in seqs if clip_of(s.name) in held])  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from grip.kinematics.features import FeatureConfig
 from grip.kinematics.model import STAGES, KinematicsNet, KinematicsNetConfig
 
 CHECKPOINT_VERSION = 1
+VAL_SOURCES: tuple[str, ...] = ("test", "holdout")
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,12 @@ class TrainConfig:
         lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
             ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
         val_windows: Validation windows (fixed draw) evaluated after every epoch.
+        val_source: Where the validation windows (and so ``best.pt``) come from: ``"test"``,
+            the dataset's test split (the runs of the shipped models), or ``"holdout"``, a
+            fraction ``val_fraction`` of the training clips held out of training
+            (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
+            unseen by model selection.
+        val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
         seed: Seed of windows, noise and initialisation.
     """
 
@@ -73,7 +80,16 @@ class TrainConfig:
     mirror_augment: bool = False
     lr_final: float | None = None
     val_windows: int = 256
+    val_source: str = "test"
+    val_fraction: float = 0.1
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.val_source not in VAL_SOURCES:
+            raise ValueError(f"train.val_source must be one of {list(VAL_SOURCES)}, "
+                             f"got {self.val_source!r}")  # fmt: skip
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
 
 
 @dataclass(frozen=True)

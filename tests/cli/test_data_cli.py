@@ -115,6 +115,14 @@ def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None
     bad = [*args[:-2], "--set", "train.lrr=1"]
     assert main(bad) == 2
     assert "lrr" in capsys.readouterr().err
+    # validation on training clips held out of training instead of the test split
+    held = [*args, "--set", "train.val_source=holdout", "--set", "train.val_fraction=0.3"]
+    held[held.index(str(run))] = str(tmp_path / "held")
+    assert main(held) == 2  # this dataset's train split has one clip: nothing to hold out
+    err = capsys.readouterr().err
+    assert "dataset" in err and "at least 2 clips" in err and "Traceback" not in err
+    assert main([*held, "--set", "train.val_source=dev"]) == 2
+    assert "val_source" in capsys.readouterr().err
 
 
 def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path, capsys) -> None:

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from grip.kinematics.dataset import Normalizer, sample_windows, sequence_arrays
 from grip.kinematics.features import FeatureConfig
@@ -18,3 +19,35 @@ def test_windows_shapes_padding_and_normalizer():
     norm = Normalizer.fit(seqs)
     z = norm(np.concatenate([s.x for s in seqs]))
     np.testing.assert_allclose(z.mean(0)[norm.std > 1e-3], 0.0, atol=1e-4)
+
+
+def test_clip_of_strips_variant_and_chunk_suffixes():
+    from grip.kinematics.dataset import clip_of
+
+    assert clip_of("cmu__07_05_v0_seq003") == "cmu__07_05"
+    assert clip_of("cmu__07_05_v12_seq000") == "cmu__07_05"
+    assert clip_of("cmu__07_05_c_seq001") == "cmu__07_05"
+    assert clip_of("subj001_take002_seq003") == "subj001_take002"
+    assert clip_of("walk") == "walk"
+
+
+def test_holdout_split_keeps_each_clip_on_one_side():
+    from types import SimpleNamespace
+
+    from grip.kinematics.dataset import clip_of, holdout_split
+
+    seqs = [SimpleNamespace(name=f"clip{c:02d}_v{v}_seq{i:03d}")
+            for c in range(20) for v in range(2) for i in range(3)]  # fmt: skip
+    train, val = holdout_split(seqs, 0.1, seed=0)
+    assert len(train) + len(val) == len(seqs)
+    held = {clip_of(s.name) for s in val}
+    assert len(held) == 2 and not held & {clip_of(s.name) for s in train}
+    assert len(val) == 2 * 2 * 3  # every chunk and variant of a held-out clip
+    again, _ = holdout_split(seqs, 0.1, seed=0)
+    assert [s.name for s in again] == [s.name for s in train]  # deterministic
+    assert {clip_of(s.name) for s in holdout_split(seqs, 0.1, seed=1)[1]} != held
+    # at least one clip is held out, and never all of them
+    assert len({clip_of(s.name) for s in holdout_split(seqs[:12], 0.01, seed=0)[1]}) == 1
+    assert len({clip_of(s.name) for s in holdout_split(seqs[:12], 0.99, seed=0)[0]}) == 1
+    with pytest.raises(ValueError, match="at least 2 clips"):
+        holdout_split(seqs[:6], 0.5, seed=0)
