@@ -38,23 +38,30 @@ def chunk_id(take_name: str, index: int) -> str:
     return f"{take_name}_seq{index:03d}"
 
 
-def segments(n_frames: int, length: int = 500, *, min_length: int = 1) -> list[slice]:
-    """Consecutive, non-overlapping frame windows covering ``[0, n_frames)``.
+def segments(n_frames: int, length: int = 500, *, min_length: int = 1,
+             stride: int = 0) -> list[slice]:  # fmt: skip
+    """Frame windows of ``length`` starting every ``stride`` frames (default ``length``:
+    consecutive, non-overlapping windows covering ``[0, n_frames)``).
 
     Args:
         n_frames: Number of frames, ``>= 0``.
         length: Window length in frames, ``>= 1``.
         min_length: A last window shorter than this is dropped (default 1: keep every frame).
+        stride: Frames between window starts, ``>= 1``; 0 = ``length``. A stride below the
+            length gives overlapping windows (more start points for an evaluation).
 
     Returns:
-        ``[slice(0, length), slice(length, 2 * length), ...]``; the last slice may be shorter than
-        ``length`` (but not shorter than ``min_length``). ``segments(1000, 500)`` gives two.
+        ``[slice(0, length), slice(stride, stride + length), ...]``; a window at the end may be
+        shorter than ``length`` (but not shorter than ``min_length``). ``segments(1000, 500)``
+        gives two, ``segments(1000, 500, min_length=500, stride=100)`` six.
     """
     if length < 1:
         raise ValueError(f"length must be >= 1, got {length}")
     if n_frames < 0:
         raise ValueError(f"n_frames must be >= 0, got {n_frames}")
-    starts = range(0, n_frames, length)
+    if stride < 0:
+        raise ValueError(f"stride must be >= 0, got {stride}")
+    starts = range(0, n_frames, stride or length)
     out = [slice(s, min(s + length, n_frames)) for s in starts]
     return [s for s in out if s.stop - s.start >= min_length]
 

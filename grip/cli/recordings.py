@@ -29,11 +29,13 @@ def load_recordings(
     max_frames: int = 0,
     limit: int = 0,
     fill_gaps: int = 0,
+    segment_stride: int = 0,
 ) -> list:
     """Load recordings, keeping those whose category matches a glob of ``categories`` (all when
     empty); crop each to ``max_frames``, or cut it into ``segment_frames``-frame segments (a
-    shorter tail is left out); stop at ``limit`` recordings or segments (0: no limit). Sensor
-    dropouts (NaN runs) of at most ``fill_gaps`` frames are interpolated
+    shorter tail is left out; with ``segment_stride`` a segment starts every that many frames,
+    overlapping when it is below ``segment_frames``); stop at ``limit`` recordings or segments
+    (0: no limit). Sensor dropouts (NaN runs) of at most ``fill_gaps`` frames are interpolated
     (:func:`prism_tools.gaps.fill_gaps`, listed in ``extras["filled_gaps"]``); longer ones are
     an error.
 
@@ -56,7 +58,8 @@ def load_recordings(
         if max_frames and rec.n_frames > max_frames:
             rec = rec.slice_frames(0, max_frames)
         if segment_frames:
-            cuts = segments(rec.n_frames, segment_frames, min_length=segment_frames)
+            cuts = segments(rec.n_frames, segment_frames, min_length=segment_frames,
+                            stride=segment_stride)  # fmt: skip
             recs += [rec.slice_frames(sl.start, sl.stop) for sl in cuts]
         else:
             recs.append(rec)

@@ -26,6 +26,10 @@ def test_segments_crops_categories_and_limit(files):
     assert [r.n_frames for r in segs] == [100, 100, 100]  # tails of 50 and 20 left out
     assert [r.n_frames for r in load_recordings(files, max_frames=110)] == [110, 110]
     assert len(load_recordings(files, segment_frames=100, limit=2)) == 2
+    over = load_recordings(files, segment_frames=100, segment_stride=50)
+    assert [r.n_frames for r in over] == [100] * 5  # starts 0..150 of the first, 0 of the second
+    whole = load_recordings(files[:1])[0]
+    assert (over[1].smpl_params.poses == whole.smpl_params.poses[50:150]).all()
     assert len(load_recordings(files, categories=[cat[:2] + "*"])) == 2
     with pytest.raises(CliError, match="no recordings of categories"):
         load_recordings(files, categories=["no-such-*"])

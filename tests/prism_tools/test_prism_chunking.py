@@ -55,6 +55,12 @@ def test_segments() -> None:
     assert segments(0) == []
     with pytest.raises(ValueError):
         segments(10, 0)
+    # overlapping windows: a start every 100 frames, whole 500-frame windows only
+    full = segments(1000, 500, min_length=500, stride=100)
+    assert [(s.start, s.stop) for s in full] == [(k, k + 500) for k in range(0, 501, 100)]
+    assert segments(1000, 500, stride=500) == segments(1000, 500)
+    with pytest.raises(ValueError, match="stride"):
+        segments(10, 5, stride=-1)
 
 
 def _ids(n_takes: int = 30, n_chunks: int = 5) -> list[str]:
