@@ -70,8 +70,7 @@ class PolicyRunner:
 
     def __init__(self, actor: nn.Sequential, obs_keys: list[str], obs_mean: dict, obs_var: dict,
                  clip_obs: float, env_cfg: TrackingEnvConfig, disc: Discriminator | None,
-                 amp_window: int, info: dict | None = None,
-                 config: PolicyRunConfig | None = None, critic: nn.Sequential | None = None,
+                 amp_window: int, info: dict | None = None, critic: nn.Sequential | None = None,
                  log_std: torch.Tensor | None = None,
                  obs_count: float | None = None) -> None:  # fmt: skip
         self.actor = actor.eval()
@@ -79,7 +78,6 @@ class PolicyRunner:
         self.obs_mean = {k: np.asarray(obs_mean[k], np.float64) for k in obs_keys}
         self.obs_var = {k: np.asarray(obs_var[k], np.float64) for k in obs_keys}
         self.obs_count = obs_count
-        self.config = config
         self.critic = critic.eval() if critic is not None else None
         self.log_std = log_std
         self._mean = np.concatenate([np.asarray(obs_mean[k], np.float64) for k in obs_keys])
@@ -142,7 +140,7 @@ class PolicyRunner:
         env_cfg = dataclasses.replace(cfg.env, amp_window=cfg.amp.window)
         count = float(ck["obs_count"]) if "obs_count" in ck else None
         return cls(actor, ck["obs_keys"], ck["obs_mean"], ck["obs_var"], float(ck["clip_obs"]),
-                   env_cfg, disc, cfg.amp.window, json.loads(ck.get("info", "{}")), config=cfg,
+                   env_cfg, disc, cfg.amp.window, json.loads(ck.get("info", "{}")),
                    critic=critic, log_std=log_std, obs_count=count)  # fmt: skip
 
 
