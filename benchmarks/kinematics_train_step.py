@@ -33,7 +33,7 @@ def main() -> None:
     torch.set_flush_denormal(args.data is None)
 
     from grip.cli.paths import load_run_config
-    from grip.kinematics.dataset import load_split_sequences, sample_windows, sequence_arrays
+    from grip.kinematics.dataset import load_split_sequences, sequence_arrays
     from grip.kinematics.train import KinematicsRunConfig, Trainer
     from prism_tools.synthetic import make_recording
 
@@ -48,23 +48,12 @@ def main() -> None:
     parts = dict.fromkeys(("sample", "augment", "forward", "backward", "step"), 0.0)
     for i in range(args.steps + 2):
         t = [time.perf_counter()]
-        x, y = sample_windows(seqs, tc.batch_size, tc.window_frames, tr.rng)
-        t.append(time.perf_counter())
-        xt, yt = tr._tensors(x, y, augment=True)
-        t.append(time.perf_counter())
-        total = tr._total(tr.losses(xt, yt), "joint")
-        t.append(time.perf_counter())
-        tr.opt.zero_grad(set_to_none=True)
-        total.backward()
-        t.append(time.perf_counter())
-        torch.nn.utils.clip_grad_norm_(tr.model.parameters(), tc.grad_clip)
-        tr.opt.step()
-        t.append(time.perf_counter())
+        tr.train_step("joint", tc.lr, clock=t)
         if i >= 2:
             for k, a, b in zip(parts, t[:-1], t[1:], strict=True):
                 parts[k] += (b - a) / args.steps
-    lstm = torch.nn.LSTM(xt.shape[-1], cfg.hidden, cfg.layers, batch_first=True)
-    xr = torch.randn(xt.shape)
+    lstm = torch.nn.LSTM(cfg.features.n_features, cfg.hidden, cfg.layers, batch_first=True)
+    xr = torch.randn(tc.batch_size, tc.window_frames, cfg.features.n_features)
     ref = 0.0
     for i in range(args.steps + 2):
         t0 = time.perf_counter()

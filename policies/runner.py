@@ -41,14 +41,20 @@ def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def linear_layers(body: nn.Sequential, head: nn.Linear | None = None) -> list[nn.Linear]:
+    """The linear layers of an MLP in order (an SB3 network body and its output layer, or one of
+    this module's plain MLPs)."""
+    return [m for m in body if isinstance(m, nn.Linear)] + ([head] if head is not None else [])
+
+
 def _copy_mlp(body: nn.Sequential, head: nn.Linear,
               activation: str) -> tuple[list[int], nn.Sequential]:  # fmt: skip
     """A plain MLP (:func:`_mlp`) with the weights of an SB3 network body and its output layer;
     returns its layer sizes and the MLP."""
-    linears = [m for m in body if isinstance(m, nn.Linear)] + [head]
+    linears = linear_layers(body, head)
     sizes = [linears[0].in_features] + [m.out_features for m in linears]
     mlp = _mlp(sizes, activation)
-    for dst, src in zip([m for m in mlp if isinstance(m, nn.Linear)], linears, strict=True):
+    for dst, src in zip(linear_layers(mlp), linears, strict=True):
         dst.load_state_dict(src.state_dict())
     return sizes, mlp
 

@@ -45,7 +45,7 @@ from envs.config import TrackingEnvConfig
 from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
 from policies.config import PolicyRunConfig, StageConfig
-from policies.runner import ACTIVATION_FNS
+from policies.runner import ACTIVATION_FNS, linear_layers
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy", "amp")
 
@@ -394,8 +394,7 @@ class PolicyTrainer:
                                  f"{space.shape}")  # fmt: skip
 
         def load(mlp, body, head, what: str) -> None:
-            ours = [m for m in body if isinstance(m, torch.nn.Linear)] + [head]
-            theirs = [m for m in mlp if isinstance(m, torch.nn.Linear)]
+            ours, theirs = linear_layers(body, head), linear_layers(mlp)
             shapes = [tuple(m.weight.shape) for m in ours]
             if shapes != [tuple(m.weight.shape) for m in theirs]:
                 raise ValueError(f"{src}: its {what} network has layers "
@@ -417,12 +416,11 @@ class PolicyTrainer:
             rms.mean, rms.var = runner.obs_mean[k].copy(), runner.obs_var[k].copy()
             rms.count = count
         if runner.disc is not None:
-            disc = self.amp.disc
-            if [p.shape for p in disc.state_dict().values()] != [
-                p.shape for p in runner.disc.state_dict().values()
-            ]:
-                raise ValueError(f"{src}: its discriminator does not fit this run's amp settings")
-            disc.load_state_dict(runner.disc.state_dict())
+            try:
+                self.amp.disc.load_state_dict(runner.disc.state_dict())
+            except RuntimeError as e:
+                raise ValueError(f"{src}: its discriminator does not fit this run's amp "
+                                 f"settings ({e})") from e
 
     # -------------------------------------------------------------- run
     def train(self) -> None:

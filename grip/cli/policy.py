@@ -174,10 +174,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         init = None
     payload = {"config": run_config_dict(cfg), "git": git_hash(),
                "data": str(args.data.resolve()), "kin": str(kin.resolve())}  # fmt: skip
-    if resuming and prev.is_file() and "init" in json.loads(prev.read_text()):
-        payload["init"] = json.loads(prev.read_text())["init"]  # what the run started from
+    started_from = json.loads(prev.read_text()).get("init") if resuming and prev.is_file() else None
     if init is not None:
-        payload["init"] = str(init.resolve())
+        started_from = str(init.resolve())
+    if started_from is not None:
+        payload["init"] = started_from  # what the run started from, kept on resume
     try:
         trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init)
     except ValueError as e:

@@ -108,19 +108,26 @@ def clip_of(sequence_name: str) -> str:
 def holdout_split(
     seqs: list[SequenceArrays], fraction: float, seed: int
 ) -> tuple[list[SequenceArrays], list[SequenceArrays]]:
-    """``(train, held_out)``: a random ``fraction`` of the clips (at least one, never all) with
-    all their sequences (chunks, noise variants) held out, the rest kept for training.
+    """``(train, held_out)``: whole clips (:func:`clip_of`; all their chunks and noise variants)
+    held out until they hold ``fraction`` of the sequences, drawn as ``grip data build`` draws
+    its test split (:func:`prism_tools.chunking.make_split` with clip groups).
 
     Raises:
-        ValueError: fewer than two clips, so nothing can be held out and still train.
+        ValueError: nothing would be left on one of the two sides (fewer than two clips, or a
+            fraction that takes them all).
     """
-    clips = sorted({clip_of(s.name) for s in seqs})
-    if len(clips) < 2:
-        raise ValueError(f"holding out validation clips needs at least 2 clips, got {clips}")
-    n = min(max(1, round(fraction * len(clips))), len(clips) - 1)
-    held = set(np.random.default_rng(seed).permutation(clips)[:n].tolist())
-    return ([s for s in seqs if clip_of(s.name) not in held],
-            [s for s in seqs if clip_of(s.name) in held])  # fmt: skip
+    from prism_tools.chunking import make_split
+
+    names = [s.name for s in seqs]
+    split = make_split(names, fraction, seed, groups={n: clip_of(n) for n in names})
+    held = set(split["test"])
+    train = [s for s in seqs if s.name not in held]
+    val = [s for s in seqs if s.name in held]
+    if not train or not val:
+        clips = sorted({clip_of(n) for n in names})
+        raise ValueError(f"holding out {fraction} of {len(clips)} clip(s) {clips[:5]} leaves "
+                         "nothing to train or validate on (it needs at least 2 clips)")  # fmt: skip
+    return train, val
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ import io
 import json
 import os
 import subprocess
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -408,6 +409,30 @@ class Trainer:
             raise ValueError(f"{path}: weights do not fit the network ({e})") from e
         self.norm = Normalizer(ck["norm_mean"].numpy(), ck["norm_std"].numpy())
 
+    def train_step(self, phase: str, lr: float, clock: list[float] | None = None):
+        """One optimiser step of ``phase`` on a fresh batch of augmented windows at rate ``lr``;
+        returns the losses and their weighted total. With ``clock``, the
+        ``time.perf_counter()`` after sampling, augmentation, forward pass, backward pass and
+        optimiser step is appended (``benchmarks/kinematics_train_step.py``)."""
+        tc = self.cfg.train
+        tick = clock.append if clock is not None else lambda _t: None
+        for group in self.opt.param_groups:
+            group["lr"] = lr
+        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
+        tick(time.perf_counter())
+        xt, yt = self._tensors(x, y, augment=True)
+        tick(time.perf_counter())
+        losses = self.losses(xt, yt, only=None if phase == "joint" else phase)
+        total = self._total(losses, phase)
+        tick(time.perf_counter())
+        self.opt.zero_grad(set_to_none=True)
+        total.backward()
+        tick(time.perf_counter())
+        torch.nn.utils.clip_grad_norm_(self.model.parameters(), tc.grad_clip)
+        self.opt.step()
+        tick(time.perf_counter())
+        return losses, total
+
     def fit(self, writer=None, progress: Callable[[dict], object] | None = None) -> list[dict]:
         """Train until ``total_epochs``; checkpoints after each epoch (resumes from ``epoch``)."""
         tc = self.cfg.train
@@ -416,16 +441,7 @@ class Trainer:
             phase = self.phase_of(self.epoch)
             sums: dict[str, float] = {}
             for step in range(tc.steps_per_epoch):
-                for group in self.opt.param_groups:
-                    group["lr"] = self.learning_rate(self.epoch, step)
-                x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
-                xt, yt = self._tensors(x, y, augment=True)
-                losses = self.losses(xt, yt, only=None if phase == "joint" else phase)
-                total = self._total(losses, phase)
-                self.opt.zero_grad(set_to_none=True)
-                total.backward()
-                torch.nn.utils.clip_grad_norm_(self.model.parameters(), tc.grad_clip)
-                self.opt.step()
+                losses, total = self.train_step(phase, self.learning_rate(self.epoch, step))
                 for k, v in losses.items():
                     sums[k] = sums.get(k, 0.0) + v.item()
                 if progress is not None:

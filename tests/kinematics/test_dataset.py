@@ -46,8 +46,9 @@ def test_holdout_split_keeps_each_clip_on_one_side():
     again, _ = holdout_split(seqs, 0.1, seed=0)
     assert [s.name for s in again] == [s.name for s in train]  # deterministic
     assert {clip_of(s.name) for s in holdout_split(seqs, 0.1, seed=1)[1]} != held
-    # at least one clip is held out, and never all of them
+    # a small fraction still holds out one whole clip; one that would leave a side empty fails
     assert len({clip_of(s.name) for s in holdout_split(seqs[:12], 0.01, seed=0)[1]}) == 1
-    assert len({clip_of(s.name) for s in holdout_split(seqs[:12], 0.99, seed=0)[0]}) == 1
+    with pytest.raises(ValueError, match="nothing to train or validate"):
+        holdout_split(seqs[:12], 0.99, seed=0)
     with pytest.raises(ValueError, match="at least 2 clips"):
         holdout_split(seqs[:6], 0.5, seed=0)

@@ -213,9 +213,9 @@ def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
 
 
 def _linears(seq) -> list:
-    import torch
+    from policies.runner import linear_layers
 
-    return [m for m in seq if isinstance(m, torch.nn.Linear)]
+    return linear_layers(seq)
 
 
 def _warm_cfg(warmup: int) -> PolicyRunConfig:
@@ -251,9 +251,18 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
     assert any(moved)  # the critic learned
     h = [r for r in frozen.history if r["stage"] == "stage2"]
     assert h and h[0]["timesteps"] == 64  # stage 1 of 0 steps is skipped
-    # the discriminator starts from the file's
-    d0 = torch.load(path / "checkpoint" / "amp.pt", weights_only=False)["disc"]
-    assert set(d0) == set(frozen.amp.disc.state_dict())
+    # before any update: the discriminator and the observation normaliser are the file's
+    fresh = PolicyTrainer(_warm_cfg(0), tmp_path / "fresh", SAMPLE_REFERENCE, init=exported)
+    fresh.venv = fresh._build_env(fresh.cfg.stage2)
+    fresh.model = fresh._new_model(fresh.venv)
+    fresh.warm_start(src)
+    for k, v in src.disc.state_dict().items():
+        assert torch.equal(fresh.amp.disc.state_dict()[k], v), k
+    for k, rms in fresh.venv.obs_rms.items():
+        np.testing.assert_array_equal(rms.mean, src.obs_mean[k])
+        np.testing.assert_array_equal(rms.var, src.obs_var[k])
+        assert rms.count == src.obs_count
+    fresh.venv.close()
 
     # no warm-up: the policy trains from the exported weights
     (tmp_path / "free").mkdir()
