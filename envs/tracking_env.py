@@ -140,6 +140,7 @@ class GripTrackingEnv(gym.Env):
                 raise ValueError(f"clip {c.name!r} runs at {c.fps} Hz but the env controls at "
                                  f"{fps:g} Hz (substeps x timestep)")  # fmt: skip
             lengths[i] = c.n_frames
+        self._clip_len = lengths
         self._clip_p = lengths / lengths.sum()  # random starts pick clips by length
         self._sims: dict[tuple, _Sim] = {}
         self._grid = heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m)
@@ -184,6 +185,19 @@ class GripTrackingEnv(gym.Env):
         if not dist_m >= 0:
             raise ValueError(f"termination distance must be >= 0 m, got {dist_m}")
         self.termination_dist_m = float(dist_m)
+
+    def set_clip_weights(self, weights) -> None:
+        """Random starts pick clip ``i`` with probability proportional to its length times
+        ``weights[i]`` from the next reset on (all ones: by length, the default). The trainer's
+        hard-clip mining (:class:`policies.mining.ClipFailureStats`) sets them."""
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != self._clip_len.shape or not np.isfinite(w).all() or (w < 0).any():
+            raise ValueError(f"clip weights must be {self._clip_len.size} finite values >= 0, "
+                             f"got shape {w.shape}")  # fmt: skip
+        p = self._clip_len * w
+        if p.sum() <= 0:
+            raise ValueError("clip weights are all zero: no clip could be picked")
+        self._clip_p = p / p.sum()
 
     # ------------------------------------------------------------------ models
     def _scene_key(self, clip: ReferenceClip, i: int) -> tuple:

@@ -125,6 +125,12 @@ class StageConfig:
             balance before precision (at 0.25 m an untrained controller's episodes end after
             about half a second, README "DynamicsNet").
         termination_anneal_steps: Steps of the stage over which the distance tightens.
+        mining_mix: Hard-clip mining (:mod:`policies.mining`): share of episodes started on
+            clips in proportion to their recent failure rate instead of by length alone
+            (0 = off, 1 = all).
+        mining_decay: Per-rollout decay of the mining counts (memory ``1 / (1 - decay)``
+            rollouts).
+        mining_prior: Episodes' worth of the overall failure rate in each clip's estimate.
     """
 
     timesteps: int = 0
@@ -134,6 +140,9 @@ class StageConfig:
     categories: tuple[str, ...] = ()
     termination_start_m: float = 0.0
     termination_anneal_steps: int = 0
+    mining_mix: float = 0.0
+    mining_decay: float = 0.995
+    mining_prior: float = 2.0
 
     def termination_at(self, steps: int) -> float:
         """The termination distance after ``steps`` steps of this stage, m."""

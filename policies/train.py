@@ -45,6 +45,7 @@ from envs.config import TrackingEnvConfig
 from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
 from policies.config import PolicyRunConfig, StageConfig
+from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy", "amp")
@@ -170,6 +171,7 @@ class TrainingCallback(BaseCallback):
         self.ep_err, self.ep_err_n, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
         self._set_termination()
+        self._set_clip_weights()
         self.trainer.set_actor_frozen(self.trainer.in_critic_warmup())
 
     def _set_termination(self) -> None:
@@ -178,6 +180,12 @@ class TrainingCallback(BaseCallback):
         if tau != self.termination_m or self.rollouts == 0:
             self.training_env.env_method("set_termination_dist", tau)
             self.termination_m = tau
+
+    def _set_clip_weights(self) -> None:
+        """Hard-clip mining: the environments' clip sampling follows the failure counts."""
+        mining = self.trainer.mining
+        if mining is not None and mining.mix > 0:
+            self.training_env.env_method("set_clip_weights", mining.weights())
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
@@ -191,6 +199,8 @@ class TrainingCallback(BaseCallback):
             self.ep_frames[i] += info.get("frames", 1)
             if done:
                 ok = bool(info.get("TimeLimit.truncated", False))
+                if self.trainer.mining is not None and "clip_index" in info:
+                    self.trainer.mining.add(int(info["clip_index"]), not ok)
                 mean_err = self.ep_err[i] / max(self.ep_err_n[i], 1)
                 self.episodes.append((ok, mean_err, int(self.ep_frames[i])))
                 self.ep_err[i] = self.ep_err_n[i] = self.ep_frames[i] = 0
@@ -214,11 +224,17 @@ class TrainingCallback(BaseCallback):
             log("episode/count", len(self.episodes))
             log("episode/frames", float(np.mean([e[2] for e in self.episodes])))
         log("episode/termination_m", self.termination_m)
+        if tr.mining is not None and tr.mining.mix > 0:
+            tr.mining.end_rollout()
+            w = tr.mining.weights()
+            log("mining/max_weight", float(w.max()))
+            log("mining/min_weight", float(w.min()))
+            self._set_clip_weights()
         row = {"timesteps": int(tr.total_done()),
                "frames": int(tr.total_done()) * tr.cfg.env.action_repeat, "stage": self.stage_name,
                "wall_s": tr.wall_s(), "termination_m": self.termination_m,
                **{f"reward/{k}": self.sums[k] / max(self.n, 1) for k in INFO_TERMS},
-               **{f"amp/{k}": v for k, v in stats.items()}}  # fmt: skip
+               **{f"amp/{k}": v for k, v in stats.items()}, "episodes": len(self.episodes)}
         if self.episodes:
             row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
             row["mpjpe_mm"] = 1000 * float(np.mean([e[1] for e in self.episodes]))
@@ -279,6 +295,8 @@ class PolicyTrainer:
         ref = load_reference(self.reference)
         real = RealSampler([A.reference_amp_features(c) for c in ref.clips], cfg.amp.window)
         self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed)
+        self.mining: ClipFailureStats | None = None  # the current stage's hard-clip mining
+        self._mining_state: dict | None = None  # from the checkpoint, until its stage runs
 
     # -------------------------------------------------------------- bookkeeping
     @property
@@ -304,6 +322,8 @@ class PolicyTrainer:
         torch.save(amp_state, tmp / "amp.pt")
         state = {"stage_index": self.stage_index, "stage_done": self.stage_done,
                  "wall_s": self.wall_s(), "history": self.history}  # fmt: skip
+        if self.mining is not None:
+            state["mining"] = {"stage_index": self.stage_index, **self.mining.state_dict()}
         (tmp / "state.json").write_text(json.dumps(state))
         old = self.run_dir / "checkpoint.old"
         shutil.rmtree(old, ignore_errors=True)
@@ -432,6 +452,7 @@ class PolicyTrainer:
         if state is not None:
             self.stage_index, self.stage_done = state["stage_index"], state["stage_done"]
             self._wall0, self.history = state["wall_s"], state["history"]
+            self._mining_state = state.get("mining")
             ck = torch.load(self.ckpt_dir / "amp.pt", map_location="cpu", weights_only=True)
             ck["rng"] = json.loads(ck["rng"])
             self.amp.load_state_dict(ck)
@@ -478,6 +499,16 @@ class PolicyTrainer:
             self.model.set_env(self.venv)
         self._apply_fixed_std()
         self.stage_done0 = self.stage_done
+        self.mining = None
+        if stage.mining_mix > 0:
+            names = [c.name for c in select_clips(load_reference(self.reference),
+                                                  stage.categories).clips]  # fmt: skip
+            self.mining = ClipFailureStats(names, stage.mining_mix, stage.mining_decay,
+                                           stage.mining_prior)  # fmt: skip
+            saved = self._mining_state
+            if saved is not None and saved.get("stage_index") == self.stage_index:
+                self.mining.load_state_dict(saved)
+        self._mining_state = None
         cb = TrainingCallback(self, name, stage, bar if bar is not None else tqdm(disable=True))
         self.model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False,
                          tb_log_name="ppo", progress_bar=False)  # fmt: skip

@@ -123,9 +123,16 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
-def changed_settings(old: dict, new: dict) -> list[str]:
-    """Dotted keys whose values differ between two config dicts, except :data:`RESUMABLE`."""
+def changed_settings(old: dict, new: dict, defaults: dict | None = None) -> list[str]:
+    """Dotted keys whose values differ between two config dicts, except :data:`RESUMABLE`.
+
+    A key missing from ``old`` (a setting added to the project after the run began) takes its
+    value from ``defaults``, the current default config, if given: a new setting left at its
+    default does not block resuming an older run."""
     a, b = _flatten(json.loads(json.dumps(old))), _flatten(json.loads(json.dumps(new)))
+    if defaults is not None:
+        d = _flatten(json.loads(json.dumps(defaults)))
+        a = {**{k: v for k, v in d.items() if k not in a}, **a}
     keys = sorted(set(a) | set(b))
     return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(RESUMABLE)]
 
@@ -163,7 +170,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
     prev = out / "config.json"
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
-        changed = changed_settings(json.loads(prev.read_text())["config"], run_config_dict(cfg))
+        changed = changed_settings(json.loads(prev.read_text())["config"], run_config_dict(cfg),
+                                   run_config_dict(PolicyRunConfig()))  # fmt: skip
         if changed:
             raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
                            f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip

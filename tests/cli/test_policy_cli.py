@@ -1,0 +1,26 @@
+"""Which setting changes `grip train-policy` accepts when it resumes a run."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from grip.cli.policy import changed_settings
+from policies.config import PolicyRunConfig
+from policies.train import run_config_dict
+
+
+def test_changed_settings_allows_resumable_and_new_default_keys():
+    base = PolicyRunConfig()
+    old = run_config_dict(base)
+    defaults = run_config_dict(PolicyRunConfig())
+    lr = dataclasses.replace(base, ppo=dataclasses.replace(base.ppo, learning_rate=1e-6))
+    assert changed_settings(old, run_config_dict(lr), defaults) == []  # resumable
+    arch = dataclasses.replace(base, ppo=dataclasses.replace(base.ppo, net_arch=(8,)))
+    assert changed_settings(old, run_config_dict(arch), defaults) == ["ppo.net_arch"]
+    # a run that began before stage1.mining_mix existed: the key is missing from its config
+    older = run_config_dict(base)
+    del older["stage1"]["mining_mix"]
+    assert changed_settings(older, run_config_dict(base), defaults) == []
+    assert changed_settings(older, run_config_dict(base)) == ["stage1.mining_mix"]  # no defaults
+    mined = dataclasses.replace(base, stage1=dataclasses.replace(base.stage1, mining_mix=0.5))
+    assert changed_settings(older, run_config_dict(mined), defaults) == ["stage1.mining_mix"]
