@@ -26,6 +26,7 @@ class RewardWeights:
     imit_rot: float = 0.15  # 0.5 x w_theta
     imit_vel: float = 0.05  # 0.5 x w_v
     imit_angvel: float = 0.05  # 0.5 x w_omega
+    root_vel: float = 0.0  # not GRIP's: see RewardConfig.k_root_vel (0 = logged only)
     energy: float = -0.0005  # -alpha (GRIP eq. 9); the raw term is the mechanical power, W
     amp: float = 0.5  # the AMP term is 0 until a wrapper fills it (policies)
 
@@ -41,6 +42,13 @@ class RewardConfig:
         k_angvel: Angular-velocity kernel coefficient.
         form: ``"mean_sq"``: exp(-k * mean over joints of the squared error) (PHC's code);
             ``"norm"``: exp(-k * norm of the stacked error) (GRIP's equation as printed).
+        k_root_vel: Kernel coefficient of the ``root_vel`` term, 1/(m/s)^2: the horizontal
+            pelvis velocity averaged over ``root_vel_window_frames`` against the ground
+            truth's (:func:`envs.rewards.root_velocity_term`). Not one of GRIP's terms: with
+            ``align_root_xy`` nothing else asks the body to cover the reference's ground.
+        root_vel_window_frames: Frames of that average. Right after a reset or a teleport the
+            window holds fewer frames and its displacement is still divided by the full
+            window's length (a few millimetres over one frame are not read as a velocity).
         energy_skip_frames: The energy term is 0 for this many steps after a reset (GRIP).
         weights: Weight of each term.
     """
@@ -50,6 +58,8 @@ class RewardConfig:
     k_vel: float = 10.0
     k_angvel: float = 0.1
     form: str = "mean_sq"
+    k_root_vel: float = 10.0
+    root_vel_window_frames: int = 30
     energy_skip_frames: int = 3
     weights: RewardWeights = field(default_factory=RewardWeights)
 
@@ -132,6 +142,7 @@ class TrackingEnvConfig:
             (self.reward.form in REWARD_FORMS, f"reward.form must be one of {REWARD_FORMS}"),
             (self.terrain in TERRAINS, f"terrain must be one of {TERRAINS}"),
             (self.substeps >= 1, "substeps must be >= 1"),
+            (self.reward.root_vel_window_frames >= 1, "reward.root_vel_window_frames must be >= 1"),
             (self.action_repeat >= 1, "action_repeat must be >= 1"),
             (self.heightmap_size >= 1, "heightmap_size must be >= 1"),
             (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),

@@ -6,12 +6,14 @@ Each function returns raw, unweighted terms; the environment multiplies them by
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from envs.config import RewardConfig
 
 IMITATION_TERMS: tuple[str, ...] = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel")
-TERMS: tuple[str, ...] = (*IMITATION_TERMS, "energy", "amp")
+TERMS: tuple[str, ...] = (*IMITATION_TERMS, "root_vel", "energy", "amp")
 
 
 def rotation_angles(sim_rot: np.ndarray, ref_rot: np.ndarray) -> np.ndarray:
@@ -48,6 +50,26 @@ def imitation_terms(
     x = x * (1.0 / ang.size) if cfg.form == "mean_sq" else np.sqrt(x)
     r = np.exp(-np.array([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel]) * x)
     return dict(zip(IMITATION_TERMS, r.tolist(), strict=True)), sq
+
+
+def root_velocity_term(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: float,
+                       k: float) -> float:  # fmt: skip
+    """Kernel on the horizontal pelvis velocity averaged over a window, in (0, 1].
+
+    Args:
+        sim_disp, ref_disp: ``(2,)`` horizontal pelvis displacement of the simulation and of the
+            reference over the same ``seconds``, m.
+        seconds: Length of the window, s (> 0).
+        k: Kernel coefficient, 1/(m/s)^2.
+
+    Returns:
+        ``exp(-k |v_sim - v_ref|^2)`` with the window's mean velocities ``v = disp / seconds``:
+        1 when the body covers the reference's ground, whatever its position (the imitation
+        terms compare positions with the pelvis moved over the reference's, so without this
+        term a body that walks too slowly loses nothing for it).
+    """
+    e = (np.asarray(sim_disp, dtype=np.float64) - ref_disp) / seconds
+    return math.exp(-k * float(e @ e))
 
 
 def mechanical_power(torque: np.ndarray, joint_vel: np.ndarray) -> float:

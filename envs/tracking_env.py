@@ -14,6 +14,7 @@ moves the simulation to ``t + 1``, whose state is rewarded against the ground tr
 from __future__ import annotations
 
 import types
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -173,6 +174,7 @@ class GripTrackingEnv(gym.Env):
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._n_bad = 0
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
+        self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)
         self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
@@ -318,6 +320,8 @@ class GripTrackingEnv(gym.Env):
         self._root_offset = clip.gt_qpos[start, :3] - clip.est_root_pos[start]
         self._per_clip_arrays(clip)
         pvw, rot = self._sim_state()
+        window = cfg.reward.root_vel_window_frames + 1
+        self._root_hist = deque([pvw[0, 0, :2].copy()], maxlen=window)
         obs = self._observe(pvw, rot)
         self._last_obs = obs
         info = {"clip": clip.name, "clip_index": i, "frame": start,
@@ -472,6 +476,14 @@ class GripTrackingEnv(gym.Env):
             return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
         pvw, rot = self._sim_state()
         gt = self._gt_pvw[t]
+        hist = self._root_hist
+        hist.append(pvw[0, 0, :2].copy())
+        # displacements over the window's frames (fewer after a reset or teleport), divided by
+        # the full window's length: millimetres over the first frames are not read as velocity
+        ref_disp = gt[0, 0, :2] - self._gt_pvw[t - (len(hist) - 1), 0, 0, :2]
+        root_vel = R.root_velocity_term(hist[-1] - hist[0], ref_disp,
+                                        cfg.reward.root_vel_window_frames * cfg.control_dt_s,
+                                        cfg.reward.k_root_vel)  # fmt: skip
         if cfg.align_root_xy:  # compare with the pelvis over the ground truth's (see config)
             shift = gt[0, 0, :2] - pvw[0, 0, :2]
             pvw[0, :, :2] += shift
@@ -480,6 +492,7 @@ class GripTrackingEnv(gym.Env):
         else:
             terms, sq = R.imitation_terms(pvw, rot, gt, clip.gt_rot[t], cfg.reward)
         power = R.mechanical_power(sim.act_force[sim.act], sim.qvel[ix.hinge_dof_adr])
+        terms["root_vel"] = root_vel
         terms["energy"] = power if self._steps > cfg.reward.energy_skip_frames else 0.0
         terms["amp"] = 0.0
         reward = 0.0
@@ -534,6 +547,8 @@ class GripTrackingEnv(gym.Env):
         self._root_offset = d.qpos[r : r + 3] - self._clip.est_root_pos[self._t]
         self._n_bad = int(sim.warnings[_UNSTABLE].sum())
         pvw, rot = self._sim_state()
+        self._root_hist.clear()
+        self._root_hist.append(pvw[0, 0, :2].copy())
         obs = self._observe(pvw, rot)
         self._last_obs = obs
         info = {"clip": self._clip.name, "clip_index": self._clip_i, "frame": self._t,

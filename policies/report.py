@@ -47,7 +47,7 @@ def plot_curves(history: list[dict], out_png: str | os.PathLike) -> None:
         ax.plot(x, series("mpjpe_mm", True))
         ax.set_ylabel("MPJPE during training, mm")
         ax = axes[1, 0]
-        for k in ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "amp"):
+        for k in ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "amp"):
             ax.plot(x, series(f"reward/{k}", True), label=k)
         ax.set_ylabel("raw reward term per step")
         ax.legend(fontsize=8)

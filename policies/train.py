@@ -48,7 +48,7 @@ from policies.config import PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers
 
-INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy", "amp")
+INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
 
 
 def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:

@@ -226,6 +226,31 @@ def test_align_root_xy_ignores_a_horizontal_offset(align: bool) -> None:
         assert rewards[1] < 0.01 * rewards[0]
 
 
+def test_root_velocity_term_asks_the_body_to_cover_the_reference_ground(walk_reference) -> None:
+    """Pelvis driven along the ground truth: the term stays near 1. Pelvis held at its start
+    while the reference walks on: near 0 once the window is full. A teleport (fall recovery)
+    restarts the window instead of counting the jump as velocity."""
+    env = _env(walk_reference, pin_root=True, random_start=False, termination_dist_m=0.0)
+    env.reset(seed=0)
+    pinned = [env.step(np.zeros(69))[4]["reward/root_vel"] for _ in range(100)]
+    assert min(pinned) > 0.9
+    env = _env(walk_reference, random_start=False, termination_dist_m=0.0, amp_window=0)
+    env.reset(seed=0)
+    start = env.data.qpos[:2].copy()
+    held = []
+    for _ in range(60):
+        env.data.qpos[:2] = start
+        held.append(env.step(np.zeros(69))[4]["reward/root_vel"])
+    assert np.mean(held[40:]) < 0.05
+    env.reset(seed=0)
+    for _ in range(20):
+        env.step(np.zeros(69))
+    q = env.clip.gt_qpos[env.frame].copy()
+    q[0] += 1.0
+    env.teleport(q)
+    assert env.step(np.zeros(69))[4]["reward/root_vel"] > 0.5
+
+
 def test_switching_subjects_equals_a_model_compiled_for_each(reference) -> None:
     """Clips of other subjects share one model per scene, their body arrays swapped in
     (ModelVariants): the simulation is the one on the subject's own compiled model."""
