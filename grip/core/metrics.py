@@ -634,6 +634,33 @@ def _check_roots(pred_root: np.ndarray, gt_root: np.ndarray) -> tuple[np.ndarray
     return p, g
 
 
+def root_error_xy(pred_root: np.ndarray, gt_root: np.ndarray) -> float:
+    """Mean horizontal distance between two ``(T, 3)`` root (pelvis) tracks, m (z up)."""
+    p, g = _check_roots(pred_root, gt_root)
+    return float(np.linalg.norm(p[:, :2] - g[:, :2], axis=1).mean())
+
+
+def travel_ratio(pred_root: np.ndarray, gt_root: np.ndarray, fps: float,
+                 every_s: float = 1.0) -> float:  # fmt: skip
+    """Ground covered by a root track over the ground truth's (1 = the same distance), -.
+
+    The horizontal path length of each ``(T, 3)`` track sampled every ``every_s`` seconds (so
+    that the sway of the pelvis within a stride does not count as ground covered), predicted
+    over true. NaN when the true track covers no ground (< 1 mm) or is shorter than
+    ``every_s``.
+    """
+    p, g = _check_roots(pred_root, gt_root)
+    step = max(round(every_s * fps), 1)
+    if p.shape[0] <= step:
+        return float("nan")
+
+    def path(x: np.ndarray) -> float:
+        return float(np.linalg.norm(np.diff(x[::step, :2], axis=0), axis=1).sum())
+
+    ref = path(g)
+    return path(p) / ref if ref > 1e-3 else float("nan")
+
+
 def translation_error_by_time(
     pred_root: np.ndarray,
     gt_root: np.ndarray,

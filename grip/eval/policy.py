@@ -10,7 +10,11 @@ The episode is :func:`grip.eval.reconstruct.simulate_clip` with recovery off, st
 first fall. Metrics are ``grip bench``'s (:func:`grip.eval.bench.segment_metrics`: ``MPJPE_mm``,
 ``PEL_MPJPE_mm``, ``PA_MPJPE_mm``, ``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N``
 from MuJoCo's foot-ground contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
-(KinematicsNet pose on the integrated root) over the same frames.
+(KinematicsNet pose on the integrated root) over the same frames, and where the world error comes
+from: ``root_err_m`` / ``kin_root_err_m`` (mean horizontal pelvis distance from the truth,
+:func:`grip.core.metrics.root_error_xy`) and ``travel_ratio`` / ``kin_travel_ratio`` (ground
+covered over the truth's, :func:`grip.core.metrics.travel_ratio`) of the simulation and of
+kinematics only.
 """
 
 from __future__ import annotations
@@ -30,7 +34,9 @@ from grip.kinematics.features import ground_truth
 
 METRIC_KEYS: tuple[str, ...] = (
     "MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N", "success_rate", "kin_MPJPE_mm",
+    "root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio",
 )  # fmt: skip
+_MEAN_KEYS = tuple(k for k in METRIC_KEYS if k != "success_rate")
 
 
 def segment_row(recon, clip, rec) -> dict:
@@ -41,6 +47,13 @@ def segment_row(recon, clip, rec) -> dict:
     row, _ = bench_metrics(recon, gt, can_fall=True)
     kin = clip.est_pos[:t] - clip.est_pos[:t, :1] + clip.est_root_pos[:t, None]
     row["kin_MPJPE_mm"] = float(M.mpjpe(kin, gt.joint_pos))
+    # where the world error comes from: the pelvis' horizontal distance from the truth, and the
+    # ground covered (1 s samples) over the truth's, for the simulation and kinematics only
+    kin_root = clip.est_root_pos[:t]
+    row["root_err_m"] = M.root_error_xy(recon.root_pos, gt.root_pos)
+    row["kin_root_err_m"] = M.root_error_xy(kin_root, gt.root_pos)
+    row["travel_ratio"] = M.travel_ratio(recon.root_pos, gt.root_pos, clip.fps)
+    row["kin_travel_ratio"] = M.travel_ratio(kin_root, gt.root_pos, clip.fps)
     row["fell"] = recon.fell
     row["frames"] = t
     return row
@@ -86,7 +99,7 @@ def evaluate_policy(runner, estimator, recs: list, batch: int = 16,
 def _summary(rows: list[dict]) -> dict[str, float]:
     frames = np.array([r["frames"] for r in rows], dtype=float)
     out: dict[str, float] = {}
-    for k in ("MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N", "kin_MPJPE_mm"):
+    for k in _MEAN_KEYS:
         v = np.array([r[k] for r in rows], dtype=float)
         ok = np.isfinite(v)
         out[k] = float(np.average(v[ok], weights=frames[ok])) if ok.any() else float("nan")
@@ -107,19 +120,24 @@ def summarize_rows(rows: list[dict]) -> dict:
     }
 
 
+_TWO_DIGITS = ("root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio")
+
+
 def markdown_table(summary: dict) -> str:
     cols = ("success_rate", "MPJPE_mm", "kin_MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm",
-            "vGRF_N", "segments")  # fmt: skip
+            "vGRF_N", "root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio",
+            "segments")  # fmt: skip
     head = ("| category | success % | MPJPE mm | kinematics-only MPJPE mm | PA-MPJPE mm | FS m/s "
-            "| FP mm | vGRF N | segments |")  # fmt: skip
+            "| FP mm | vGRF N | root err. m | kin. root err. m | travel | kin. travel "
+            "| segments |")  # fmt: skip
     lines = [head, "|" + "---|" * (len(cols) + 1)]
     items = [*summary["categories"].items(), ("**all**", summary["overall"])]
     for name, s in items:
         cells = []
         for c in cols:
             v = s[c]
-            cells.append(f"{v:d}" if isinstance(v, int) else f"{v:.3f}" if c == "FS_mps"
-                         else f"{v:.1f}")  # fmt: skip
+            cells.append(f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if c in _TWO_DIGITS
+                         else f"{v:.3f}" if c == "FS_mps" else f"{v:.1f}")  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -130,7 +148,7 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    keys = ["name", "category", "fell", "frames", *[k for k in METRIC_KEYS if k != "success_rate"]]
+    keys = ["name", "category", "fell", "frames", *_MEAN_KEYS]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")
     w.writeheader()

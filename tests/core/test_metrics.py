@@ -391,3 +391,20 @@ def test_shape_errors():
         M.vgrf_error(np.zeros((3, 2)), np.zeros((3, 3)))
     with pytest.raises(ValueError):
         M.cumulative_translation_error(np.zeros((5, 3)), np.zeros((5, 3)), FPS, variant="x")
+
+
+def test_root_error_and_travel_ratio_on_hand_made_tracks():
+    t = np.arange(301) / 100.0  # 3 s at 100 Hz
+    gt = np.stack([1.2 * t, np.zeros_like(t), np.full_like(t, 0.9)], axis=1)  # 1.2 m/s along x
+    # half the speed, with a 5 cm sway at 2 Hz and a different height: half the ground
+    slow = np.stack([0.6 * t, 0.05 * np.sin(2 * np.pi * 2 * t), np.full_like(t, 0.8)], axis=1)
+    assert M.travel_ratio(slow, gt, 100.0) == pytest.approx(0.5, abs=1e-9)  # sway sampled at 0
+    assert M.travel_ratio(gt, gt, 100.0) == pytest.approx(1.0)
+    # the mean horizontal distance of the slow track: 0.6 t along x plus the sway
+    want = np.mean(np.hypot(0.6 * t, 0.05 * np.sin(2 * np.pi * 2 * t)))
+    assert M.root_error_xy(slow, gt) == pytest.approx(want)
+    still = np.tile(gt[:1], (301, 1))
+    assert np.isnan(M.travel_ratio(gt, still, 100.0))  # the truth covers no ground
+    assert np.isnan(M.travel_ratio(gt[:50], gt[:50], 100.0))  # shorter than one sample step
+    with pytest.raises(ValueError, match="root tracks"):
+        M.root_error_xy(gt[:, :2], gt[:, :2])

@@ -177,8 +177,10 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     for r in rows:
         assert 2 <= r["frames"] <= 120
         assert r["fell"] == (r["frames"] < 120)
-        for k in ("MPJPE_mm", "PA_MPJPE_mm", "kin_MPJPE_mm", "FP_mm"):
+        for k in ("MPJPE_mm", "PA_MPJPE_mm", "kin_MPJPE_mm", "FP_mm", "root_err_m",
+                  "kin_root_err_m"):  # fmt: skip
             assert np.isfinite(r[k]) and r[k] >= 0, k
+        assert "travel_ratio" in r and "kin_travel_ratio" in r
     s = summarize_rows(rows)
     assert s["overall"]["segments"] == 2
     assert s["overall"]["success_rate"] == 100.0 * np.mean([not r["fell"] for r in rows])
@@ -189,6 +191,7 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     truth = evaluate_policy(runner, est, recs, reference="truth")
     for r, t in zip(rows, truth, strict=True):
         assert t["kin_MPJPE_mm"] < 1.0 < r["kin_MPJPE_mm"]
+        assert t["kin_root_err_m"] < 1e-3 < r["kin_root_err_m"]
     with pytest.raises(ValueError, match="reference must be"):
         evaluate_policy(runner, est, recs, reference="oracle")
 
