@@ -36,8 +36,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
-    p.add_argument("--kin", type=Path, default=None,
-                   help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    p.add_argument("--kin", type=Path, action="append", default=None,
+                   help="KinematicsNet checkpoint that makes the references (default: the "
+                   "shipped one); repeat it to train on every recording estimated by each, "
+                   "e.g. a weaker checkpoint whose errors on the training clips resemble the "
+                   "shipped one's on unseen clips")  # fmt: skip
     p.add_argument("--config", type=Path, default=None,
                    help="TOML overrides (default: configs/policy/default.toml)")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -153,19 +156,26 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise CliError(f"{args.init}: no such policy file")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    kin = kin_checkpoint(args.kin)
+    kins = [kin_checkpoint(k) for k in (args.kin or [None])]
     ref_path = out / "reference_train.npz"
     if not ref_path.is_file():
         from grip.kinematics.inference import KinematicsEstimator
-        from grip.kinematics.reference import build_reference_set
+        from grip.kinematics.reference import build_reference_set, merge_reference_sets
 
         recs = load_recordings(split_paths(args.data, "train"))
+        sets = []
+        for kin in kins:
+            try:
+                est = KinematicsEstimator.from_checkpoint(kin)
+            except ValueError as e:
+                raise CliError(str(e)) from e
+            desc = f"KinematicsNet estimates ({kin.name})"
+            with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
+                sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin)))
         try:
-            est = KinematicsEstimator.from_checkpoint(kin)
+            ref = merge_reference_sets(sets, source=str(ref_path))
         except ValueError as e:
             raise CliError(str(e)) from e
-        with tqdm(total=len(recs), unit="rec", desc="KinematicsNet estimates") as bar:
-            ref = build_reference_set(recs, est, progress=bar.update, source=str(ref_path))
         ref.save(ref_path)
         print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
     prev = out / "config.json"
@@ -181,7 +191,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"{out} resumes from its own checkpoint; --init {init} is ignored")
         init = None
     payload = {"config": run_config_dict(cfg), "git": git_hash(),
-               "data": str(args.data.resolve()), "kin": str(kin.resolve())}  # fmt: skip
+               "data": str(args.data.resolve()),
+               "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
     started_from = json.loads(prev.read_text()).get("init") if resuming and prev.is_file() else None
     if init is not None:
         started_from = str(init.resolve())

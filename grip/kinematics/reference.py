@@ -90,3 +90,27 @@ def build_reference_set(
         if progress is not None:
             progress(len(part))
     return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)
+
+
+def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>") -> ReferenceSet:
+    """One reference set holding the clips of several, e.g. the same recordings estimated by
+    several KinematicsNets (``grip train-policy --kin A --kin B``): the controller then trains
+    on references with the errors of each estimator. Clip names of the k-th set (k >= 1) get
+    the suffix ``#k`` so that every clip keeps a unique name.
+
+    Raises:
+        ValueError: No set, or sets whose sensor observations differ (sites or insoles).
+    """
+    if not sets:
+        raise ValueError("merge_reference_sets needs at least one reference set")
+    first = sets[0]
+    clips = list(first.clips)
+    for k, other in enumerate(sets[1:], start=1):
+        if other.sensor_sites != first.sensor_sites or other.insoles != first.insoles:
+            raise ValueError(f"{other.source}: sensor sites {list(other.sensor_sites)} / insoles "
+                             f"{other.insoles} differ from {first.source}'s "
+                             f"{list(first.sensor_sites)} / {first.insoles}")  # fmt: skip
+        for c in other.clips:
+            c.name = f"{c.name}#{k}"
+            clips.append(c)
+    return ReferenceSet(clips, first.sensor_sites, first.insoles, source)

@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 
 from grip.cli.main import main
+from grip.cli.paths import REPO_ROOT
+from grip.core.reference import ReferenceSet
 
 MOTIONS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "motions"
 pytestmark = pytest.mark.skipif(not MOTIONS.is_dir(), reason="shared motion clips not found")
@@ -254,6 +256,17 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
         assert key in res
     assert res["segments"] == 2
     assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    # two KinematicsNets: the references hold every training recording once per estimator
+    kin = str(REPO_ROOT / "grip/assets/kinematics_default.pt")
+    two = tmp_path / "policy_two_kin"
+    argv = [*args[:3], "--out", str(two), *args[5:], "--kin", kin, "--kin", kin]
+    assert main(argv) == 0
+    one = ReferenceSet.load(run / "reference_train.npz")
+    both = ReferenceSet.load(two / "reference_train.npz")
+    assert [c.name for c in both.clips] == [
+        *(c.name for c in one.clips), *(f"{c.name}#1" for c in one.clips)]
+    resolved = str(Path(kin).resolve())
+    assert json.loads((two / "config.json").read_text())["kin"] == [resolved, resolved]
     # reconstruct: npz + exports per recording, summary, resume, errors named
     recs = sorted((built / "sequences").glob("*.npz"))[:2]
     out = tmp_path / "recon"

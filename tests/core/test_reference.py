@@ -89,3 +89,26 @@ def test_live_clip_unwraps_hinge_angles_as_numpy_does() -> None:
         corr = corr + _unwrap_step(wrapped[i] - wrapped[i - 1])
         up[i] = wrapped[i] + corr
     np.testing.assert_array_equal(up, np.unwrap(wrapped, axis=0))
+
+
+def test_merging_sets_keeps_every_clip_with_unique_names() -> None:
+    from grip.kinematics.reference import merge_reference_sets
+
+    from grip.kinematics.features import FeatureConfig
+
+    cfg = FeatureConfig()
+
+    def one(seed: int, sites=tuple(cfg.sites)) -> ReferenceSet:
+        clips = [oracle_reference_clip(make_recording(40, seed=s)) for s in (seed, seed + 1)]
+        return ReferenceSet(clips, sites, cfg.insoles, f"set{seed}")
+
+    a, b = one(0), one(0)
+    merged = merge_reference_sets([a, b], source="both")
+    assert len(merged) == 4 and merged.source == "both"
+    names = [c.name for c in merged.clips]
+    assert names[2:] == [f"{n}#1" for n in names[:2]] and len(set(names)) == 4
+    np.testing.assert_array_equal(merged.clip(2).gt_qpos, merged.clip(0).gt_qpos)
+    with pytest.raises(ValueError, match="differ"):
+        merge_reference_sets([one(0), one(0, sites=tuple(reversed(cfg.sites)))])
+    with pytest.raises(ValueError, match="at least one"):
+        merge_reference_sets([])
