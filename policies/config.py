@@ -167,6 +167,11 @@ class PolicyRunConfig:
     checkpoint_every: int = 10
     """Rollouts between checkpoints."""
     seed: int = 0
+    mirror_references: bool = False
+    """The run's reference set (``RUN/reference_train.npz``, built by ``grip train-policy``)
+    also holds the left-right mirror image of every clip
+    (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
+    right balanced."""
 
     def __post_init__(self) -> None:
         checks = (

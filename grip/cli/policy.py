@@ -176,6 +176,10 @@ def cmd_train(args: argparse.Namespace) -> int:
             ref = merge_reference_sets(sets, source=str(ref_path))
         except ValueError as e:
             raise CliError(str(e)) from e
+        if cfg.mirror_references:
+            from grip.kinematics.reference import with_mirrored_clips
+
+            ref = with_mirrored_clips(ref)
         ref.save(ref_path)
         print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
     prev = out / "config.json"

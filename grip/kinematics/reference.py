@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, pose_vector
 from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
 from grip.kinematics.features import FeatureConfig, input_features, recording_body, targets
@@ -114,3 +115,55 @@ def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>")
             c.name = f"{c.name}#{k}"
             clips.append(c)
     return ReferenceSet(clips, first.sensor_sites, first.insoles, source)
+
+
+MIRROR_SUFFIX = "~mirror"
+_M = np.array([-1.0, 1.0, 1.0])  # the reflection x -> -x (as kinematics.train.mirror_batch)
+# per hinge: the angle about x keeps its sign under R -> M R M, those about y and z flip
+_HINGE_SIGN = np.array([[1.0 if a == "x" else -1.0 for a in sk.HINGE_ORDERS[j]]
+                        for j in range(1, sk.N_JOINTS)])  # fmt: skip
+_VEL_MIRROR = [sk.VELOCITY_JOINTS.index(int(sk.MIRROR[j])) for j in sk.VELOCITY_JOINTS]
+
+
+def mirror_reference_clip(clip: ReferenceClip, sites: Sequence[str], insoles: bool
+                          ) -> ReferenceClip:  # fmt: skip
+    """The left-right mirror image of a reference clip (ground truth, estimate and sensors).
+
+    The world is reflected through ``x = 0`` and left and right swap, the convention of
+    :func:`grip.kinematics.train.mirror_batch` (which mirrors the sensor features here):
+    positions and velocities ``v -> M v``, global rotations ``R -> M R M``, hinge angles about
+    x keep their sign and those about y and z flip, the root quaternion ``(w, x, y, z) -> (w,
+    x, -y, -z)``, scene meshes are reflected (faces reversed to keep their outward side). Exact
+    for the mirror-symmetric body of :func:`grip.core.body.build_body` (subjects differ in
+    height and mass only); the mirrored clip is named ``name + "~mirror"``.
+    """
+    import torch
+
+    from grip.kinematics.train import mirror_batch
+
+    perm = sk.MIRROR
+    q = clip.gt_qpos
+    hinges = q[:, 7:].reshape(-1, sk.N_JOINTS - 1, 3) * _HINGE_SIGN
+    hinges = hinges[:, perm[1:] - 1]
+    gt = np.concatenate([q[:, :3] * _M, q[:, 3:5], -q[:, 5:7], hinges.reshape(len(q), -1)], axis=1)
+    cols = clip.est_rot6d.reshape(-1, sk.N_JOINTS, 2, 3)[:, perm] * np.stack([-_M, _M])
+    x = torch.from_numpy(np.asarray(clip.sensor, dtype=np.float64)[None])
+    sensor = mirror_batch(x, {}, tuple(sites), insoles)[0][0].numpy()
+    objects = None
+    if clip.objects:
+        objects = {n: (np.asarray(v, dtype=np.float64) * _M, np.asarray(f)[:, ::-1].copy())
+                   for n, (v, f) in clip.objects.items()}  # fmt: skip
+    return ReferenceClip(
+        name=clip.name + MIRROR_SUFFIX, category=clip.category, fps=clip.fps, body=clip.body,
+        gt_qpos=gt, est_pos=clip.est_pos[:, perm] * _M,
+        est_rot6d=cols.reshape(clip.est_rot6d.shape), est_vel=clip.est_vel[:, _VEL_MIRROR] * _M,
+        sensor=sensor.astype(clip.sensor.dtype), objects=objects,
+    )  # fmt: skip
+
+
+def with_mirrored_clips(ref: ReferenceSet, source: str | None = None) -> ReferenceSet:
+    """``ref``'s clips followed by the mirror image of each (:func:`mirror_reference_clip`):
+    twice the motions for the controller, left and right balanced."""
+    mirrored = [mirror_reference_clip(c, ref.sensor_sites, ref.insoles) for c in ref.clips]
+    return ReferenceSet([*ref.clips, *mirrored], ref.sensor_sites, ref.insoles,
+                        source or ref.source)  # fmt: skip

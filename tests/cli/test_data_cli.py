@@ -259,12 +259,13 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     # two KinematicsNets: the references hold every training recording once per estimator
     kin = str(REPO_ROOT / "grip/assets/kinematics_default.pt")
     two = tmp_path / "policy_two_kin"
-    argv = [*args[:3], "--out", str(two), *args[5:], "--kin", kin, "--kin", kin]
+    argv = [*args[:3], "--out", str(two), *args[5:], "--kin", kin, "--kin", kin,
+            "--set", "mirror_references=true"]  # fmt: skip
     assert main(argv) == 0
     one = ReferenceSet.load(run / "reference_train.npz")
     both = ReferenceSet.load(two / "reference_train.npz")
-    assert [c.name for c in both.clips] == [
-        *(c.name for c in one.clips), *(f"{c.name}#1" for c in one.clips)]
+    names = [*(c.name for c in one.clips), *(f"{c.name}#1" for c in one.clips)]
+    assert [c.name for c in both.clips] == [*names, *(f"{n}~mirror" for n in names)]
     resolved = str(Path(kin).resolve())
     assert json.loads((two / "config.json").read_text())["kin"] == [resolved, resolved]
     # reconstruct: npz + exports per recording, summary, resume, errors named

@@ -92,9 +92,8 @@ def test_live_clip_unwraps_hinge_angles_as_numpy_does() -> None:
 
 
 def test_merging_sets_keeps_every_clip_with_unique_names() -> None:
-    from grip.kinematics.reference import merge_reference_sets
-
     from grip.kinematics.features import FeatureConfig
+    from grip.kinematics.reference import merge_reference_sets
 
     cfg = FeatureConfig()
 

@@ -119,3 +119,35 @@ def test_training_with_mirror_flips_about_half_the_windows(tmp_path, monkeypatch
     for k in ("fp", "offsets"):
         torch.testing.assert_close(yt[k][~same], mirrored[k][~same])
         torch.testing.assert_close(yt[k][same], torch.from_numpy(y[k])[same])
+
+
+def test_mirrored_reference_clip_equals_the_clip_of_the_mirrored_motion():
+    # The controller's references: mirroring the clip of a motion (ground-truth pose vector,
+    # estimate, sensors) must give the clip made from the motion's mirror image.
+    from grip.core.reference import ReferenceSet
+    from grip.kinematics.reference import (
+        MIRROR_SUFFIX,
+        mirror_reference_clip,
+        oracle_reference_clip,
+        with_mirrored_clips,
+    )
+
+    cfg = FeatureConfig()
+    m = _motion()
+    a = oracle_reference_clip(recording_from_motion(m, noise=False), cfg)
+    b = oracle_reference_clip(recording_from_motion(_mirror_motion(m), noise=False), cfg)
+    c = mirror_reference_clip(a, cfg.sites, cfg.insoles)
+    assert c.name == a.name + MIRROR_SUFFIX and c.category == a.category
+    np.testing.assert_allclose(c.gt_qpos, b.gt_qpos, atol=1e-6)
+    np.testing.assert_allclose(c.gt_pos, b.gt_pos, atol=1e-6)
+    for k in ("est_pos", "est_rot6d", "est_vel"):
+        np.testing.assert_allclose(getattr(c, k), getattr(b, k), atol=1e-4, err_msg=k)
+    n = 15 * len(cfg.sites)
+    np.testing.assert_allclose(c.sensor[:, :n], b.sensor[:, :n], atol=2e-4)
+    np.testing.assert_allclose(c.sensor[:, n:], b.sensor[:, n:], atol=1e-3)
+    # mirroring twice gives the clip back; a set gets every clip and its mirror image
+    back = mirror_reference_clip(c, cfg.sites, cfg.insoles)
+    np.testing.assert_allclose(back.gt_qpos, a.gt_qpos, atol=1e-12)
+    np.testing.assert_allclose(back.sensor, a.sensor, atol=1e-6)
+    both = with_mirrored_clips(ReferenceSet([a], tuple(cfg.sites), cfg.insoles))
+    assert [x.name for x in both.clips] == [a.name, c.name]
