@@ -183,8 +183,8 @@ class TrainingCallback(BaseCallback):
 
     def _set_clip_weights(self) -> None:
         """Hard-clip mining: the environments' clip sampling follows the failure counts."""
-        mining = self.trainer.mining
-        if mining is not None and mining.mix > 0:
+        mining = self.trainer.mining  # (None unless the stage's mining_mix > 0)
+        if mining is not None:
             self.training_env.env_method("set_clip_weights", mining.weights())
 
     def _on_step(self) -> bool:
@@ -224,7 +224,7 @@ class TrainingCallback(BaseCallback):
             log("episode/count", len(self.episodes))
             log("episode/frames", float(np.mean([e[2] for e in self.episodes])))
         log("episode/termination_m", self.termination_m)
-        if tr.mining is not None and tr.mining.mix > 0:
+        if tr.mining is not None:
             tr.mining.end_rollout()
             w = tr.mining.weights()
             log("mining/max_weight", float(w.max()))

@@ -7,6 +7,7 @@ and batched, exactly as at inference (the LSTMs are initialised from the recordi
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -112,8 +113,9 @@ def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>")
                              f"{other.insoles} differ from {first.source}'s "
                              f"{list(first.sensor_sites)} / {first.insoles}")  # fmt: skip
         for c in other.clips:
-            c.name = f"{c.name}#{k}"
-            clips.append(c)
+            renamed = copy.copy(c)  # (shares the arrays; the caller's clip keeps its name)
+            renamed.name = f"{c.name}#{k}"
+            clips.append(renamed)
     return ReferenceSet(clips, first.sensor_sites, first.insoles, source)
 
 
@@ -122,7 +124,6 @@ _M = np.array([-1.0, 1.0, 1.0])  # the reflection x -> -x (as kinematics.train.m
 # per hinge: the angle about x keeps its sign under R -> M R M, those about y and z flip
 _HINGE_SIGN = np.array([[1.0 if a == "x" else -1.0 for a in sk.HINGE_ORDERS[j]]
                         for j in range(1, sk.N_JOINTS)])  # fmt: skip
-_VEL_MIRROR = [sk.VELOCITY_JOINTS.index(int(sk.MIRROR[j])) for j in sk.VELOCITY_JOINTS]
 
 
 def mirror_reference_clip(clip: ReferenceClip, sites: Sequence[str], insoles: bool
@@ -130,34 +131,39 @@ def mirror_reference_clip(clip: ReferenceClip, sites: Sequence[str], insoles: bo
     """The left-right mirror image of a reference clip (ground truth, estimate and sensors).
 
     The world is reflected through ``x = 0`` and left and right swap, the convention of
-    :func:`grip.kinematics.train.mirror_batch` (which mirrors the sensor features here):
-    positions and velocities ``v -> M v``, global rotations ``R -> M R M``, hinge angles about
-    x keep their sign and those about y and z flip, the root quaternion ``(w, x, y, z) -> (w,
-    x, -y, -z)``, scene meshes are reflected (faces reversed to keep their outward side). Exact
-    for the mirror-symmetric body of :func:`grip.core.body.build_body` (subjects differ in
-    height and mass only); the mirrored clip is named ``name + "~mirror"``.
+    :func:`grip.kinematics.train.mirror_batch`, which mirrors the sensor features and the
+    estimate (its joints, 6D rotations and velocities are KinematicsNet's ``fp``, ``fa`` and
+    ``lv`` targets). The ground-truth pose vector: the root position ``p -> M p``, the root
+    quaternion ``(w, x, y, z) -> (w, x, -y, -z)`` (``R -> M R M``), hinge angles about x keep
+    their sign and those about y and z flip, left and right swap. Scene meshes are reflected
+    (faces reversed to keep their outward side). Exact for the mirror-symmetric body of
+    :func:`grip.core.body.build_body` (subjects differ in height and mass only); the mirrored
+    clip is named ``name + "~mirror"``.
     """
     import torch
 
     from grip.kinematics.train import mirror_batch
 
-    perm = sk.MIRROR
     q = clip.gt_qpos
     hinges = q[:, 7:].reshape(-1, sk.N_JOINTS - 1, 3) * _HINGE_SIGN
-    hinges = hinges[:, perm[1:] - 1]
+    hinges = hinges[:, sk.MIRROR[1:] - 1]
     gt = np.concatenate([q[:, :3] * _M, q[:, 3:5], -q[:, 5:7], hinges.reshape(len(q), -1)], axis=1)
-    cols = clip.est_rot6d.reshape(-1, sk.N_JOINTS, 2, 3)[:, perm] * np.stack([-_M, _M])
-    x = torch.from_numpy(np.asarray(clip.sensor, dtype=np.float64)[None])
-    sensor = mirror_batch(x, {}, tuple(sites), insoles)[0][0].numpy()
+
+    def batch(a: np.ndarray) -> torch.Tensor:  # (T, ...) -> (1, T, F) float64
+        return torch.from_numpy(np.asarray(a, dtype=np.float64).reshape(1, len(a), -1))
+
+    est = {"fp": batch(clip.est_pos), "fa": batch(clip.est_rot6d), "lv": batch(clip.est_vel)}
+    x, y = mirror_batch(batch(clip.sensor), est, tuple(sites), insoles)
     objects = None
     if clip.objects:
         objects = {n: (np.asarray(v, dtype=np.float64) * _M, np.asarray(f)[:, ::-1].copy())
                    for n, (v, f) in clip.objects.items()}  # fmt: skip
     return ReferenceClip(
         name=clip.name + MIRROR_SUFFIX, category=clip.category, fps=clip.fps, body=clip.body,
-        gt_qpos=gt, est_pos=clip.est_pos[:, perm] * _M,
-        est_rot6d=cols.reshape(clip.est_rot6d.shape), est_vel=clip.est_vel[:, _VEL_MIRROR] * _M,
-        sensor=sensor.astype(clip.sensor.dtype), objects=objects,
+        gt_qpos=gt, est_pos=y["fp"][0].numpy().reshape(clip.est_pos.shape),
+        est_rot6d=y["fa"][0].numpy().reshape(clip.est_rot6d.shape),
+        est_vel=y["lv"][0].numpy().reshape(clip.est_vel.shape),
+        sensor=x[0].numpy().astype(clip.sensor.dtype), objects=objects,
     )  # fmt: skip
 
 

@@ -107,6 +107,7 @@ def test_merging_sets_keeps_every_clip_with_unique_names() -> None:
     names = [c.name for c in merged.clips]
     assert names[2:] == [f"{n}#1" for n in names[:2]] and len(set(names)) == 4
     np.testing.assert_array_equal(merged.clip(2).gt_qpos, merged.clip(0).gt_qpos)
+    assert [c.name for c in b.clips] == names[:2]  # the inputs keep their names
     with pytest.raises(ValueError, match="differ"):
         merge_reference_sets([one(0), one(0, sites=tuple(reversed(cfg.sites)))])
     with pytest.raises(ValueError, match="at least one"):
