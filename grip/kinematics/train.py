@@ -48,6 +48,7 @@ class TrainConfig:
         stage_epochs: Epochs per stage in the stage-wise phase (LP, then FP, FA, LV).
         joint_epochs: Epochs of joint training of all stages.
         lr: Adam learning rate.
+        weight_decay: Decoupled weight decay (AdamW); 0 keeps plain Adam.
         grad_clip: Gradient-norm clip.
         fk_loss_weight: Weight of the forward-kinematics joint-position loss on FA's rotations.
         acc_noise: Std of Gaussian noise added to normalised acceleration features.
@@ -73,6 +74,7 @@ class TrainConfig:
     stage_epochs: int = 2
     joint_epochs: int = 10
     lr: float = 1e-3
+    weight_decay: float = 0.0
     grad_clip: float = 1.0
     fk_loss_weight: float = 1.0
     acc_noise: float = 0.05
@@ -95,17 +97,27 @@ class TrainConfig:
 
 @dataclass(frozen=True)
 class KinematicsRunConfig:
-    """Everything a training run needs (written to ``config.json``)."""
+    """Everything a training run needs (written to ``config.json``).
+
+    ``dropout`` is applied to every stage's LSTM input in training (PIP: 0.4 on its nets' inputs).
+    """
 
     features: FeatureConfig = field(default_factory=FeatureConfig)
     hidden: int = 192
     layers: int = 2
     init_hidden: int = 256
+    dropout: float = 0.0
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def net_config(self) -> KinematicsNetConfig:
         return KinematicsNetConfig(n_inputs=self.features.n_features, hidden=self.hidden,
-                                   layers=self.layers, init_hidden=self.init_hidden)  # fmt: skip
+                                   layers=self.layers, init_hidden=self.init_hidden,
+                                   dropout=self.dropout)  # fmt: skip
+
+    def same_network(self, other: KinematicsRunConfig) -> bool:
+        """Whether ``other``'s weights fit this network (dropout, which has none, may differ)."""
+        mine, theirs = self.net_config(), other.net_config()
+        return dataclasses.replace(mine, dropout=0.0) == dataclasses.replace(theirs, dropout=0.0)
 
     def phases(self) -> list[tuple[str, int]]:
         """``(phase, epochs)``: one phase per stage, then ``"joint"``."""
@@ -290,7 +302,11 @@ class Trainer:
         if cfg.train.mirror_augment:
             mirror_site_order(tuple(cfg.features.sites))  # fails early on a one-sided sensor set
         self.model = KinematicsNet(cfg.net_config())
-        self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
+        if cfg.train.weight_decay > 0:
+            self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg.train.lr,
+                                         weight_decay=cfg.train.weight_decay)  # fmt: skip
+        else:
+            self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.norm = Normalizer.fit(train_seqs)
         self.rng = np.random.default_rng(cfg.train.seed)
         self.epoch = 0
@@ -400,7 +416,7 @@ class Trainer:
         """
         ck = load_checkpoint(path)
         theirs = run_config_from_dict(json.loads(ck["config"]))
-        if theirs.net_config() != self.cfg.net_config() or theirs.features != self.cfg.features:
+        if not theirs.same_network(self.cfg) or theirs.features != self.cfg.features:
             raise ValueError(f"{path}: its network or sensor settings differ from this run's "
                              f"({theirs.net_config()}, {theirs.features})")  # fmt: skip
         try:
@@ -494,10 +510,13 @@ class Trainer:
         new = json.loads(json.dumps(asdict(self.cfg)))
         old["train"].pop("joint_epochs")
         new["train"].pop("joint_epochs")
-        defaults = asdict(TrainConfig())
+        defaults = asdict(KinematicsRunConfig())
         for k in set(new["train"]) - set(old["train"]):  # fields added since the run began
-            if new["train"][k] == defaults[k]:
+            if new["train"][k] == defaults["train"][k]:
                 new["train"].pop(k)
+        for k in set(new) - set(old):
+            if new[k] == defaults[k]:
+                new.pop(k)
         if old != new:
             diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
             raise ValueError(f"{path}: checkpoint was trained with another configuration "

@@ -9,6 +9,7 @@ import torch
 from grip.core.body import build_body
 from grip.kinematics.dataset import sequence_arrays
 from grip.kinematics.features import FeatureConfig, targets
+from grip.kinematics.model import STAGE_DIMS
 from grip.kinematics.train import (
     KinematicsRunConfig,
     TrainConfig,
@@ -167,10 +168,38 @@ def test_runs_begun_before_new_train_fields_still_resume(seqs, tmp_path):
     tr.fit()
     ck = torch.load(tmp_path / "last.pt", weights_only=True)
     cfg = json.loads(ck["config"])
-    for k in ("mirror_augment", "lr_final"):
+    for k in ("mirror_augment", "lr_final", "weight_decay"):
         cfg["train"].pop(k)  # as a checkpoint written before these settings existed
+    cfg.pop("dropout")
     ck["config"] = json.dumps(cfg)
     torch.save(ck, tmp_path / "old.pt")
     Trainer(_cfg(), seqs, seqs, tmp_path).load(tmp_path / "old.pt")
     with pytest.raises(ValueError, match="another configuration"):
         Trainer(_cfg(mirror_augment=True), seqs, seqs, tmp_path).load(tmp_path / "old.pt")
+    with pytest.raises(ValueError, match="dropout"):
+        Trainer(dataclasses.replace(_cfg(), dropout=0.3), seqs, seqs, tmp_path).load(
+            tmp_path / "old.pt")
+
+
+def test_dropout_acts_in_training_only_and_weight_decay_selects_adamw(seqs, tmp_path):
+    cfg = dataclasses.replace(_cfg(weight_decay=0.01), dropout=0.5)
+    tr = Trainer(cfg, seqs, seqs, tmp_path / "a")
+    assert isinstance(tr.opt, torch.optim.AdamW)
+    assert tr.opt.param_groups[0]["weight_decay"] == 0.01
+    assert isinstance(Trainer(_cfg(), seqs, seqs, tmp_path / "b").opt, torch.optim.Adam)
+    x = torch.randn(2, 10, cfg.features.n_features)
+    st = tr.model.initial_state({s: torch.zeros(2, d) for s, d in STAGE_DIMS.items()})
+
+    def fp():
+        return tr.model(x, st)[0]["fp"]
+
+    tr.model.train()
+    assert not torch.allclose(fp(), fp())  # two dropout draws
+    tr.model.eval()
+    torch.testing.assert_close(fp(), fp())
+    tr.fit()
+    # a model trained with dropout fine-tunes one without, and the reverse (same weights)
+    dst = Trainer(_cfg(), seqs, seqs, tmp_path / "c")
+    dst.init_from(tmp_path / "a" / "last.pt")
+    torch.testing.assert_close(dst.model.state_dict()["stages.fp.head.weight"],
+                               tr.model.state_dict()["stages.fp.head.weight"])  # fmt: skip
