@@ -172,6 +172,12 @@ class PolicyRunConfig:
     also holds the left-right mirror image of every clip
     (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
     right balanced."""
+    holdout_fraction: float = 0.0
+    """Share of the training split's clips (whole clips, all their chunks) kept out of the
+    reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a
+    validation split for choosing among a run's exports without looking at the test split
+    (``grip eval-policy --split holdout``). The names are in ``RUN/holdout.json`` and in every
+    export's ``info``. 0 trains on every training clip."""
 
     def __post_init__(self) -> None:
         checks = (
@@ -183,6 +189,7 @@ class PolicyRunConfig:
             (self.ppo.n_steps * self.ppo.n_envs >= self.ppo.batch_size,
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
+            (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
         )  # fmt: skip
         for ok, msg in checks:
             if not ok:

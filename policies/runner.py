@@ -155,6 +155,8 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     """Write the inference file of a training run's checkpoint; returns its size in bytes.
 
     Weights are float16 with ``half`` (cast back on load); normaliser statistics stay float64.
+    ``info`` (JSON) is kept in the file; the run's held-out sequences (``RUN/holdout.json``)
+    join it as ``info["holdout"]``, for ``grip eval-policy --split holdout``.
     """
     from stable_baselines3 import PPO
 
@@ -172,6 +174,13 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     critic_sizes, critic = _copy_mlp(pol.mlp_extractor.value_net, pol.value_net,
                                      cfg.ppo.activation)  # fmt: skip
     cast = (lambda v: v.half()) if half else (lambda v: v)
+    info = dict(info or {})
+    holdout = run_dir / "holdout.json"  # grip train-policy's held-out clips (holdout_fraction)
+    if holdout.is_file():
+        try:
+            info["holdout"] = list(json.loads(holdout.read_text())["sequences"])
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{holdout}: not a held-out sequence list ({e})") from e
     with np.load(ck_dir / "vecnorm.npz", allow_pickle=False) as z:
         norm = dict(z)
     keys = list(model.observation_space.spaces.keys())
@@ -189,7 +198,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         "clip_obs": cfg.ppo.clip_obs, "amp_frame_dim": FRAME_DIM,
         "disc": {k: (cast(v) if k.startswith(("trunk", "head")) else v)
                  for k, v in amp_ck["disc"].items()},
-        "info": json.dumps(info or {}),
+        "info": json.dumps(info),
     }  # fmt: skip
     buf = io.BytesIO()
     torch.save(payload, buf)

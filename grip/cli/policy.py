@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 
 SHIPPED_POLICY = "grip/assets/policy_default.pt"
+HOLDOUT_FILE = "holdout.json"
+"""Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -74,7 +76,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--kin", type=Path, default=None,
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
     e.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
-    e.add_argument("--split", default="test", choices=("train", "test", "all"))
+    e.add_argument("--split", default="test", choices=("train", "test", "all", "holdout"),
+                   help="dataset split; 'holdout': the training clips held out of the "
+                        "policy's training (holdout_fraction), a validation split")  # fmt: skip
     e.add_argument("--category", action="append", default=[], metavar="GLOB",
                    help="only these motion categories (glob, repeatable)")  # fmt: skip
     e.add_argument("--segment-frames", type=int, default=500, help="frames per segment")
@@ -140,6 +144,27 @@ def changed_settings(old: dict, new: dict, defaults: dict | None = None) -> list
     return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(RESUMABLE)]
 
 
+def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
+    """The training split's recording files less the clips that ``cfg.holdout_fraction`` holds
+    out, whose sequence names go to ``out/holdout.json`` (every call: the draw depends only on
+    the names, the fraction and the seed)."""
+    from grip.cli.main import CliError
+    from grip.core.atomic import atomic_write_text
+    from grip.kinematics.dataset import holdout_names
+
+    if cfg.holdout_fraction <= 0:
+        return files
+    held = holdout_names([f.stem for f in files], cfg.holdout_fraction, cfg.seed)
+    kept = [f for f in files if f.stem not in held]
+    if not kept:
+        raise CliError(f"holdout_fraction={cfg.holdout_fraction} holds out every training "
+                       f"clip of {len(files)} sequence(s): nothing to train on")  # fmt: skip
+    payload = {"fraction": cfg.holdout_fraction, "seed": cfg.seed, "sequences": sorted(held)}
+    atomic_write_text(out / HOLDOUT_FILE, json.dumps(payload, indent=1))
+    print(f"held out {len(held)} of {len(files)} training sequences ({out / HOLDOUT_FILE})")
+    return kept
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -158,11 +183,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     kins = [kin_checkpoint(k) for k in (args.kin or [None])]
     ref_path = out / "reference_train.npz"
+    files = training_files(split_paths(args.data, "train"), cfg, out)
     if not ref_path.is_file():
         from grip.kinematics.inference import KinematicsEstimator
         from grip.kinematics.reference import build_reference_set, merge_reference_sets
 
-        recs = load_recordings(split_paths(args.data, "train"))
+        recs = load_recordings(files)
         sets = []
         for kin in kins:
             try:
@@ -261,7 +287,18 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     if args.stride < 0:
         raise CliError(f"--stride must be >= 0, got {args.stride}")
-    recs = load_recordings(split_paths(args.data, args.split), args.category,
+    if args.split == "holdout":
+        held = set(runner.info.get("holdout") or ())
+        if not held:
+            raise CliError(f"{pol}: no clips were held out of this policy's training (train "
+                           "with --set holdout_fraction=0.1 for a validation split)")  # fmt: skip
+        files = [f for f in split_paths(args.data, "train") if f.stem in held]
+        if not files:
+            raise CliError(f"{args.data}: its train split holds none of the {len(held)} "
+                           f"sequences held out of {pol}'s training (other data?)")  # fmt: skip
+    else:
+        files = split_paths(args.data, args.split)
+    recs = load_recordings(files, args.category,
                            args.segment_frames, limit=args.segments,
                            segment_stride=args.stride)  # fmt: skip
     with tqdm(total=len(recs), unit="seg", desc="episodes") as bar:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,6 +106,14 @@ def clip_of(sequence_name: str) -> str:
     return m.group("clip") if m else sequence_name
 
 
+def holdout_names(names: Sequence[str], fraction: float, seed: int) -> set[str]:
+    """The sequence names that :func:`holdout_split` holds out (whole clips, :func:`clip_of`)."""
+    from prism_tools.chunking import make_split
+
+    names = list(names)
+    return set(make_split(names, fraction, seed, groups={n: clip_of(n) for n in names})["test"])
+
+
 def holdout_split(
     seqs: list[SequenceArrays], fraction: float, seed: int
 ) -> tuple[list[SequenceArrays], list[SequenceArrays]]:
@@ -116,11 +125,8 @@ def holdout_split(
         ValueError: nothing would be left on one of the two sides (fewer than two clips, or a
             fraction that takes them all).
     """
-    from prism_tools.chunking import make_split
-
     names = [s.name for s in seqs]
-    split = make_split(names, fraction, seed, groups={n: clip_of(n) for n in names})
-    held = set(split["test"])
+    held = holdout_names(names, fraction, seed)
     train = [s for s in seqs if s.name not in held]
     val = [s for s in seqs if s.name in held]
     if not train or not val:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -227,15 +228,18 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
     assert "bad.npz" in capsys.readouterr().err
 
 
+TINY_POLICY = ["--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo.batch_size=64",
+               "--set", "ppo.n_epochs=1", "--set", "ppo.net_arch=[16]", "--set", "amp.hidden=[16]",
+               "--set", "amp.window=2", "--set", "amp.batch_size=16",
+               "--set", "amp.replay_size=256", "--set", "stage1.timesteps=64",
+               "--set", "stage1.categories=[]", "--set", "stage2.categories=[]",
+               "--set", "stage2.timesteps=64"]  # fmt: skip
+"""A policy run of a few seconds (``grip train-policy`` settings)."""
+
+
 def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "policy"
-    args = ["train-policy", "--data", str(built), "--out", str(run),
-            "--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo.batch_size=64",
-            "--set", "ppo.n_epochs=1", "--set", "ppo.net_arch=[16]", "--set", "amp.hidden=[16]",
-            "--set", "amp.window=2", "--set", "amp.batch_size=16", "--set", "amp.replay_size=256",
-            "--set", "stage1.timesteps=64", "--set", "stage1.categories=[]",
-            "--set", "stage2.categories=[]",
-            "--set", "stage2.timesteps=64"]  # fmt: skip
+    args = ["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY]
     assert main(args) == 0
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["config"]["ppo"]["net_arch"] == [16] and "git" in cfg and "kin" in cfg
@@ -296,3 +300,35 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert "frames pushed" in capsys.readouterr().out
     assert len(list(demo.glob("*.npz"))) == 5 and len(list(demo.glob("*.png"))) == 1
     assert len(list(demo.glob("*.bvh"))) == 1 and len(list(demo.glob("*.glb"))) == 1
+
+
+def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
+    built: Path, tmp_path: Path, capsys
+) -> None:
+    data = tmp_path / "data"  # the fixture's dataset with all three clips in training
+    shutil.copytree(built, data)
+    split = json.loads((data / "split.json").read_text())
+    split["train"], split["test"] = sorted(split["train"] + split["test"]), []
+    (data / "split.json").write_text(json.dumps(split))
+    run = tmp_path / "held"
+    args = ["train-policy", "--data", str(data), "--out", str(run), *TINY_POLICY,
+            "--set", "holdout_fraction=0.5"]  # fmt: skip
+    assert main(args) == 0
+    held = json.loads((run / "holdout.json").read_text())["sequences"]
+    train = split["train"]
+    assert held and set(held) < set(train)  # some, not all, of the training sequences
+    ref = ReferenceSet.load(run / "reference_train.npz")
+    assert len(ref.clips) == len(train) - len(held)  # one clip per training recording
+    exported = tmp_path / "held.pt"
+    assert main(["policy-export", str(run), "--out", str(exported)]) == 0
+    js = tmp_path / "held.json"
+    assert main(["eval-policy", "--policy", str(exported), "--data", str(data), "--split",
+                 "holdout", "--segment-frames", "100", "--json", str(js)]) == 0  # fmt: skip
+    assert json.loads(js.read_text())["segments"] >= 1
+    # a policy trained on every clip has no validation split: a clear error
+    assert main(["train-policy", "--data", str(data), "--out", str(tmp_path / "all"),
+                 *TINY_POLICY]) == 0  # fmt: skip
+    assert main(["eval-policy", "--policy", str(tmp_path / "all" / "policy.pt"), "--data",
+                 str(data), "--split", "holdout"]) == 2  # fmt: skip
+    assert "no clips were held out" in capsys.readouterr().err
+    assert main([*args, "--set", "holdout_fraction=1.5"]) == 2  # out of range: refused
