@@ -332,3 +332,6 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
                  str(data), "--split", "holdout"]) == 2  # fmt: skip
     assert "no clips were held out" in capsys.readouterr().err
     assert main([*args, "--set", "holdout_fraction=1.5"]) == 2  # out of range: refused
+    everything = ["train-policy", "--data", str(data), "--out", str(tmp_path / "none"),
+                  *TINY_POLICY, "--set", "holdout_fraction=0.99"]  # fmt: skip
+    assert main(everything) == 2 and "nothing to train on" in capsys.readouterr().err
