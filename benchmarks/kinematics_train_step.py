@@ -10,6 +10,7 @@ random batch of the same shape (KinematicsNet has four such stages). Compare rat
 machines.
 
     python benchmarks/kinematics_train_step.py --data data/prism_synth [--threads 1] [--steps 6]
+        [--bf16]
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=6, help="timed steps (after 2 warm-up steps)")
     ap.add_argument("--data", default=None, help="dataset folder (default: synthetic data)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--bf16", action="store_true",
+                    help="train.bf16: the network under bfloat16 autocast (the reference stays "
+                         "float32, so the ratio shows the gain)")  # fmt: skip
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(args.data is None)
@@ -37,7 +41,8 @@ def main() -> None:
     from grip.kinematics.train import KinematicsRunConfig, Trainer
     from prism_tools.synthetic import make_recording
 
-    cfg = load_run_config(None, "kinematics", KinematicsRunConfig(), [])
+    sets = ["train.bf16=true"] if args.bf16 else []
+    cfg = load_run_config(None, "kinematics", KinematicsRunConfig(), sets)
     tc = cfg.train
     if args.data:
         seqs = load_split_sequences(args.data, "train", cfg.features, limit=40)
@@ -64,13 +69,15 @@ def main() -> None:
     step = sum(parts.values())
     frames = tc.batch_size * tc.window_frames
     print(f"threads {args.threads}, batch {tc.batch_size} x {tc.window_frames} frames, "
-          f"mirror_augment={tc.mirror_augment}, data {args.data or 'synthetic'}")  # fmt: skip
+          f"mirror_augment={tc.mirror_augment}, bf16={tc.bf16}, "
+          f"data {args.data or 'synthetic'}")  # fmt: skip
     print(" | ".join(f"{k} {v:.3f} s" for k, v in parts.items()))
     print(f"step {step:.3f} s ({frames / step:.0f} frames/s); bare LSTM fwd+bwd {ref:.3f} s; "
           f"ratio {step / ref:.2f}")  # fmt: skip
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"threads": args.threads, "data": args.data, "parts_s": parts, "step_s": step,
+            json.dump({"threads": args.threads, "data": args.data, "bf16": tc.bf16,
+                       "parts_s": parts, "step_s": step,
                        "frames_per_s": frames / step, "lstm_ref_s": ref,
                        "ratio": step / ref}, f, indent=1)  # fmt: skip
 

@@ -66,6 +66,11 @@ class TrainConfig:
             unseen by model selection.
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
         seed: Seed of windows, noise and initialisation.
+        bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
+            (weights, losses and the optimiser stay float32). On a CPU with AMX or
+            AVX512-BF16 the LSTMs run several times faster
+            (``benchmarks/kinematics_train_step.py --bf16``); elsewhere it may be slower.
+            Inference stays float32.
     """
 
     window_frames: int = 200
@@ -86,6 +91,7 @@ class TrainConfig:
     val_source: str = "test"
     val_fraction: float = 0.1
     seed: int = 0
+    bf16: bool = False
 
     def __post_init__(self) -> None:
         if self.val_source not in VAL_SOURCES:
@@ -359,7 +365,9 @@ class Trainer:
     def losses(self, x: torch.Tensor, y: dict[str, torch.Tensor],
                only: str | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
         first = {k: y[k][:, 0] for k in TARGET_KEYS}
-        out, _ = self.model(x, self.model.initial_state(first), only=only)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.cfg.train.bf16):
+            out, _ = self.model(x, self.model.initial_state(first), only=only)
+        out = {k: v.float() for k, v in out.items()}
         losses = {k: ((out[k] - y[k]) ** 2).mean() for k in out}
         if "fa" in out and self.cfg.train.fk_loss_weight > 0:
             losses["fk"] = ((fk_positions(out["fa"], y["offsets"]) - y["fp"]) ** 2).mean()

@@ -82,12 +82,26 @@ def test_training_runs_checkpoints_and_resumes(seqs, tmp_path):
         Trainer(_cfg(joint_epochs=0), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
 
 
-def test_training_lowers_the_validation_loss(seqs, tmp_path):
-    cfg = _cfg()
+@pytest.mark.parametrize("bf16", [False, True])
+def test_training_lowers_the_validation_loss(seqs, tmp_path, bf16):
+    cfg = _cfg(bf16=bf16)
     tr = Trainer(cfg, seqs, seqs, tmp_path)
     before = tr.validate()["total"]
     tr.fit()
     assert tr.validate()["total"] < before
+    assert all(p.dtype == torch.float32 for p in tr.model.parameters())  # weights stay fp32
+
+
+def test_bf16_losses_are_float32_and_close_to_the_float32_pass(seqs, tmp_path):
+    tr = Trainer(_cfg(), seqs, seqs, tmp_path / "a")
+    half = Trainer(_cfg(bf16=True), seqs, seqs, tmp_path / "b")
+    half.model.load_state_dict(tr.model.state_dict())
+    x, y = tr._tensors(*tr.val_batch, augment=False)
+    full, low = tr.losses(x, y), half.losses(x, y)
+    for k, v in full.items():
+        assert low[k].dtype == torch.float32
+        assert abs(low[k].item() - v.item()) <= 0.05 * v.item() + 1e-6, k  # bfloat16 rounding
+    assert any(low[k].item() != v.item() for k, v in full.items())  # autocast did act
 
 
 def test_corrupt_checkpoint_is_a_clean_error(tmp_path):
