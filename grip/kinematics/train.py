@@ -462,6 +462,7 @@ class Trainer:
         tc = self.cfg.train
         self.model.train()
         while self.epoch < self.cfg.total_epochs():
+            t0 = time.perf_counter()
             phase = self.phase_of(self.epoch)
             sums: dict[str, float] = {}
             for step in range(tc.steps_per_epoch):
@@ -476,6 +477,7 @@ class Trainer:
                 "phase": phase,
                 "train": {k: v / tc.steps_per_epoch for k, v in sums.items()},
                 "val": val,
+                "wall_s": self.wall_s() + time.perf_counter() - t0,
             }
             self.history.append(record)
             log_epoch(writer, record)
@@ -485,6 +487,11 @@ class Trainer:
                 self.save(self.run_dir / "best.pt")
             self.save(self.run_dir / "last.pt")
         return self.history
+
+    def wall_s(self) -> float:
+        """Seconds of training (epochs with their validation) over every sitting of the run;
+        epochs of checkpoints written before this was recorded count as 0."""
+        return float(self.history[-1].get("wall_s", 0.0)) if self.history else 0.0
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict:

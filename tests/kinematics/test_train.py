@@ -78,6 +78,9 @@ def test_training_runs_checkpoints_and_resumes(seqs, tmp_path):
     tr3 = Trainer(_cfg(joint_epochs=2), seqs, seqs, tmp_path)
     tr3.load(tmp_path / "last.pt")
     assert [h["phase"] for h in tr3.fit()][-2:] == ["joint", "joint"] and tr3.epoch == 6
+    walls = [h["wall_s"] for h in tr3.history]  # training time adds up across sittings
+    assert all(b > a > 0 for a, b in itertools.pairwise(walls))
+    assert tr3.wall_s() == walls[-1] > tr.wall_s() == walls[-2]
     with pytest.raises(ValueError, match="beyond"):
         Trainer(_cfg(joint_epochs=0), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
 
