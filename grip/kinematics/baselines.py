@@ -51,6 +51,7 @@ import dataclasses
 import io
 import json
 import os
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -70,6 +71,7 @@ from grip.kinematics.features import DEFAULT_SITES, FeatureConfig, input_feature
 from grip.kinematics.train import (
     export_for_inference,
     git_hash,
+    history_wall_s,
     load_checkpoint,
     log_epoch,
     rotate_batch,
@@ -718,6 +720,7 @@ class BaselineTrainer:
         tc = self.cfg.train
         self.nets.train()
         while self.epoch < tc.epochs:
+            t0 = time.perf_counter()
             sums: dict[str, float] = {}
             for _ in range(tc.steps_per_epoch):
                 losses = self.step()
@@ -728,7 +731,7 @@ class BaselineTrainer:
             val = self.validate()
             record = {"epoch": self.epoch,
                       "train": {k: v / tc.steps_per_epoch for k, v in sums.items()},
-                      "val": val}  # fmt: skip
+                      "val": val, "wall_s": self.wall_s() + time.perf_counter() - t0}  # fmt: skip
             self.history.append(record)
             log_epoch(writer, record)
             self.epoch += 1
@@ -736,6 +739,9 @@ class BaselineTrainer:
             self._write(self.run_dir / "best.pt", self.best_state())
             self._write(self.run_dir / "last.pt", self.state())
         return self.history
+
+    def wall_s(self) -> float:
+        return history_wall_s(self.history)
 
     def update_best(self, val: dict[str, float]) -> None:
         """Keep the current weights of every net whose validation loss in ``val`` is its lowest

@@ -143,6 +143,12 @@ def run_config_from_dict(d: dict) -> KinematicsRunConfig:
     return KinematicsRunConfig(features=FeatureConfig(**feats), train=train, **d)
 
 
+def history_wall_s(history: list[dict]) -> float:
+    """Seconds of training (epochs with their validation) over every sitting of a run, from its
+    history's last ``wall_s``; epochs of checkpoints written before it was recorded count as 0."""
+    return float(history[-1].get("wall_s", 0.0)) if history else 0.0
+
+
 def git_hash() -> str:
     """The repository's commit (``"unknown"`` outside a git checkout)."""
     try:
@@ -489,9 +495,7 @@ class Trainer:
         return self.history
 
     def wall_s(self) -> float:
-        """Seconds of training (epochs with their validation) over every sitting of the run;
-        epochs of checkpoints written before this was recorded count as 0."""
-        return float(self.history[-1].get("wall_s", 0.0)) if self.history else 0.0
+        return history_wall_s(self.history)
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict:

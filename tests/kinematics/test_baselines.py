@@ -244,6 +244,7 @@ def test_checkpoints_resume_per_net_best_and_export(tmp_path):
     tr3 = BaselineTrainer(longer, seqs, seqs, tmp_path)
     tr3.load(tmp_path / "last.pt")
     assert [h["epoch"] for h in tr3.fit()] == [0, 1, 2]
+    assert tr3.wall_s() > tr2.wall_s() == hist[-1]["wall_s"] > hist[0]["wall_s"] > 0
     with pytest.raises(ValueError, match="another configuration"):
         BaselineTrainer(replace_train(cfg, lr=0.5), seqs, seqs, tmp_path).load(tmp_path / "last.pt")
     with pytest.raises(ValueError, match="beyond"):
