@@ -217,8 +217,8 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
     if steps:
         fps = steps * tc.batch_size * tc.window_frames / dt
         print(f"trained {steps} steps in {dt:.0f} s ({steps / dt:.3f} steps/s, {fps:.0f} frames/s)")
-        print(f"{trainer.wall_s():.0f} s of training in all sittings of the run (epochs with "
-              "their validation; resumed epochs count from their own sitting)")  # fmt: skip
+        print(f"{trainer.wall_s():.0f} s of training over all sittings of the run (epochs "
+              "with their validation)")  # fmt: skip
     if trainer.history:
         print(f"final validation losses: {trainer.history[-1]['val']}")
     print(f"checkpoints: {out / 'last.pt'} and {out / 'best.pt'}")

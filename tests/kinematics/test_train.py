@@ -220,3 +220,8 @@ def test_dropout_acts_in_training_only_and_weight_decay_selects_adamw(seqs, tmp_
     dst.init_from(tmp_path / "a" / "last.pt")
     torch.testing.assert_close(dst.model.state_dict()["stages.fp.head.weight"],
                                tr.model.state_dict()["stages.fp.head.weight"])  # fmt: skip
+    dst.save(tmp_path / "plain.pt")
+    back = Trainer(cfg, seqs, seqs, tmp_path / "d")
+    back.init_from(tmp_path / "plain.pt")
+    torch.testing.assert_close(back.model.state_dict()["stages.fp.head.weight"],
+                               tr.model.state_dict()["stages.fp.head.weight"])  # fmt: skip
