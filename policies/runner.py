@@ -21,6 +21,7 @@ from envs.amp import FRAME_DIM
 from envs.config import TrackingEnvConfig
 from grip.config import apply_dict
 from grip.core.atomic import atomic_write
+from grip.core.loaderrors import describe_load_error
 from policies.amp import Discriminator
 from policies.config import PolicyRunConfig
 
@@ -63,6 +64,22 @@ def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
     mlp = _mlp([int(s) for s in sizes], activation)
     mlp.load_state_dict({k: v.float() for k, v in state.items()})
     return mlp
+
+
+def load_weights(path: str | os.PathLike, what: str) -> object:
+    """``torch.load(path, weights_only=True)`` on the CPU; a refusal names the file and why.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: ``"{path}: not a {what}: ..."`` for a corrupt file or one holding pickled
+            Python objects (never executed).
+    """
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise
+    except Exception as e:  # corrupt or hostile files raise many types
+        raise ValueError(f"{path}: not a {what}: {describe_load_error(e)}") from e
 
 
 class PolicyRunner:
@@ -117,12 +134,7 @@ class PolicyRunner:
     def load(cls, path: str | os.PathLike) -> PolicyRunner:
         """Read an exported policy; errors name the file and the problem."""
         path = Path(path)
-        try:
-            ck = torch.load(path, map_location="cpu", weights_only=True)
-        except FileNotFoundError:
-            raise
-        except Exception as e:  # corrupt or hostile files raise many types
-            raise ValueError(f"{path}: not a readable policy file ({e})") from e
+        ck = load_weights(path, "policy file")
         if not isinstance(ck, dict) or ck.get("format") != FORMAT:
             raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
         missing = [k for k in ("config", "actor", "obs_keys", "obs_mean", "obs_var") if k not in ck]
@@ -184,7 +196,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     with np.load(ck_dir / "vecnorm.npz", allow_pickle=False) as z:
         norm = dict(z)
     keys = list(model.observation_space.spaces.keys())
-    amp_ck = torch.load(ck_dir / "amp.pt", map_location="cpu", weights_only=True)
+    amp_ck = load_weights(ck_dir / "amp.pt", "discriminator checkpoint")
     payload = {
         "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
         "actor_sizes": sizes, "actor": {k: cast(v) for k, v in actor.state_dict().items()},

@@ -46,7 +46,7 @@ from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
 from policies.config import PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
-from policies.runner import ACTIVATION_FNS, linear_layers
+from policies.runner import ACTIVATION_FNS, linear_layers, load_weights
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
 
@@ -453,7 +453,7 @@ class PolicyTrainer:
             self.stage_index, self.stage_done = state["stage_index"], state["stage_done"]
             self._wall0, self.history = state["wall_s"], state["history"]
             self._mining_state = state.get("mining")
-            ck = torch.load(self.ckpt_dir / "amp.pt", map_location="cpu", weights_only=True)
+            ck = load_weights(self.ckpt_dir / "amp.pt", "discriminator checkpoint")
             ck["rng"] = json.loads(ck["rng"])
             self.amp.load_state_dict(ck)
         stages = self.cfg.stages()

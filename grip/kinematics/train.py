@@ -23,6 +23,7 @@ import torch
 
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write, atomic_write_text
+from grip.core.loaderrors import describe_load_error
 from grip.core.rotations import axis_angle_to_matrix
 from grip.kinematics.dataset import (
     TARGET_KEYS,
@@ -560,7 +561,7 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     except FileNotFoundError:
         raise
     except Exception as e:  # torch raises many types for corrupt or hostile files
-        raise ValueError(f"{path}: not a readable KinematicsNet checkpoint ({e})") from e
+        raise ValueError(f"{path}: not a KinematicsNet checkpoint: {describe_load_error(e)}") from e
     missing = [k for k in ("version", "config", "model", "norm_mean", "norm_std") if k not in ck]
     if missing:
         raise ValueError(f"{path}: checkpoint lacks {missing}")

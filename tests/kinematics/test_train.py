@@ -1,6 +1,7 @@
 import dataclasses
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -107,11 +108,27 @@ def test_bf16_losses_are_float32_and_close_to_the_float32_pass(seqs, tmp_path):
     assert any(low[k].item() != v.item() for k, v in full.items())  # autocast did act
 
 
-def test_corrupt_checkpoint_is_a_clean_error(tmp_path):
+class _Hostile:
+    """Unpickling this runs ``Path.touch`` on its marker: a stand-in for a malicious payload."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.touch, (self.marker,))
+
+
+def test_corrupt_and_hostile_checkpoints_are_clean_errors(tmp_path):
     bad = tmp_path / "x.pt"
     bad.write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError, match=r"x\.pt"):
+    with pytest.raises(ValueError, match=r"x\.pt: not a KinematicsNet checkpoint: corrupt") as e:
         load_checkpoint(bad)
+    assert "weights_only" not in str(e.value)  # none of torch's advice to load unsafely
+    marker, hostile = tmp_path / "ran", tmp_path / "h.pt"
+    torch.save({"version": 1, "model": _Hostile(marker)}, hostile)
+    with pytest.raises(ValueError, match=r"h\.pt: .*pickled Python objects, refused"):
+        load_checkpoint(hostile)
+    assert not marker.exists()
 
 
 def test_pack_weights_round_trip():

@@ -138,7 +138,7 @@ def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
 def test_bad_policy_files_are_refused(tmp_path):
     junk = tmp_path / "junk.pt"
     junk.write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError, match=r"junk\.pt"):
+    with pytest.raises(ValueError, match=r"junk\.pt: not a policy file: corrupt"):
         PolicyRunner.load(junk)
     import torch
 
