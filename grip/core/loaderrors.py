@@ -3,7 +3,7 @@
 torch's own message for a refused file is several lines long and advises re-running with
 ``weights_only=False``, which would execute whatever a hostile pickle holds. Every loader of
 this project (KinematicsNet checkpoints, policy files, run checkpoints) words the refusal
-with :func:`describe_load_error` instead. numpy and stdlib only: no torch import here.
+with :func:`describe_load_error` instead. stdlib only: no torch import here.
 """
 
 from __future__ import annotations

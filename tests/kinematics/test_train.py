@@ -129,6 +129,8 @@ def test_corrupt_and_hostile_checkpoints_are_clean_errors(tmp_path):
     with pytest.raises(ValueError, match=r"h\.pt: .*pickled Python objects, refused"):
         load_checkpoint(hostile)
     assert not marker.exists()
+    torch.load(hostile, weights_only=False)  # the payload is live: an unsafe load runs it
+    assert marker.exists()
 
 
 def test_pack_weights_round_trip():
