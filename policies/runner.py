@@ -83,7 +83,8 @@ def load_weights(path: str | os.PathLike, what: str) -> object:
 
 
 class PolicyRunner:
-    """Deterministic actions of a trained DynamicsNet, and the discriminator's probability.
+    """Actions of a trained DynamicsNet (the Gaussian's mean unless :meth:`use_action_noise`),
+    and the discriminator's probability.
 
     Attributes:
         env_cfg: The environment settings the policy was trained with (observation variant,
@@ -111,6 +112,21 @@ class PolicyRunner:
         self.disc = disc.eval() if disc is not None else None
         self.amp_window = amp_window
         self.info = info or {}
+        self._noise = 0.0
+        self._rng = np.random.default_rng(0)
+
+    def use_action_noise(self, scale: float, seed: int = 0) -> None:
+        """Sample actions from the policy's Gaussian with its trained standard deviation times
+        ``scale`` (1: the exploration noise of training; 0: the mean action, the default), then
+        clip them to [-1, 1] as training does. For diagnostics: does the policy fare differently
+        with the noise it was trained with?"""
+        if not np.isfinite(scale) or scale < 0:
+            raise ValueError(f"action noise scale must be finite and >= 0, got {scale}")
+        if scale > 0 and self.log_std is None:
+            raise ValueError("this policy file has no log_std (exported before it was kept): "
+                             "no action noise to sample")  # fmt: skip
+        self._noise = float(scale)
+        self._rng = np.random.default_rng(seed)
 
     def _flat(self, obs: dict) -> np.ndarray:
         parts = [np.asarray(obs[k], np.float64) for k in self.obs_keys]
@@ -121,7 +137,11 @@ class PolicyRunner:
     def act(self, obs: dict) -> np.ndarray:
         """Action(s) in [-1, 1] for one observation dict (or a batch with a leading axis)."""
         x = torch.as_tensor(self._flat(obs), dtype=torch.float32)
-        return np.clip(self.actor(x).numpy(), -1.0, 1.0)
+        a = self.actor(x).numpy().astype(np.float64)
+        if self._noise > 0:
+            std = np.exp(self.log_std.numpy().astype(np.float64)) * self._noise
+            a = a + std * self._rng.standard_normal(a.shape)
+        return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
         """The discriminator's probability that AMP windows are real motion."""

@@ -91,6 +91,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="what the controller follows: the KinematicsNet estimate (default, the "
                    "method) or the ground truth (a perfect KinematicsNet; tells the "
                    "controller's own falls from those the estimate causes)")  # fmt: skip
+    e.add_argument("--action-noise", type=float, default=0.0, metavar="SCALE",
+                   help="sample actions with the policy's trained standard deviation times "
+                   "SCALE (1: the exploration noise of training) instead of the mean action "
+                   "(0, the default); a diagnostic")  # fmt: skip
+    e.add_argument("--seed", type=int, default=0, help="seed of the action noise")
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
@@ -285,6 +290,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
         est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin))
     except ValueError as e:
         raise CliError(str(e)) from e
+    try:
+        runner.use_action_noise(args.action_noise, args.seed)
+    except ValueError as e:
+        raise CliError(f"--action-noise with {pol}: {e}") from e
     if args.stride < 0:
         raise CliError(f"--stride must be >= 0, got {args.stride}")
     if args.split == "holdout":

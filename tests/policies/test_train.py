@@ -135,6 +135,37 @@ def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     np.testing.assert_allclose(PolicyRunner.load(half).act(obs), expected, atol=2e-2)
 
 
+def test_action_noise_samples_the_trained_gaussian_and_clips(run, tmp_path):
+    import torch
+
+    path, _ = run
+    export_policy(path, tmp_path / "p.pt", half=False)
+    runner = PolicyRunner.load(tmp_path / "p.pt")
+    obs, _ = GripTrackingEnv(runner.env_cfg).reset(seed=3)
+    mean = runner.act(obs)
+    runner.log_std = torch.full_like(runner.log_std, -3.0)  # std 0.05: few samples clipped
+    std = np.exp(-3.0)
+    batch = {k: np.repeat(np.asarray(v)[None], 4000, axis=0) for k, v in obs.items()}
+    runner.use_action_noise(1.0, seed=5)
+    a = runner.act(batch)
+    assert a.shape == (4000, mean.size) and np.abs(a).max() <= 1.0
+    inside = np.abs(mean) < 1 - 4 * std
+    assert inside.sum() >= 3
+    np.testing.assert_allclose(a.mean(0)[inside], mean[inside], atol=0.1 * std)
+    np.testing.assert_allclose(a.std(0)[inside], std, rtol=0.05)
+    runner.use_action_noise(2.0, seed=5)
+    np.testing.assert_allclose(runner.act(batch).std(0)[inside], 2 * std, rtol=0.05)
+    runner.use_action_noise(1.0, seed=5)
+    np.testing.assert_array_equal(runner.act(batch), a)  # the seed repeats the draw
+    runner.use_action_noise(0.0)
+    np.testing.assert_array_equal(runner.act(obs), mean)
+    with pytest.raises(ValueError, match=">= 0"):
+        runner.use_action_noise(-1.0)
+    runner.log_std = None
+    with pytest.raises(ValueError, match="no log_std"):
+        runner.use_action_noise(1.0)
+
+
 def test_bad_policy_files_are_refused(tmp_path):
     junk = tmp_path / "junk.pt"
     junk.write_bytes(b"not a checkpoint")
