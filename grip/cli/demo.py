@@ -55,6 +55,12 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported
     import json
 
+    import torch
+
+    # Every method runs one recording at batch 1, where a second thread gains little and, on a
+    # machine with a busy core, costs a lot: the demo took 18.6 s with torch's default two
+    # threads and 8.0 s with one while a training held the other core (README, "The demo").
+    torch.set_num_threads(1)
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT
     from grip.cli.reconstruct import policy_checkpoint, safe_name
