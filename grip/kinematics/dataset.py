@@ -153,29 +153,57 @@ class Normalizer:
 
 
 def sample_windows(
-    seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
+    speeds: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), weighted by sequence length.
+
+    Args:
+        speeds: ``(n,)`` playback speeds: window ``i`` reads its sequence at the fractional
+            frames ``start + speeds[i] * k`` (``k < length``), every feature and target linearly
+            interpolated between the two nearest frames. Only the sampling: scaling the rates
+            (accelerations, velocities) to the new speed is the caller's
+            (:func:`grip.kinematics.train.time_warp_rates`). ``None``: whole frames, speed 1.
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
         sequences (``TARGET_KEYS`` plus any the caller added to ``SequenceArrays.y``), plus
         ``"offsets": (n, 24, 3)``.
     """
+    if speeds is not None:
+        speeds = np.asarray(speeds, dtype=np.float64)
+        if speeds.shape != (n,) or not np.all(np.isfinite(speeds)) or np.any(speeds <= 0):
+            raise ValueError(f"speeds must be {n} finite positive values, got shape "
+                             f"{speeds.shape}")  # fmt: skip
     lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
     pick = rng.choice(len(seqs), size=n, p=lens / lens.sum())
     keys = tuple(seqs[0].y)
     xs, offs, ys = [], [], {k: [] for k in keys}
-    for i in pick:
+    for w, i in enumerate(pick):
         s = seqs[i]
         t = len(s.x)
-        start = int(rng.integers(0, max(t - length, 0) + 1))
-        idx = np.minimum(np.arange(start, start + length), t - 1)
-        xs.append(s.x[idx])
+        if speeds is None:
+            start = int(rng.integers(0, max(t - length, 0) + 1))
+            idx = np.minimum(np.arange(start, start + length), t - 1)
+            xs.append(s.x[idx])
+            for k in keys:
+                ys[k].append(s.y[k][idx])
+        else:
+            span = speeds[w] * (length - 1)
+            start = int(rng.integers(0, max(int(np.floor(t - 1 - span)), 0) + 1))
+            pos = np.minimum(start + speeds[w] * np.arange(length), t - 1)
+            i0 = np.floor(pos).astype(np.int64)
+            i1 = np.minimum(i0 + 1, t - 1)
+            frac = (pos - i0)[:, None]
+
+            def lerp(a: np.ndarray, i0=i0, i1=i1, frac=frac) -> np.ndarray:
+                return (a[i0] * (1 - frac) + a[i1] * frac).astype(a.dtype)
+
+            xs.append(lerp(s.x))
+            for k in keys:
+                ys[k].append(lerp(s.y[k]))
         offs.append(s.offsets)
-        for k in keys:
-            ys[k].append(s.y[k][idx])
     out = {k: np.stack(v) for k, v in ys.items()}
     out["offsets"] = np.stack(offs)
     return np.stack(xs), out

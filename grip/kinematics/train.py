@@ -57,6 +57,10 @@ class TrainConfig:
         yaw_augment: Rotate each window about the vertical axis by a random angle.
         mirror_augment: Mirror half of the windows left-right (:func:`mirror_batch`); needs a
             sensor set that is its own mirror image (every left site with its right partner).
+        time_warp: Play each training window at a random speed ``s``, log-uniform in
+            ``[1 / (1 + time_warp), 1 + time_warp]`` (0: off): frames are interpolated
+            (:func:`grip.kinematics.dataset.sample_windows`) and the rates rescaled
+            (:func:`time_warp_rates`), so the network sees the same motions faster and slower.
         lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
             ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
         val_windows: Validation windows (fixed draw) evaluated after every epoch.
@@ -87,6 +91,7 @@ class TrainConfig:
     ori_noise_rad: float = 0.02
     yaw_augment: bool = True
     mirror_augment: bool = False
+    time_warp: float = 0.0
     lr_final: float | None = None
     val_windows: int = 256
     val_source: str = "test"
@@ -100,6 +105,8 @@ class TrainConfig:
                              f"got {self.val_source!r}")  # fmt: skip
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not 0.0 <= self.time_warp <= 1.0:
+            raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
 
 
 @dataclass(frozen=True)
@@ -262,6 +269,55 @@ def mirror_batch(
         else:
             raise ValueError(f"mirror_batch: no mirror rule for target {k!r}")
     return x_out, out
+
+
+def time_warp_rates(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray, n_sites: int,
+                    insoles: bool) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
+    """Rescale the rates of windows resampled at playback ``speeds`` (``sample_windows(...,
+    speeds=...)``) to what the sensors would read at that speed.
+
+    A motion played ``s`` times faster has accelerations ``s^2`` and angular and linear
+    velocities ``s`` times the original's at the same pose. So the IMUs' free accelerations
+    scale by ``s^2``, their angular velocities and the leaf/pelvis velocity targets by ``s``;
+    orientations, positions and rotations keep their values. The insoles' total vertical force
+    (body weights) is one plus the centre of mass's vertical acceleration over g, so its
+    deviation from 1 scales by ``s^2``, shared between the feet as recorded; the CoP keeps its
+    value and the contact flags are rounded back to 0/1. The force rule is an approximation
+    (it ignores how the stance phases themselves would change); the rest is exact up to the
+    interpolation and the recording's low-pass filter.
+
+    Args:
+        x: ``(B, T, F)`` raw (unnormalised) features: 15 per IMU site, then 10 insole values.
+        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets``.
+        speeds: ``(B,)`` playback speeds.
+
+    Raises:
+        ValueError: ``y`` has a target without a known rule.
+    """
+    known = ("lp", "fp", "fa", "lv", "offsets")
+    unknown = [k for k in y if k not in known]
+    if unknown:
+        raise ValueError(f"time_warp_rates: no rule for target(s) {unknown}")
+    s = np.asarray(speeds, dtype=np.float64)[:, None, None]
+    x = x.copy()
+    b, t, _ = x.shape
+    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
+    imu[..., 0:3] *= (s**2)[..., None].astype(x.dtype)
+    imu[..., 3:6] *= s[..., None].astype(x.dtype)
+    x[..., : 15 * n_sites] = imu.reshape(b, t, -1)
+    if insoles:
+        ins = x[..., 15 * n_sites : 15 * n_sites + 10].reshape(b, t, 2, 5)
+        force = ins[..., 0].astype(np.float64)
+        total = force.sum(-1, keepdims=True)
+        new_total = np.maximum(1.0 + s**2 * (total - 1.0), 0.0)
+        share = np.divide(force, total, out=np.zeros_like(force), where=total > 1e-3)
+        ins[..., 0] = np.where(total > 1e-3, share * new_total, force).astype(x.dtype)
+        ins[..., 3:5] = np.round(ins[..., 3:5])
+        x[..., 15 * n_sites : 15 * n_sites + 10] = ins.reshape(b, t, 10)
+    y = dict(y)
+    if "lv" in y:
+        y["lv"] = (y["lv"] * s).astype(y["lv"].dtype)
+    return x, y
 
 
 def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
@@ -449,7 +505,14 @@ class Trainer:
         tick = clock.append if clock is not None else lambda _t: None
         for group in self.opt.param_groups:
             group["lr"] = lr
-        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
+        speeds = None
+        if tc.time_warp > 0:
+            speeds = np.exp(self.rng.uniform(-1.0, 1.0, tc.batch_size) * np.log1p(tc.time_warp))
+        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
+                              speeds=speeds)  # fmt: skip
+        if speeds is not None:
+            x, y = time_warp_rates(x, y, speeds, len(self.cfg.features.sites),
+                                   self.cfg.features.insoles)  # fmt: skip
         tick(time.perf_counter())
         xt, yt = self._tensors(x, y, augment=True)
         tick(time.perf_counter())
