@@ -152,14 +152,33 @@ class Normalizer:
         return ((x - self.mean) / self.std).astype(np.float32)
 
 
+def category_weights(seqs: list[SequenceArrays], balance: float) -> np.ndarray:
+    """Sampling weights of sequences that even out their motion categories.
+
+    A sequence weighs its length times ``F_c ** -balance``, ``F_c`` the frames of its category
+    (``SequenceArrays.category``): ``balance = 0`` samples frames uniformly (each category in
+    proportion to its frames), ``1`` gives every category the same share, values between
+    interpolate (0.5: a category's share grows as the square root of its frames).
+    """
+    if not 0.0 <= balance <= 1.0:
+        raise ValueError(f"category balance must be in [0, 1], got {balance}")
+    lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
+    frames: dict[str, float] = {}
+    for s, n in zip(seqs, lens, strict=True):
+        frames[s.category] = frames.get(s.category, 0.0) + n
+    return lens * np.array([frames[s.category] ** -balance for s in seqs])
+
+
 def sample_windows(
     seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
-    speeds: np.ndarray | None = None,
+    speeds: np.ndarray | None = None, weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), weighted by sequence length.
 
     Args:
+        weights: ``(len(seqs),)`` sampling weights of the sequences instead of their lengths
+            (e.g. :func:`category_weights`).
         speeds: ``(n,)`` playback speeds: window ``i`` reads its sequence at the fractional
             frames ``start + speeds[i] * k`` (``k < length``), every feature and target linearly
             interpolated between the two nearest frames. Only the sampling: scaling the rates
@@ -176,8 +195,15 @@ def sample_windows(
         if speeds.shape != (n,) or not np.all(np.isfinite(speeds)) or np.any(speeds <= 0):
             raise ValueError(f"speeds must be {n} finite positive values, got shape "
                              f"{speeds.shape}")  # fmt: skip
-    lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
-    pick = rng.choice(len(seqs), size=n, p=lens / lens.sum())
+    if weights is None:
+        weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    if weights.shape != (len(seqs),) or not np.all(np.isfinite(weights)) or np.any(
+        weights < 0
+    ) or weights.sum() <= 0:
+        raise ValueError(f"weights must be {len(seqs)} finite non-negative values with a "
+                         f"positive sum, got shape {weights.shape}")  # fmt: skip
+    pick = rng.choice(len(seqs), size=n, p=weights / weights.sum())
     keys = tuple(seqs[0].y)
     xs, offs, ys = [], [], {k: [] for k in keys}
     for w, i in enumerate(pick):

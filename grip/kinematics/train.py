@@ -29,6 +29,7 @@ from grip.kinematics.dataset import (
     TARGET_KEYS,
     Normalizer,
     SequenceArrays,
+    category_weights,
     sample_windows,
 )
 from grip.kinematics.features import FeatureConfig
@@ -57,6 +58,9 @@ class TrainConfig:
         yaw_augment: Rotate each window about the vertical axis by a random angle.
         mirror_augment: Mirror half of the windows left-right (:func:`mirror_batch`); needs a
             sensor set that is its own mirror image (every left site with its right partner).
+        category_balance: Even out the motion categories of the training windows
+            (:func:`grip.kinematics.dataset.category_weights`): 0 samples frames uniformly
+            (common motions dominate), 1 gives every category the same share.
         time_warp: Play each training window at a random speed ``s``, log-uniform in
             ``[1 / (1 + time_warp), 1 + time_warp]`` (0: off): frames are interpolated
             (:func:`grip.kinematics.dataset.sample_windows`) and the rates rescaled
@@ -92,6 +96,7 @@ class TrainConfig:
     yaw_augment: bool = True
     mirror_augment: bool = False
     time_warp: float = 0.0
+    category_balance: float = 0.0
     lr_final: float | None = None
     val_windows: int = 256
     val_source: str = "test"
@@ -105,6 +110,9 @@ class TrainConfig:
                              f"got {self.val_source!r}")  # fmt: skip
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not 0.0 <= self.category_balance <= 1.0:
+            raise ValueError(f"train.category_balance must be in [0, 1], got "
+                             f"{self.category_balance}")  # fmt: skip
         if not 0.0 <= self.time_warp <= 1.0:
             raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
 
@@ -366,6 +374,8 @@ class Trainer:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.train_seqs = train_seqs
+        self.train_weights = (category_weights(train_seqs, cfg.train.category_balance)
+                              if cfg.train.category_balance > 0 else None)  # fmt: skip
         self.val_seqs = val_seqs or train_seqs
         torch.manual_seed(cfg.train.seed)
         if cfg.train.mirror_augment:
@@ -509,7 +519,7 @@ class Trainer:
         if tc.time_warp > 0:
             speeds = np.exp(self.rng.uniform(-1.0, 1.0, tc.batch_size) * np.log1p(tc.time_warp))
         x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
-                              speeds=speeds)  # fmt: skip
+                              speeds=speeds, weights=self.train_weights)  # fmt: skip
         if speeds is not None:
             x, y = time_warp_rates(x, y, speeds, len(self.cfg.features.sites),
                                    self.cfg.features.insoles)  # fmt: skip

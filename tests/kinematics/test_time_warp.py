@@ -106,14 +106,17 @@ def test_unknown_targets_and_bad_settings_are_refused():
         time_warp_rates(x, {"other": np.zeros((1, 5, 3))}, np.ones(1), N_SITES, True)
     with pytest.raises(ValueError, match="time_warp"):
         TrainConfig(time_warp=-0.1)
+    with pytest.raises(ValueError, match="category_balance"):
+        TrainConfig(category_balance=2.0)
 
 
-def test_training_with_time_warp_runs_and_lowers_the_loss(tmp_path):
+def test_training_with_time_warp_and_category_balance_lowers_the_loss(tmp_path):
     seqs = [sequence_arrays(make_recording(160, seed=s), CFG) for s in range(3)]
     cfg = KinematicsRunConfig(hidden=16, layers=1, init_hidden=16, train=TrainConfig(
         window_frames=40, batch_size=8, steps_per_epoch=1, stage_epochs=0, joint_epochs=1,
-        time_warp=0.25, val_windows=4))  # fmt: skip
+        time_warp=0.25, category_balance=0.5, val_windows=4))  # fmt: skip
     tr = Trainer(cfg, seqs, seqs[:1], tmp_path)
+    assert tr.train_weights is not None and tr.train_weights.shape == (3,)
     first = [tr.train_step("joint", 3e-3)[1].item() for _ in range(3)]
     for _ in range(40):
         tr.train_step("joint", 3e-3)
