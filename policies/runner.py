@@ -112,7 +112,7 @@ class PolicyRunner:
         self.disc = disc.eval() if disc is not None else None
         self.amp_window = amp_window
         self.info = info or {}
-        self._noise = 0.0
+        self._action_std: np.ndarray | None = None  # set by use_action_noise
         self._rng = np.random.default_rng(0)
 
     def use_action_noise(self, scale: float, seed: int = 0) -> None:
@@ -125,7 +125,8 @@ class PolicyRunner:
         if scale > 0 and self.log_std is None:
             raise ValueError("this policy file has no log_std (exported before it was kept): "
                              "no action noise to sample")  # fmt: skip
-        self._noise = float(scale)
+        self._action_std = (np.exp(self.log_std.numpy()).astype(np.float32) * np.float32(scale)
+                            if scale > 0 else None)  # fmt: skip
         self._rng = np.random.default_rng(seed)
 
     def _flat(self, obs: dict) -> np.ndarray:
@@ -137,11 +138,10 @@ class PolicyRunner:
     def act(self, obs: dict) -> np.ndarray:
         """Action(s) in [-1, 1] for one observation dict (or a batch with a leading axis)."""
         x = torch.as_tensor(self._flat(obs), dtype=torch.float32)
-        a = self.actor(x).numpy().astype(np.float64)
-        if self._noise > 0:
-            std = np.exp(self.log_std.numpy().astype(np.float64)) * self._noise
-            a = a + std * self._rng.standard_normal(a.shape)
-        return np.clip(a, -1.0, 1.0).astype(np.float32)
+        a = self.actor(x).numpy()
+        if self._action_std is not None:
+            a = a + self._action_std * self._rng.standard_normal(a.shape, dtype=np.float32)
+        return np.clip(a, -1.0, 1.0)
 
     def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
         """The discriminator's probability that AMP windows are real motion."""

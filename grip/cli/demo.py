@@ -122,11 +122,9 @@ DEMO_METHODS = ("grip", "kinematics", "kin+pip", "transpose", "pip")
 def _stream_check(grip_method, rec, offline) -> None:
     """Push ``rec`` through :class:`grip.eval.stream.GripStream` and compare with ``offline``."""
     import numpy as np
-    import torch
 
     from grip.kinematics.features import sensor_frames
 
-    torch.set_num_threads(1)
     g = grip_method.reconstructor
     stream = g.stream(rec.slice_frames(0, 2))
     times = []

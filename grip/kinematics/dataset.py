@@ -177,13 +177,13 @@ def sample_windows(
     their last frame; a window never crosses sequences), weighted by sequence length.
 
     Args:
-        weights: ``(len(seqs),)`` sampling weights of the sequences instead of their lengths
-            (e.g. :func:`category_weights`).
         speeds: ``(n,)`` playback speeds: window ``i`` reads its sequence at the fractional
             frames ``start + speeds[i] * k`` (``k < length``), every feature and target linearly
             interpolated between the two nearest frames. Only the sampling: scaling the rates
             (accelerations, velocities) to the new speed is the caller's
             (:func:`grip.kinematics.train.time_warp_rates`). ``None``: whole frames, speed 1.
+        weights: ``(len(seqs),)`` sampling weights of the sequences instead of their lengths
+            (e.g. :func:`category_weights`).
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
@@ -198,9 +198,8 @@ def sample_windows(
     if weights is None:
         weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
-    if weights.shape != (len(seqs),) or not np.all(np.isfinite(weights)) or np.any(
-        weights < 0
-    ) or weights.sum() <= 0:
+    valid = np.all(np.isfinite(weights)) and np.all(weights >= 0) and weights.sum() > 0
+    if weights.shape != (len(seqs),) or not valid:
         raise ValueError(f"weights must be {len(seqs)} finite non-negative values with a "
                          f"positive sum, got shape {weights.shape}")  # fmt: skip
     pick = rng.choice(len(seqs), size=n, p=weights / weights.sum())

@@ -28,17 +28,9 @@ def body():
 
 
 @pytest.fixture(scope="module")
-def walk(body):
+def walk(body, cmu_walk):
     """GT walk on the default body: local rotations, joint positions, rotations, root, fps."""
-    from grip.cli.paths import default_motions_dir
-    from grip.motion.catalog import load_clip
-    from grip.motion.retarget import retarget
-
-    root = default_motions_dir()
-    path = root / "cmu" / "bvh" / "07_05.bvh" if root else None
-    if path is None or not path.is_file():
-        pytest.skip("shared motion data (cmu/bvh/07_05.bvh) not found")
-    motion = retarget(load_clip(str(path)))
+    motion = cmu_walk
     assert motion.body == body.params
     rot, pos = motion.fk(body)
     return motion.local_rot(), pos, rot, motion.root_pos, motion.fps

@@ -9,29 +9,20 @@ from __future__ import annotations
 
 import pytest
 
-from grip.cli.paths import default_motions_dir
 from grip.core.reference import ReferenceSet
 from grip.kinematics.reference import oracle_reference_clip
 
 SITES = ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist")
 
 
-def _walk() -> ReferenceSet | None:
-    root = default_motions_dir()
-    path = root / "cmu" / "bvh" / "07_05.bvh" if root else None
-    if path is None or not path.is_file():
+@pytest.fixture(scope="session")
+def _walk_or_none(cmu_walk_or_none) -> ReferenceSet | None:
+    if cmu_walk_or_none is None:
         return None
-    from grip.motion.catalog import load_clip
-    from grip.motion.retarget import retarget
     from prism_tools.synth import SynthConfig, recording_from_motion
 
-    rec = recording_from_motion(retarget(load_clip(str(path))), SynthConfig(), seed=0, noise=False)
-    return ReferenceSet([oracle_reference_clip(rec)], SITES, True, source=str(path))
-
-
-@pytest.fixture(scope="session")
-def _walk_or_none() -> ReferenceSet | None:
-    return _walk()
+    rec = recording_from_motion(cmu_walk_or_none, SynthConfig(), seed=0, noise=False)
+    return ReferenceSet([oracle_reference_clip(rec)], SITES, True, source="cmu/bvh/07_05.bvh")
 
 
 @pytest.fixture(scope="session")
