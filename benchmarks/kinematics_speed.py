@@ -5,6 +5,10 @@ bare ``torch.nn.LSTM`` of the same width and depth (one stage's recurrent core).
 what to compare across machines; the absolute numbers depend on the CPU and its load.
 
     python benchmarks/kinematics_speed.py [--model CKPT] [--hidden 256 --layers 2] [--json PATH]
+    python benchmarks/kinematics_speed.py --model CKPT --tta full
+
+With ``--model`` it also times the estimator's whole streaming step (normalisation and
+output conversion included), without test-time augmentation and with ``--tta MODE``.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ def main() -> None:
     ap.add_argument("--layers", type=int, default=2)
     ap.add_argument("--inputs", type=int, default=70)
     ap.add_argument("--frames", type=int, default=2000, help="streamed frames")
+    ap.add_argument("--tta", default="full", help="test-time augmentation timed with --model")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -75,6 +80,7 @@ def main() -> None:
             {k: v.expand(32, -1) for k, v in first.items()})), 3)  # fmt: skip
         ref_off_s = _time(lambda: ref(rb), 3)
     frames = 32 * 500
+    steps = _estimator_steps(args.model, args.tta, args.frames) if args.model else {}
     res = {
         "stream_ms_per_frame": stream_s * 1e3,
         "ref_lstm_stream_ms_per_frame": ref_stream_s * 1e3,
@@ -86,12 +92,33 @@ def main() -> None:
         "layers": cfg.layers,
         "parameters": int(sum(p.numel() for p in net.parameters())),
         "threads": 1,
+        **steps,
     }
     for k, v in res.items():
         print(f"{k:32s} {v:.4g}" if isinstance(v, float) else f"{k:32s} {v}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(res, f, indent=1)
+
+
+def _estimator_steps(model: str, tta: str, frames: int) -> dict[str, float]:
+    """ms per frame of ``StreamingEstimator.step`` without and with test-time augmentation."""
+    import numpy as np
+
+    from grip.kinematics.features import input_features
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.synthetic import make_recording
+
+    rec = make_recording(50, seed=0)
+    res = {}
+    for mode in ("none", tta):
+        est = KinematicsEstimator.from_checkpoint(model, tta=mode)
+        row = input_features(rec, est.cfg.features)[10].astype(np.float32)
+        stream = est.stream(rec)
+        res[f"step_ms_per_frame_tta_{mode}"] = (
+            _time(lambda s=stream, r=row: s.step(r), frames) * 1e3
+        )
+    return res
 
 
 if __name__ == "__main__":

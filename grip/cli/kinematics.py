@@ -6,6 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from grip.cli.recordings import add_tta_argument
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -254,6 +256,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         help="joints of the position metrics: the estimated rotations posed on the subject's "
         "body (default, what every method is judged on) or the FP stage's direct estimate",
     )
+    add_tta_argument(p)
     p.add_argument(
         "--sweep",
         type=Path,
@@ -287,7 +290,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return _eval_sweep(args)
     model = kin_checkpoint(args.model, "--model")
     try:
-        est = KinematicsEstimator.from_checkpoint(model)
+        est = KinematicsEstimator.from_checkpoint(model, tta=args.tta)
     except ValueError as e:
         raise CliError(str(e)) from e
     recs = _load_split(args.data, args.split)
@@ -303,6 +306,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                        "segments")}  # fmt: skip
     figures["model"] = str(model)
     figures["joints"] = args.joints
+    figures["tta"] = args.tta
     if args.json:
         atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"]},
                                                 indent=1))  # fmt: skip

@@ -7,6 +7,8 @@ import json
 import time
 from pathlib import Path
 
+from grip.cli.recordings import add_tta_argument
+
 SHIPPED_POLICY = "grip/assets/policy_default.pt"
 HOLDOUT_FILE = "holdout.json"
 """Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
@@ -96,6 +98,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "SCALE (1: the exploration noise of training) instead of the mean action "
                    "(0, the default); a diagnostic")  # fmt: skip
     e.add_argument("--seed", type=int, default=0, help="seed of the action noise")
+    add_tta_argument(e)
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
@@ -225,9 +228,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     if init is not None and resuming:
         print(f"{out} resumes from its own checkpoint; --init {init} is ignored")
         init = None
-    payload = {"config": run_config_dict(cfg), "git": git_hash(),
-               "data": str(args.data.resolve()),
-               "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
+    payload = {
+        "config": run_config_dict(cfg),
+        "git": git_hash(),
+        "data": str(args.data.resolve()),
+        "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve()),
+    }
     started_from = json.loads(prev.read_text()).get("init") if resuming and prev.is_file() else None
     if init is not None:
         started_from = str(init.resolve())
@@ -287,7 +293,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(f"{pol}: no such policy file (train one with 'grip train-policy')")
     try:
         runner = PolicyRunner.load(pol)
-        est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin))
+        est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin), tta=args.tta)
     except ValueError as e:
         raise CliError(str(e)) from e
     try:

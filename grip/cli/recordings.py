@@ -81,3 +81,18 @@ def kin_checkpoint(path: Path | None, flag: str = "--kin") -> Path:
         raise CliError(f"{kin}: no such KinematicsNet checkpoint (train one with 'grip train-kin' "
                        f"and pass {flag} RUN/best.pt)")  # fmt: skip
     return kin
+
+
+TTA_HELP = (
+    "test-time augmentation of KinematicsNet: average its estimates of the input turned about "
+    "the vertical and mirrored left-right, each mapped back ('mirror': 2 copies, 'yaw4': 4 "
+    "turns, 'full': both, 8 copies; default 'none'). More accurate, n times the computation "
+    "(README, issue 3)"
+)
+
+
+def add_tta_argument(parser) -> None:
+    """The ``--tta`` option of the commands that run KinematicsNet."""
+    from grip.kinematics.features import TTA_MODES
+
+    parser.add_argument("--tta", default="none", choices=tuple(TTA_MODES), help=TTA_HELP)

@@ -34,6 +34,13 @@ DEFAULT_SITES: tuple[str, ...] = ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist")
 """GRIP's 4 wearables, in its channel order."""
 
 
+TTA_MODES: dict[str, tuple[int, bool]] = {
+    "none": (1, False), "mirror": (1, True), "yaw4": (4, False), "full": (4, True),
+}  # fmt: skip
+"""Test-time augmentation: the number of yaw angles (evenly spaced about the vertical) and
+whether the left-right mirror image is added; ``full`` runs 8 copies."""
+
+
 @dataclass(frozen=True)
 class FeatureConfig:
     """Which sensors feed the networks, and how.

@@ -176,7 +176,7 @@ def git_hash() -> str:
 
 
 # ---------------------------------------------------------------------------- augmentation
-def _yaw_matrices(angles: torch.Tensor) -> torch.Tensor:
+def yaw_matrices(angles: torch.Tensor) -> torch.Tensor:
     c, s = torch.cos(angles), torch.sin(angles)
     z, o = torch.zeros_like(c), torch.ones_like(c)
     return torch.stack([c, -s, z, s, c, z, z, z, o], -1).view(*angles.shape, 3, 3)
@@ -190,15 +190,28 @@ def rotate_batch(
     Accelerations, angular velocities, orientations, leaf/joint positions, 6D global rotations and
     velocities all rotate; insole values do not.
     """
+    return rotate_features(x, rot, n_sites), rotate_targets(y, rot)
+
+
+def rotate_features(x: torch.Tensor, rot: torch.Tensor, n_sites: int) -> torch.Tensor:
+    """Raw features ``(B, T, F)`` of ``n_sites`` IMUs (and insoles) seen in a world turned by
+    ``rot (B, 3, 3)`` (:func:`rotate_batch`'s rule for the inputs)."""
     b, t, _ = x.shape
     r = rot[:, None]  # (B, 1, 3, 3)
     imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
     acc = torch.einsum("btij,btsj->btsi", r, imu[..., 0:3])
     gyr = torch.einsum("btij,btsj->btsi", r, imu[..., 3:6])
     ori = (r[:, :, None] @ imu[..., 6:15].reshape(b, t, n_sites, 3, 3)).reshape(b, t, n_sites, 9)
-    x = torch.cat([torch.cat([acc, gyr, ori], -1).reshape(b, t, -1), x[..., 15 * n_sites :]], -1)
+    return torch.cat([torch.cat([acc, gyr, ori], -1).reshape(b, t, -1), x[..., 15 * n_sites :]], -1)
+
+
+def rotate_targets(y: dict[str, torch.Tensor], rot: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Targets or outputs ``{stage: (B, T, dim)}`` in a world turned by ``rot (B, 3, 3)``
+    (:func:`rotate_batch`'s rule; other keys pass unchanged)."""
+    r = rot[:, None]
     out = {}
     for k, v in y.items():
+        b, t = v.shape[:2]
         if k in ("lp", "fp", "lv"):
             out[k] = torch.einsum("btij,btnj->btni", r, v.reshape(b, t, -1, 3)).reshape(b, t, -1)
         elif k == "fa":
@@ -206,7 +219,7 @@ def rotate_batch(
             out[k] = torch.einsum("btij,btncj->btnci", r, cols).reshape(b, t, -1)
         else:
             out[k] = v
-    return x, out
+    return out
 
 
 def mirror_site_order(sites: tuple[str, ...]) -> list[int]:
@@ -249,6 +262,16 @@ def mirror_batch(
     Raises:
         ValueError: ``sites`` is not closed under the mirror, or ``y`` has an unknown key.
     """
+    return mirror_features(x, sites, insoles), mirror_targets(y)
+
+
+def mirror_features(x: torch.Tensor, sites: tuple[str, ...], insoles: bool) -> torch.Tensor:
+    """Raw features ``(B, T, F)`` of the mirror image (:func:`mirror_batch`'s rule for the
+    inputs).
+
+    Raises:
+        ValueError: ``sites`` is not closed under the mirror.
+    """
     order = mirror_site_order(tuple(sites))
     b, t, _ = x.shape
     n = len(sites)
@@ -260,23 +283,35 @@ def mirror_batch(
     parts = [torch.cat([acc, gyr, ori], -1).reshape(b, t, -1)]
     if insoles:
         parts.append(x[..., 15 * n : 15 * n + 10].reshape(b, t, 2, 5).flip(2).reshape(b, t, 10))
-    x_out = torch.cat(parts, -1)
+    return torch.cat(parts, -1)
+
+
+def mirror_targets(y: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Targets or outputs of the mirror image (:func:`mirror_batch`'s rule): ``lp, fp, fa,
+    lv`` as ``(B, T, dim)``, ``offsets`` as ``(B, 24, 3)``. Mirroring twice is the identity.
+
+    Raises:
+        ValueError: ``y`` has a key without a mirror rule.
+    """
     perm = torch.from_numpy(sk.MIRROR)
     out = {}
     for k, v in y.items():
+        m = _M.to(v.dtype)
         if k in ("lp", "fp", "lv"):
+            b, t = v.shape[:2]
             idx = {"lp": _LEAF_MIRROR, "fp": perm, "lv": _VEL_MIRROR}[k]
             out[k] = (v.reshape(b, t, -1, 3)[:, :, idx] * m).reshape(b, t, -1)
         elif k == "fa":
             # the columns c0, c1 of R become those of M R M: -M c0, M c1
+            b, t = v.shape[:2]
             cols = v.reshape(b, t, 24, 2, 3)[:, :, perm]
-            sign = torch.stack([-m, m]).to(v.dtype)
+            sign = torch.stack([-m, m])
             out[k] = (cols * sign).reshape(b, t, -1)
         elif k == "offsets":
             out[k] = v[:, perm] * m
         else:
             raise ValueError(f"mirror_batch: no mirror rule for target {k!r}")
-    return x_out, out
+    return out
 
 
 def time_warp_rates(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray, n_sites: int,
@@ -404,7 +439,7 @@ class Trainer:
             xt, yt = self._mirror_half(xt, yt)
         if augment and self.cfg.train.yaw_augment:
             ang = torch.from_numpy(self.rng.uniform(-np.pi, np.pi, x.shape[0]).astype(np.float32))
-            xt, yt = rotate_batch(xt, yt, _yaw_matrices(ang), n_sites)
+            xt, yt = rotate_batch(xt, yt, yaw_matrices(ang), n_sites)
         if augment and self.cfg.train.ori_noise_rad > 0:
             noise = self.rng.normal(0, self.cfg.train.ori_noise_rad, (x.shape[0], n_sites, 3))
             dr = torch.from_numpy(axis_angle_to_matrix(noise).astype(np.float32))  # (B, S, 3, 3)

@@ -163,6 +163,12 @@ def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsy
     for key in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "frames"):
         assert key in fig
     assert fig["frames"] > 0 and (tmp_path / "ev" / "categories.png").exists()
+    assert fig["tta"] == "none"
+    assert main(["eval-kin", "--model", str(run / "last.pt"), "--data", str(built),
+                 "--tta", "mirror", "--json", str(js)]) == 0  # fmt: skip
+    tta = json.loads(js.read_text())
+    assert tta["tta"] == "mirror" and tta["frames"] == fig["frames"]
+    assert tta["PEL_MPJPE_mm"] != pytest.approx(fig["PEL_MPJPE_mm"], rel=1e-4)
     assert main(["eval-kin", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
     assert "none.pt" in capsys.readouterr().err
 

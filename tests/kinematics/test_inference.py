@@ -61,3 +61,65 @@ def test_evaluation_rows_and_table(ckpt, tmp_path):
         assert a["MPJRE_deg"] == b["MPJRE_deg"]
     with pytest.raises(ValueError, match="joints must be"):
         evaluate_recordings(est, [make_recording(60, seed=3)], segment_frames=50, joints="lp")
+
+
+@pytest.mark.parametrize("mode", ["mirror", "yaw4", "full"])
+def test_test_time_augmentation_streams_like_offline(ckpt, mode):
+    est = KinematicsEstimator.from_checkpoint(ckpt, tta=mode)
+    plain = KinematicsEstimator.from_checkpoint(ckpt)
+    rec = make_recording(60, seed=21)
+    off = est.predict([rec])[0]
+    stream = est.stream(rec)
+    rows = [stream.step(f) for f in input_features(rec, est.cfg.features)]
+    np.testing.assert_allclose(np.stack([r["fp"] for r in rows]).reshape(60, 24, 3),
+                               off.fp_joint_pos, atol=1e-5)  # fmt: skip
+    # an average of several copies: not the plain estimate
+    assert np.abs(off.fp_joint_pos - plain.predict([rec])[0].fp_joint_pos).max() > 1e-3
+
+
+def test_full_test_time_augmentation_is_exactly_equivariant(ckpt):
+    """Averaged over the group of quarter turns and the mirror, the estimate of a turned or
+    mirrored input is the turned or mirrored estimate; the bare network is not equivariant."""
+    import torch
+
+    from grip.kinematics.train import (
+        mirror_features,
+        mirror_targets,
+        rotate_features,
+        rotate_targets,
+        yaw_matrices,
+    )
+
+    rec = make_recording(40, seed=5)
+    feats = FeatureConfig()
+    x = torch.from_numpy(input_features(rec, feats)[None].astype(np.float32))
+    first = KinematicsEstimator.from_checkpoint(ckpt)._first([rec])
+    sites, n = feats.sites, len(feats.sites)
+    r = yaw_matrices(torch.tensor([np.pi / 2]))
+
+    def with_first(y):
+        return {k: v[:, 0] for k, v in y.items()}
+
+    f3 = {k: v[:, None] for k, v in first.items()}
+    transforms = {
+        "mirror": (mirror_features(x, sites, True), with_first(mirror_targets(f3)), mirror_targets),
+        "turn": (rotate_features(x, r, n), with_first(rotate_targets(f3, r)),
+                 lambda y: rotate_targets(y, r)),
+    }  # fmt: skip
+    for mode, atol, expect_equal in (("full", 1e-5, True), ("none", 1e-3, False)):
+        est = KinematicsEstimator.from_checkpoint(ckpt, tta=mode)
+        base = est.run_features(x, first)
+        for xt, ft, apply in transforms.values():
+            got, want = est.run_features(xt, ft), apply(base)
+            err = max(float((got[k] - want[k]).abs().max()) for k in ("lp", "fp", "fa", "lv"))
+            assert (err < atol) == expect_equal, (mode, err)
+
+
+def test_test_time_augmentation_errors(ckpt):
+    with pytest.raises(ValueError, match="unknown test-time augmentation 'twice'"):
+        KinematicsEstimator.from_checkpoint(ckpt, tta="twice")
+    from grip.kinematics.inference import Symmetries
+
+    with pytest.raises(ValueError, match="needs a mirror image"):
+        Symmetries("mirror", ("L_Foot", "R_Foot", "L_Wrist"), True)
+    assert Symmetries("yaw4", ("L_Foot", "R_Foot", "L_Wrist"), True).n == 4

@@ -15,10 +15,10 @@ from grip.kinematics.train import (
     KinematicsRunConfig,
     TrainConfig,
     Trainer,
-    _yaw_matrices,
     fk_positions,
     load_checkpoint,
     rotate_batch,
+    yaw_matrices,
 )
 from prism_tools.synthetic import make_recording
 
@@ -47,7 +47,7 @@ def test_fk_positions_match_the_targets():
 
 def test_yaw_rotation_keeps_features_and_targets_consistent(seqs):
     s = seqs[0]
-    rot = _yaw_matrices(torch.tensor([0.7]))
+    rot = yaw_matrices(torch.tensor([0.7]))
     x = torch.from_numpy(s.x[None])
     y = {k: torch.from_numpy(v[None]) for k, v in s.y.items()}
     xr, yr = rotate_batch(x, y, rot, 4)
@@ -214,7 +214,8 @@ def test_runs_begun_before_new_train_fields_still_resume(seqs, tmp_path):
         Trainer(_cfg(mirror_augment=True), seqs, seqs, tmp_path).load(tmp_path / "old.pt")
     with pytest.raises(ValueError, match="dropout"):
         Trainer(dataclasses.replace(_cfg(), dropout=0.3), seqs, seqs, tmp_path).load(
-            tmp_path / "old.pt")
+            tmp_path / "old.pt"
+        )
 
 
 def test_dropout_acts_in_training_only_and_weight_decay_selects_adamw(seqs, tmp_path):
