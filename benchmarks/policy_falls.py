@@ -34,19 +34,12 @@ TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy")
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument(
-        "--reference",
-        required=True,
-        help="reference set (grip train-policy writes RUN/reference_train.npz)",
-    )
+    ap.add_argument("--reference", required=True,
+                    help="reference set (grip train-policy writes RUN/reference_train.npz)")
     ap.add_argument("--policy", default=SHIPPED_POLICY)
     ap.add_argument("--episodes", type=int, default=120)
-    ap.add_argument(
-        "--category",
-        action="append",
-        default=None,
-        help="glob on the motion category (repeatable; default walk*, run*, dash*)",
-    )
+    ap.add_argument("--category", action="append", default=None,
+                    help="glob on the motion category (repeatable; default walk*, run*, dash*)")
     ap.add_argument("--max-frames", type=int, default=1000, help="episode length limit")
     ap.add_argument("--fall-height", type=float, default=0.3, help="pelvis height of a fall, m")
     ap.add_argument("--seed", type=int, default=1)
@@ -76,10 +69,8 @@ def main() -> None:
             obs, _ = env.reset()
     n_fall = sum(e[2] for e in episodes)
     frames = np.mean([len(e[3]) for e in episodes]) * k
-    print(
-        f"{args.policy}: {len(episodes)} episodes on {len(ref)} clips ({', '.join(cats)}), "
-        f"{n_fall} falls ({100 * n_fall / len(episodes):.1f} %), {frames:.0f} frames each"
-    )
+    print(f"{args.policy}: {len(episodes)} episodes on {len(ref)} clips ({', '.join(cats)}), "
+          f"{n_fall} falls ({100 * n_fall / len(episodes):.1f} %), {frames:.0f} frames each")
     by_cat: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     by_clip: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for cat, name, fell, _ in episodes:
@@ -101,10 +92,8 @@ def main() -> None:
         b, o = np.concatenate(before), np.concatenate(other)
         for i, nm in enumerate(names):
             print(f"| {nm} | {b[:, i].mean():.3f} | {o[:, i].mean():.3f} |")
-        print(
-            f"| share with a negative reward | {(b[:, 0] < 0).mean():.2f} "
-            f"| {(o[:, 0] < 0).mean():.2f} |"
-        )
+        print(f"| share with a negative reward | {(b[:, 0] < 0).mean():.2f} "
+              f"| {(o[:, 0] < 0).mean():.2f} |")
 
 
 if __name__ == "__main__":

@@ -112,19 +112,15 @@ def main() -> None:
     }  # fmt: skip
     print(f"streaming GRIP, one thread, batch 1, {rec.name} ({rec.n_frames} frames x "
           f"{max(args.repeat, 2) - 1} passes after a warm-up)")  # fmt: skip
-    print(
-        f"  per pushed frame: mean {out['mean_ms']:.2f} ms, median {out['p50_ms']:.2f}, "
-        f"p95 {out['p95_ms']:.2f}, p99 {out['p99_ms']:.2f}, max {out['max_ms']:.2f}"
-    )
+    print(f"  per pushed frame: mean {out['mean_ms']:.2f} ms, median {out['p50_ms']:.2f}, "
+          f"p95 {out['p95_ms']:.2f}, p99 {out['p99_ms']:.2f}, max {out['max_ms']:.2f}")
     print(f"  parts alone: KinematicsNet step {kin_ms:.2f} ms, policy forward {act_ms:.2f} ms")
     print(f"  offline path (GripReconstructor): {offline_ms:.2f} ms per frame")
     print(f"  reference, bare MuJoCo control step: {ref:.3f} ms; stream / reference = "
           f"{out['ratio_to_physics']:.1f}")  # fmt: skip
     met = "met" if out["mean_ms"] < TARGET_MS else "NOT met"
-    print(
-        f"  aim < {TARGET_MS:g} ms per frame: {met} (plus {LATENCY_FRAMES} frames of "
-        "algorithmic delay)"
-    )
+    print(f"  aim < {TARGET_MS:g} ms per frame: {met} (plus {LATENCY_FRAMES} frames of "
+          "algorithmic delay)")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)

@@ -50,14 +50,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     from grip.cli.kinematics import add_export_parser
 
-    add_export_parser(
-        sub,
-        "baseline-export",
-        "TransPose / PIP baseline",
-        "for shipping trained baseline nets (a few MB)",
-        "grip baseline-export runs/tp4/best.pt --out grip/assets/transpose4.pt",
-        "grip.kinematics.baselines:export_baseline",
-    )
+    add_export_parser(sub, "baseline-export", "TransPose / PIP baseline",
+                      "for shipping trained baseline nets (a few MB)",
+                      "grip baseline-export runs/tp4/best.pt --out grip/assets/transpose4.pt",
+                      "grip.kinematics.baselines:export_baseline")
 
 
 def cmd_train(args: argparse.Namespace) -> int:

@@ -53,21 +53,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "default: the number of cores)")  # fmt: skip
     p.add_argument("--kin", type=Path, default=None,
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
-    p.add_argument(
-        "--policy",
-        type=Path,
-        default=None,
-        help="GRIP policy export for method grip (default: the shipped one)",
-    )
-    p.add_argument(
-        "--transpose",
-        type=Path,
-        default=None,
-        help="TransPose nets for method transpose (default: the shipped ones)",
-    )
-    p.add_argument(
-        "--pip", type=Path, default=None, help="PIP nets for method pip (default: the shipped ones)"
-    )
+    p.add_argument("--policy", type=Path, default=None,
+                   help="GRIP policy export for method grip (default: the shipped one)")
+    p.add_argument("--transpose", type=Path, default=None,
+                   help="TransPose nets for method transpose (default: the shipped ones)")
+    p.add_argument("--pip", type=Path, default=None,
+                   help="PIP nets for method pip (default: the shipped ones)")
     p.add_argument("--sensors", default=None, metavar="NAME,NAME,...",
                    help="sensor configurations of a 'grip train-kin --sweep' folder "
                    "(imu<N>_press|nopress), GRIP Table 3; methods that cannot change sensors "
@@ -118,13 +109,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
                              args.category)  # fmt: skip
         segs = select_segments(segs, args.segments)
-        options = MethodOptions(
-            kin_checkpoint=args.kin,
-            sweep_dir=args.sweep,
-            policy_checkpoint=args.policy,
-            transpose_checkpoint=args.transpose,
-            pip_checkpoint=args.pip,
-        )
+        options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
+                                policy_checkpoint=args.policy,
+                                transpose_checkpoint=args.transpose, pip_checkpoint=args.pip)
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         raise CliError(str(e)) from e

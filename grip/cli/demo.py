@@ -23,19 +23,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
-    p.add_argument(
-        "--recording",
-        type=Path,
-        default=None,
-        help="recording to reconstruct (default: the bundled sample)",
-    )
+    p.add_argument("--recording", type=Path, default=None,
+                   help="recording to reconstruct (default: the bundled sample)")
     p.add_argument("--policy", type=Path, default=None, help="policy (default: the shipped one)")
     p.add_argument("--no-video", action="store_true", help="skip the MP4 (the slowest export)")
-    p.add_argument(
-        "--dataset",
-        action="store_true",
-        help="also build a small dataset from the shared clips (--clips of them)",
-    )
+    p.add_argument("--dataset", action="store_true",
+                   help="also build a small dataset from the shared clips (--clips of them)")
     p.add_argument("--clips", type=int, default=16, help="number of clips (default 16)")
     p.add_argument("--workers", type=int, default=0, help="worker processes (default: all)")
     p.add_argument("--motions", type=Path, default=None,
@@ -145,15 +138,11 @@ def _stream_check(grip_method, rec, offline) -> None:
     first_fall = min([n, *offline.falls[:, 0], *live.falls[:, 0]])
     diff = np.abs(live.joint_pos[:first_fall] - offline.joint_pos[:first_fall]).max(initial=0.0)
     ms = 1e3 * np.array(times[2:])
-    print(
-        f"      {len(times)} frames pushed: {ms.mean():.2f} ms per frame on one thread "
-        f"(median {np.median(ms):.2f}), output 2 frames behind the input"
-    )
-    print(
-        f"      largest joint difference to the offline result over the {first_fall} frames "
-        f"before the first fall: {1e3 * diff:.4f} mm (float32 rounding of the LSTM's "
-        "step-wise and sequence passes; a fall and its recovery amplify it)"
-    )
+    print(f"      {len(times)} frames pushed: {ms.mean():.2f} ms per frame on one thread "
+          f"(median {np.median(ms):.2f}), output 2 frames behind the input")
+    print(f"      largest joint difference to the offline result over the {first_fall} frames "
+          f"before the first fall: {1e3 * diff:.4f} mm (float32 rounding of the LSTM's "
+          "step-wise and sequence passes; a fall and its recovery amplify it)")
 
 
 def dataset_demo(args: argparse.Namespace) -> int:

@@ -228,12 +228,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     if init is not None and resuming:
         print(f"{out} resumes from its own checkpoint; --init {init} is ignored")
         init = None
-    payload = {
-        "config": run_config_dict(cfg),
-        "git": git_hash(),
-        "data": str(args.data.resolve()),
-        "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve()),
-    }
+    payload = {"config": run_config_dict(cfg), "git": git_hash(),
+               "data": str(args.data.resolve()),
+               "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
     started_from = json.loads(prev.read_text()).get("init") if resuming and prev.is_file() else None
     if init is not None:
         started_from = str(init.resolve())

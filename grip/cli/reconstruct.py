@@ -31,43 +31,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("recordings", nargs="+", type=Path, help="recordings (.pkl/.npz)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument(
-        "--policy",
-        type=Path,
-        default=None,
-        help="policy export (default: the shipped grip/assets/policy_default.pt)",
-    )
-    p.add_argument(
-        "--kin", type=Path, default=None, help="KinematicsNet checkpoint (default: the shipped one)"
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=1,
-        help="parallel processes, each on a share of the recordings (default 1)",
-    )
-    p.add_argument(
-        "--no-recovery",
-        action="store_true",
-        help="report falls but do not recover from them (the humanoid stays down)",
-    )
-    p.add_argument(
-        "--history",
-        type=int,
-        default=30,
-        help="history buffer length N in frames (default 30 = 0.3 s)",
-    )
-    p.add_argument(
-        "--max-frames",
-        type=int,
-        default=0,
-        help="crop each recording to its first N frames (0: all)",
-    )
-    p.add_argument(
-        "--formats",
-        default="npz",
-        help="comma-separated: npz (always), bvh, glb, mp4, png (default npz)",
-    )
+    p.add_argument("--policy", type=Path, default=None,
+                   help="policy export (default: the shipped grip/assets/policy_default.pt)")
+    p.add_argument("--kin", type=Path, default=None,
+                   help="KinematicsNet checkpoint (default: the shipped one)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="parallel processes, each on a share of the recordings (default 1)")
+    p.add_argument("--no-recovery", action="store_true",
+                   help="report falls but do not recover from them (the humanoid stays down)")
+    p.add_argument("--history", type=int, default=30,
+                   help="history buffer length N in frames (default 30 = 0.3 s)")
+    p.add_argument("--max-frames", type=int, default=0,
+                   help="crop each recording to its first N frames (0: all)")
+    p.add_argument("--formats", default="npz",
+                   help="comma-separated: npz (always), bvh, glb, mp4, png (default npz)")
     p.add_argument("--fill-gaps", type=int, default=10, metavar="N",
                    help="interpolate sensor dropouts (NaN runs) of up to N frames, listed in "
                         "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
@@ -188,22 +165,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
             done = {r["file"]: r for r in json.loads(summary_path.read_text())["recordings"]}
         except (ValueError, KeyError, TypeError):
             done = {}
-    todo = [
-        str(f)
-        for f in args.recordings
-        if str(f) not in done or not all(Path(w).is_file() for w in done[str(f)]["written"])
-    ]
+    todo = [str(f) for f in args.recordings
+            if str(f) not in done or not all(Path(w).is_file() for w in done[str(f)]["written"])]
     print(f"{len(args.recordings)} recording(s), {len(args.recordings) - len(todo)} already done")
 
     def save() -> None:
         rows = list(done.values())
-        meta = {
-            "policy": str(policy),
-            "kin": str(kin),
-            "recovery": recovery.enabled,
-            "history_frames": recovery.history_frames,
-            "fill_gaps": args.fill_gaps,
-        }
+        meta = {"policy": str(policy), "kin": str(kin), "recovery": recovery.enabled,
+                "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps}
         atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
                                                     "errors": errors}, indent=1))  # fmt: skip
 
@@ -235,10 +204,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     rows = [done[str(f)] for f in args.recordings if str(f) in done]
     falls = sum(len(r["falls"]) for r in rows)
     frames = sum(r["frames"] for r in rows)
-    print(
-        f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
-        f"event(s){' recovered' if recovery.enabled else ''}; summary {summary_path}"
-    )
+    print(f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
+          f"event(s){' recovered' if recovery.enabled else ''}; summary {summary_path}")
     failed = [(r["name"], fmt, msg) for r in rows for fmt, msg in r.get("failed", {}).items()]
     for name, fmt, msg in failed:
         print(f"grip: error: {fmt} of {name}: {msg}", file=sys.stderr)

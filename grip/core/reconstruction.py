@@ -140,6 +140,7 @@ class Reconstruction(PoseTrack):
             raise ReconstructionError(f"{where}: fall events {f.tolist()} outside 0..{t - 1}")
         self.falls = f
 
+
     @property
     def fell(self) -> bool:
         """Whether any fall was detected (GRIP's success criterion)."""

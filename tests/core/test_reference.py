@@ -44,17 +44,8 @@ _EST = ("est_pos", "est_rot", "est_vel", "est_angvel", "est_hinge", "est_hinge_v
 
 
 def _head(clip: ReferenceClip, n: int) -> ReferenceClip:
-    return ReferenceClip(
-        clip.name,
-        clip.category,
-        clip.fps,
-        clip.body,
-        clip.gt_qpos[:n],
-        clip.est_pos[:n],
-        clip.est_rot6d[:n],
-        clip.est_vel[:n],
-        clip.sensor[:n],
-    )
+    return ReferenceClip(clip.name, clip.category, clip.fps, clip.body, clip.gt_qpos[:n],
+                         clip.est_pos[:n], clip.est_rot6d[:n], clip.est_vel[:n], clip.sensor[:n])
 
 
 def test_live_clip_grows_to_the_offline_clip_frame_by_frame(clip) -> None:

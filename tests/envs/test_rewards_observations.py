@@ -94,12 +94,10 @@ def test_observations_are_invariant_to_a_yaw_of_the_whole_scene() -> None:
 def test_root_velocity_term_on_hand_computed_windows() -> None:
     # 0.3 m instead of 0.6 m in 0.3 s: 1 m/s too slow -> exp(-k)
     assert root_velocity_term(np.array([0.3, 0.0]), np.array([0.6, 0.0]), 0.3, 10.0) == (
-        pytest.approx(np.exp(-10.0))
-    )
+        pytest.approx(np.exp(-10.0)))
     # the same ground covered in another place: perfect
     assert root_velocity_term(np.array([0.1, 0.2]), np.array([0.1, 0.2]), 0.3, 10.0) == 1.0
     # sideways instead of forward: |(0, 0.3) - (0.3, 0)| / 0.5 s = 0.3 sqrt(2) / 0.5 m/s
     e2 = (0.3 * np.sqrt(2) / 0.5) ** 2
     assert root_velocity_term(np.array([0.0, 0.3]), np.array([0.3, 0.0]), 0.5, 2.0) == (
-        pytest.approx(np.exp(-2.0 * e2))
-    )
+        pytest.approx(np.exp(-2.0 * e2)))

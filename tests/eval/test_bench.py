@@ -186,9 +186,8 @@ def test_contacts_and_insole_force_fall_back_without_insoles(seg_rec) -> None:
     )
     assert gt_bare.insole_force_n is None
     mass = gt.body.mass_kg
-    np.testing.assert_allclose(
-        gt.insole_force_n[:, 0], seg_rec.insole["L_Foot"].force[:, 0] * mass * 9.81, rtol=1e-3
-    )
+    np.testing.assert_allclose(gt.insole_force_n[:, 0],
+                               seg_rec.insole["L_Foot"].force[:, 0] * mass * 9.81, rtol=1e-3)
     assert gt.head(7).n_frames == 7 and gt.head(7).insole_force_n.shape == (7, 2)
 
 

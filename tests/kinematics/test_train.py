@@ -214,8 +214,7 @@ def test_runs_begun_before_new_train_fields_still_resume(seqs, tmp_path):
         Trainer(_cfg(mirror_augment=True), seqs, seqs, tmp_path).load(tmp_path / "old.pt")
     with pytest.raises(ValueError, match="dropout"):
         Trainer(dataclasses.replace(_cfg(), dropout=0.3), seqs, seqs, tmp_path).load(
-            tmp_path / "old.pt"
-        )
+            tmp_path / "old.pt")
 
 
 def test_dropout_acts_in_training_only_and_weight_decay_selects_adamw(seqs, tmp_path):

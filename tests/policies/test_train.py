@@ -301,8 +301,7 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
     # no warm-up: the policy trains from the exported weights
     (tmp_path / "free").mkdir()
     (tmp_path / "free" / "config.json").write_text(
-        json.dumps({"config": run_config_dict(_warm_cfg(0))})
-    )
+        json.dumps({"config": run_config_dict(_warm_cfg(0))}))
     free = PolicyTrainer(_warm_cfg(0), tmp_path / "free", SAMPLE_REFERENCE, init=exported)
     free.train()
     pol = free.model.policy
