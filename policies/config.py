@@ -70,6 +70,11 @@ class PPOConfig:
         batch_size: Minibatch size.
         n_epochs: Passes over each rollout.
         learning_rate: Adam learning rate.
+        learning_rate_decay_steps: Anneal the learning rate over the last this many decisions
+            of the final stage, linearly from ``learning_rate`` to ``learning_rate_final`` (0 =
+            constant). Tied to the stage's end, so extending ``stage2.timesteps`` moves the
+            decay to the new end. Against the swings of a long run's last exports (README).
+        learning_rate_final: The learning rate at the end of the decay.
         gamma, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm: PPO as in SB3.
         target_kl: Stop a rollout's update epochs early once the approximate KL divergence
             passes 1.5 x this (SB3); 0 = off.
@@ -93,6 +98,8 @@ class PPOConfig:
     batch_size: int = 1024
     n_epochs: int = 5
     learning_rate: float = 2e-4
+    learning_rate_decay_steps: int = 0
+    learning_rate_final: float = 0.0
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip_range: float = 0.2
@@ -190,6 +197,8 @@ class PolicyRunConfig:
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
+            (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
+             "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip
         for ok, msg in checks:
             if not ok:

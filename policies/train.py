@@ -149,6 +149,17 @@ def load_vecnorm_state(vn: VecNormalize, state: dict[str, np.ndarray]) -> None:
 
 
 # ------------------------------------------------------------------------ callback
+class ConstantLearningRate:
+    """An SB3 learning-rate schedule that returns one value (picklable, unlike a lambda in
+    some pickle protocols); the callback replaces it after every rollout."""
+
+    def __init__(self, value: float) -> None:
+        self.value = float(value)
+
+    def __call__(self, _progress_remaining: float) -> float:
+        return self.value
+
+
 class TrainingCallback(BaseCallback):
     """Discriminator updates, logging, progress bar and checkpoints of a training run."""
 
@@ -172,7 +183,12 @@ class TrainingCallback(BaseCallback):
         self.start_steps = self.num_timesteps
         self._set_termination()
         self._set_clip_weights()
+        self._set_learning_rate()
         self.trainer.set_actor_frozen(self.trainer.in_critic_warmup())
+
+    def _set_learning_rate(self) -> None:
+        """The learning rate of the next update (``ppo.learning_rate_decay_steps``)."""
+        self.model.lr_schedule = ConstantLearningRate(self.trainer.learning_rate_now())
 
     def _set_termination(self) -> None:
         """The termination curriculum: the stage's distance after the steps done so far."""
@@ -230,9 +246,11 @@ class TrainingCallback(BaseCallback):
             log("mining/max_weight", float(w.max()))
             log("mining/min_weight", float(w.min()))
             self._set_clip_weights()
+        self._set_learning_rate()
         row = {"timesteps": int(tr.total_done()),
                "frames": int(tr.total_done()) * tr.cfg.env.action_repeat, "stage": self.stage_name,
                "wall_s": tr.wall_s(), "termination_m": self.termination_m,
+               "learning_rate": self.model.lr_schedule(1.0),
                **{f"reward/{k}": self.sums[k] / max(self.n, 1) for k in INFO_TERMS},
                **{f"amp/{k}": v for k, v in stats.items()}, "episodes": len(self.episodes)}
         if self.episodes:
@@ -387,6 +405,17 @@ class PolicyTrainer:
         value network (``ppo.critic_warmup_steps``); Adam skips parameters without gradients."""
         for prm in self._actor_params():
             prm.requires_grad_(not frozen)
+
+    def learning_rate_now(self) -> float:
+        """``ppo.learning_rate``, annealed linearly to ``ppo.learning_rate_final`` over the
+        last ``ppo.learning_rate_decay_steps`` decisions of the final stage."""
+        p = self.cfg.ppo
+        stages = self.cfg.stages()
+        if p.learning_rate_decay_steps <= 0 or self.stage_index != len(stages) - 1:
+            return p.learning_rate
+        start = stages[-1][1].timesteps - p.learning_rate_decay_steps
+        frac = float(np.clip((self.stage_done - start) / p.learning_rate_decay_steps, 0.0, 1.0))
+        return p.learning_rate + frac * (p.learning_rate_final - p.learning_rate)
 
     def in_critic_warmup(self) -> bool:
         return self.total_done() < self.cfg.ppo.critic_warmup_steps

@@ -112,6 +112,31 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     assert tr3.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
 
 
+def test_learning_rate_decays_over_the_end_of_the_last_stage(run, tmp_path):
+    """Resumed with stage 2 extended to 192 decisions and a decay over its last 128: the
+    updates after the rollouts ending at 128 and 192 use half and none of the rate."""
+    path, tr = run
+    import shutil
+
+    copy = tmp_path / "decay"
+    shutil.copytree(path, copy)
+    cfg = _tiny()
+    ppo = dataclasses.replace(cfg.ppo, learning_rate_decay_steps=128, learning_rate_final=0.0)
+    longer = dataclasses.replace(cfg, ppo=ppo,
+                                 stage2=dataclasses.replace(cfg.stage2, timesteps=192))  # fmt: skip
+    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE)
+    tr2.train()
+    new = tr2.history[len(tr.history) :]
+    assert [h["timesteps"] for h in new] == [128 + 128, 128 + 192]
+    lr0 = cfg.ppo.learning_rate
+    assert [h["learning_rate"] for h in new] == pytest.approx([lr0 / 2, 0.0])
+    assert tr2.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(0.0)
+    # stage 1 and runs without the setting keep the constant rate
+    assert all(h["learning_rate"] == pytest.approx(lr0) for h in tr.history)
+    with pytest.raises(ValueError, match="learning_rate_decay_steps"):
+        dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, learning_rate_decay_steps=-1))
+
+
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     path, _ = run
     from stable_baselines3 import PPO
