@@ -117,6 +117,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--fp32", action="store_true", help="keep float32 weights")
     x.set_defaults(func=cmd_export)
 
+    a = sub.add_parser(
+        "policy-average",
+        help="average the weights of exported policies of one run",
+        description="Weight average of exported policies (a run's late exports, or exports of "
+        "its continuations): PPO's exports swing from one checkpoint to the next, their "
+        "average sits between the swings. Networks must match; each file's first layers are "
+        "rewritten for the last file's observation normaliser, whose normaliser, "
+        "discriminator and settings the result keeps (policies/average.py).",
+        epilog="example: grip policy-average runs/a.pt runs/b.pt --out runs/avg.pt",
+    )
+    a.add_argument("policies", nargs="+", type=Path, help="exported policy files (two or more)")
+    a.add_argument("--out", required=True, type=Path, help="output .pt")
+    a.set_defaults(func=cmd_average)
+
 
 RESUMABLE: tuple[str, ...] = (
     "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
@@ -272,6 +286,18 @@ def cmd_export(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError, OSError) as e:
         raise CliError(str(e)) from e
     print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
+    return 0
+
+
+def cmd_average(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from policies.average import average_policies
+
+    try:
+        size = average_policies(args.policies, args.out)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        raise CliError(str(e)) from e
+    print(f"wrote {args.out} ({size / 1e6:.1f} MB), the average of {len(args.policies)} policies")
     return 0
 
 

@@ -137,6 +137,57 @@ def test_learning_rate_decays_over_the_end_of_the_last_stage(run, tmp_path):
         dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, learning_rate_decay_steps=-1))
 
 
+def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
+    import torch
+
+    from policies.average import average_policies
+
+    path, _ = run
+    a = tmp_path / "a.pt"
+    export_policy(path, a, half=False)
+    ck = torch.load(a, weights_only=True)
+    gen = torch.Generator().manual_seed(0)
+    other = dict(ck)
+    other["actor"] = {k: v + 0.05 * torch.randn(v.shape, generator=gen, dtype=v.dtype)
+                      for k, v in ck["actor"].items()}  # fmt: skip
+    # (shifts by a fraction of the spread, so that neither file clips the test input)
+    other["obs_mean"] = {k: v + 0.3 * (ck["obs_var"][k] + 1e-8).sqrt()
+                         for k, v in ck["obs_mean"].items()}  # fmt: skip
+    other["obs_var"] = {k: v * 1.3 for k, v in ck["obs_var"].items()}
+    b = tmp_path / "b.pt"
+    torch.save(other, b)
+    avg = tmp_path / "avg.pt"
+    average_policies([a, b], avg)
+    ra, rb, rv = (PolicyRunner.load(f) for f in (a, b, avg))
+    np.testing.assert_allclose(rv._mean, rb._mean)  # the last file's normaliser
+    # the first layer's pre-activation is the mean of the two files' on the same raw input
+    x = rb._mean + 0.5 * rb._std * np.random.default_rng(1).standard_normal(rb._mean.shape)
+
+    def pre(r):
+        z = torch.from_numpy(np.clip((x - r._mean) / r._std, -r.clip_obs, r.clip_obs)).float()
+        return r.actor[0](z).detach().numpy()
+
+    np.testing.assert_allclose(pre(rv), (pre(ra) + pre(rb)) / 2, atol=1e-4)
+    assert np.abs(pre(ra) - pre(rb)).max() > 0.05  # (the two files do differ)
+    # deeper layers: the plain mean
+    np.testing.assert_allclose(rv.actor[2].weight.detach(),
+                               (ra.actor[2].weight + rb.actor[2].weight).detach() / 2, atol=1e-6)
+    # a file averaged with itself acts as it does
+    self_avg = tmp_path / "self.pt"
+    average_policies([a, a], self_avg)
+    obs = {k: np.asarray(v, np.float64) for k, v in ra.obs_mean.items()}
+    np.testing.assert_allclose(PolicyRunner.load(self_avg).act(obs), ra.act(obs), atol=1e-5)
+    # other networks, and single files, are refused with the file's name
+    bad = dict(ck)
+    bad["actor_sizes"] = [*ck["actor_sizes"][:-1], 7]
+    torch.save(bad, tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match=r"bad\.pt: actor_sizes"):
+        average_policies([tmp_path / "bad.pt", a], tmp_path / "x.pt")
+    with pytest.raises(ValueError, match="at least two"):
+        average_policies([a], tmp_path / "x.pt")
+    assert not (tmp_path / "x.pt").exists()
+
+
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     path, _ = run
     from stable_baselines3 import PPO
