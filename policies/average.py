@@ -52,13 +52,13 @@ def _average_mlp(cks: list[dict], part: str, mean: np.ndarray, std: np.ndarray) 
     """The averaged state dict of MLP ``part`` (``actor`` or ``critic``), first layers rewritten
     for the normaliser ``mean, std``."""
     first = sorted(k for k in cks[0][part] if k.endswith(".weight"))[0].split(".")[0]
+    norms = [_norm(ck) for ck in cks]
     out: dict[str, torch.Tensor] = {}
     for key in cks[0][part]:
         acc = None
-        for ck in cks:
+        for ck, (m_i, s_i) in zip(cks, norms, strict=True):
             v = ck[part][key].double().numpy()
             if key.startswith(first + "."):
-                m_i, s_i = _norm(ck)
                 w = ck[part][f"{first}.weight"].double().numpy()
                 v = (
                     w * (std / s_i)[None]

@@ -109,21 +109,22 @@ class Symmetries:
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """Raw features ``(B, T, F)`` -> the copies' ``(n B, T, F)`` (copy-major)."""
+        if self.n == 1:
+            return x
         out = []
         for mirror, yaw in self.copies:
             xc = mirror_features(x, self.sites, self.insoles) if mirror else x
             out.append(rotate_features(xc, self._turn(yaw, len(x)), len(self.sites)) if yaw else xc)
-        return torch.cat(out) if len(out) > 1 else out[0]
+        return torch.cat(out)
 
     def first(self, first: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         """First-frame states ``{stage: (B, dim)}`` -> the copies' ``(n B, dim)``."""
         y = {k: v[:, None] for k, v in first.items()}
+        b = len(next(iter(first.values())))
         out = []
         for mirror, yaw in self.copies:
             yc = mirror_targets(y) if mirror else y
-            out.append(
-                rotate_targets(yc, self._turn(yaw, len(next(iter(y.values()))))) if yaw else yc
-            )
+            out.append(rotate_targets(yc, self._turn(yaw, b)) if yaw else yc)
         return {k: torch.cat([o[k] for o in out])[:, 0] for k in y}
 
     def reduce(self, out: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -156,6 +157,8 @@ class KinematicsEstimator:
         self.norm = norm
         self.cfg = cfg
         self.tta = Symmetries(tta, tuple(cfg.features.sites), cfg.features.insoles)
+        self._mean = torch.from_numpy(norm.mean)
+        self._std = torch.from_numpy(norm.std)
 
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike, tta: str = "none") -> KinematicsEstimator:
@@ -166,8 +169,9 @@ class KinematicsEstimator:
         norm = Normalizer(ck["norm_mean"].float().numpy(), ck["norm_std"].float().numpy())
         return cls(model, norm, cfg, tta)
 
-    def _normalise(self, x: torch.Tensor) -> torch.Tensor:
-        return (x - torch.from_numpy(self.norm.mean)) / torch.from_numpy(self.norm.std)
+    def normalise(self, x: torch.Tensor) -> torch.Tensor:
+        """Raw features -> the network's normalised inputs."""
+        return (x - self._mean) / self._std
 
     # ------------------------------------------------------------------ offline
     def _first(self, recs) -> dict[str, torch.Tensor]:
@@ -207,7 +211,7 @@ class KinematicsEstimator:
         """The network on raw features ``(B, T, F)`` from first-frame states ``{stage: (B,
         dim)}`` -> outputs ``{stage: (B, T, dim)}``, averaged over the test-time copies."""
         with torch.no_grad():
-            xs = self._normalise(self.tta.features(x))
+            xs = self.normalise(self.tta.features(x))
             out, _ = self.model(xs, self.model.initial_state(self.tta.first(first)))
             return self.tta.reduce(out)
 
@@ -241,22 +245,15 @@ class StreamingEstimator:
         self.est = est
         with torch.no_grad():
             self.state = est.model.initial_state(est.tta.first(first))
-        self.mean = torch.from_numpy(est.norm.mean)
-        self.std = torch.from_numpy(est.norm.std)
 
     def step(self, feature_row: np.ndarray) -> dict[str, np.ndarray]:
         """``(F,)`` raw features of one frame -> ``{stage: (dim,)}``."""
         x = torch.from_numpy(np.asarray(feature_row, dtype=np.float32)).view(1, 1, -1)
-        tta = self.est.tta
-        if tta.n > 1:
-            x = tta.features(x)
-        x = (x - self.mean) / self.std
+        x = self.est.normalise(self.est.tta.features(x))
         prev = torch.backends.mkldnn.set_flags(False)  # (the flags() context warns per call)
         try:
             with torch.no_grad():
                 out, self.state = self.est.model(x, self.state)
         finally:
             torch.backends.mkldnn.set_flags(prev[0])
-        if tta.n > 1:
-            out = tta.reduce(out)
-        return {k: v[0, 0].numpy() for k, v in out.items()}
+        return {k: v[0, 0].numpy() for k, v in self.est.tta.reduce(out).items()}
