@@ -26,7 +26,7 @@ import torch
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.cli.policy import SHIPPED_POLICY
-from policies.runner import PolicyRunner
+from policies.ensemble import load_policy
 from policies.train import load_reference, select_clips
 
 TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy")
@@ -45,7 +45,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     torch.set_grad_enabled(False)
-    runner = PolicyRunner.load(args.policy)
+    runner = load_policy(args.policy)
     cats = tuple(args.category or ("walk*", "run*", "dash*"))
     ref = select_clips(load_reference(args.reference), cats)
     cfg = dataclasses.replace(runner.env_cfg, termination_dist_m=0.0,

@@ -27,6 +27,8 @@ from policies.config import PolicyRunConfig
 
 FORMAT = "grip-policy"
 VERSION = 1
+ENSEMBLE_FORMAT = "grip-policy-ensemble"
+"""Several policies in one file (:mod:`policies.ensemble`)."""
 ACTIVATION_FNS: dict[str, type[nn.Module]] = {
     "silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU,
 }  # fmt: skip
@@ -154,7 +156,14 @@ class PolicyRunner:
     def load(cls, path: str | os.PathLike) -> PolicyRunner:
         """Read an exported policy; errors name the file and the problem."""
         path = Path(path)
-        ck = load_weights(path, "policy file")
+        return cls.from_payload(load_weights(path, "policy file"), path)
+
+    @classmethod
+    def from_payload(cls, ck: object, path: str | os.PathLike) -> PolicyRunner:
+        """The policy of a loaded export (``path`` names it in errors)."""
+        if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
+            raise ValueError(f"{path}: an ensemble of {len(ck.get('members') or ())} policies, "
+                             "not one policy (fine-tune or average one of its members)")
         if not isinstance(ck, dict) or ck.get("format") != FORMAT:
             raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
         missing = [k for k in ("config", "actor", "obs_keys", "obs_mean", "obs_var") if k not in ck]

@@ -73,10 +73,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "         grip eval-policy --policy runs/policy/policy.pt --data data/prism_synth "
         "--category 'walk*' --category 'run*'",
     )
-    e.add_argument("--policy", type=Path, default=None,
-                   help="exported policy (default: the shipped one)")  # fmt: skip
+    e.add_argument("--policy", type=Path, action="append", default=None,
+                   help="exported policy (default: the shipped one); repeat it to play the "
+                   "mean action of several (an ensemble)")  # fmt: skip
     e.add_argument("--kin", type=Path, default=None,
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
+    e.add_argument("--mirror", action="store_true",
+                   help="average each action with the mirror image of the action on the "
+                   "mirrored observation (policies/symmetry.py)")  # fmt: skip
     e.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     e.add_argument("--split", default="test", choices=("train", "test", "all", "holdout"),
                    help="dataset split; 'holdout': the training clips held out of the "
@@ -130,6 +134,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     a.add_argument("policies", nargs="+", type=Path, help="exported policy files (two or more)")
     a.add_argument("--out", required=True, type=Path, help="output .pt")
     a.set_defaults(func=cmd_average)
+
+    n = sub.add_parser(
+        "policy-ensemble",
+        help="join exported policies into one ensemble file (the mean of their actions)",
+        description="Write several exported policies into one file that acts as one policy: "
+        "the mean of the members' actions, each computed with the member's own observation "
+        "normaliser, so members may come from separate runs. They must drive the humanoid "
+        "alike (observations, action mode and scale, decision period, body); the first "
+        "member's discriminator is the fall detector. Value networks are left out: fine-tune "
+        "a member, not the ensemble. Every command that takes --policy reads the file "
+        "(policies/ensemble.py).",
+        epilog="example: grip policy-ensemble runs/a/policy.pt runs/b/policy.pt --out runs/ab.pt",
+    )
+    n.add_argument("policies", nargs="+", type=Path,
+                   help="exported policy (or ensemble) files, two policies or more")  # fmt: skip
+    n.add_argument("--out", required=True, type=Path, help="output .pt")
+    n.set_defaults(func=cmd_ensemble)
 
 
 RESUMABLE: tuple[str, ...] = (
@@ -301,6 +322,18 @@ def cmd_average(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_ensemble(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from policies.ensemble import write_ensemble
+
+    try:
+        size, n = write_ensemble(args.policies, args.out)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        raise CliError(str(e)) from e
+    print(f"wrote {args.out} ({size / 1e6:.1f} MB), an ensemble of {n} policies")
+    return 0
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -309,14 +342,21 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
-    from policies.runner import PolicyRunner
+    from policies.ensemble import PolicyEnsemble
 
-    pol = args.policy or REPO_ROOT / SHIPPED_POLICY
-    if not Path(pol).is_file():
-        raise CliError(f"{pol}: no such policy file (train one with 'grip train-policy')")
+    pols = args.policy or [REPO_ROOT / SHIPPED_POLICY]
+    for p in pols:
+        if not Path(p).is_file():
+            raise CliError(f"{p}: no such policy file (train one with 'grip train-policy')")
+    pol = " + ".join(str(p) for p in pols)
     try:
-        runner = PolicyRunner.load(pol)
+        runner = PolicyEnsemble.load(pols)
         est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin), tta=args.tta)
+        if args.mirror:
+            from policies.symmetry import MirrorAveragedPolicy
+
+            runner = MirrorAveragedPolicy(runner, est.cfg.features.sites,
+                                          est.cfg.features.insoles)  # fmt: skip
     except ValueError as e:
         raise CliError(str(e)) from e
     try:

@@ -91,7 +91,8 @@ class ClipPlayer:
 
     Args:
         env: An inference env (:func:`inference_env`).
-        runner: A :class:`policies.runner.PolicyRunner`.
+        runner: A :class:`policies.runner.PolicyRunner` or an ensemble of them
+            (:class:`policies.ensemble.PolicyEnsemble`).
         recovery: Fall detection and recovery settings.
         stop_at_fall: End at the first fall that is not recovered.
 
@@ -205,7 +206,8 @@ def simulate_clip(
 
     Args:
         env: An inference env (no random start, no termination) holding the clip.
-        runner: A :class:`policies.runner.PolicyRunner`.
+        runner: A :class:`policies.runner.PolicyRunner` or an ensemble of them
+            (:class:`policies.ensemble.PolicyEnsemble`).
         clip_index: Clip of ``env.reference`` to play.
         recovery: Fall detection and recovery settings.
         stop_at_fall: End at the first fall that is not recovered (``grip eval-policy``: a fall
@@ -262,7 +264,8 @@ class GripReconstructor:
     """KinematicsNet + policy + fall recovery over PRISM-format recordings.
 
     Args:
-        runner: A :class:`policies.runner.PolicyRunner` (its env settings and sensor features
+        runner: A :class:`policies.runner.PolicyRunner` or :class:`policies.ensemble.
+            PolicyEnsemble` (its env settings and sensor features
             must match the estimator's).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         recovery: Fall detection and recovery settings.
@@ -275,11 +278,12 @@ class GripReconstructor:
 
     @classmethod
     def from_files(cls, policy, kin, recovery: RecoveryConfig = RecoveryConfig()):
-        """Load a policy export (``grip policy-export``) and a KinematicsNet checkpoint."""
+        """Load a policy export (``grip policy-export``, or an ensemble of them, ``grip
+        policy-ensemble``) and a KinematicsNet checkpoint."""
         from grip.kinematics.inference import KinematicsEstimator
-        from policies.runner import PolicyRunner
+        from policies.ensemble import load_policy
 
-        return cls(PolicyRunner.load(policy), KinematicsEstimator.from_checkpoint(kin), recovery)
+        return cls(load_policy(policy), KinematicsEstimator.from_checkpoint(kin), recovery)
 
     def stream(self, calibration):
         """A :class:`grip.eval.stream.GripStream` (one frame in, one frame out) with these

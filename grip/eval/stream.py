@@ -86,7 +86,8 @@ class GripStream:
     """GRIP on a live sensor stream (see the module docstring).
 
     Args:
-        runner: A :class:`policies.runner.PolicyRunner`.
+        runner: A :class:`policies.runner.PolicyRunner` or an ensemble of them
+            (:class:`policies.ensemble.PolicyEnsemble`).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         calibration: The recording's first frames with ground truth (``smpl_params``,
             ``imu_gt``; a PRISM recording or a slice of one): the calibration pose the humanoid

@@ -266,6 +266,18 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
         assert key in res
     assert res["segments"] == 2
     assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    # an ensemble: from repeated --policy, or from one grip policy-ensemble file
+    ens = tmp_path / "ens.pt"
+    assert main(["policy-ensemble", str(exported), str(run / "policy.pt"), "--out", str(ens)]) == 0
+    js2 = tmp_path / "eval2.json"
+    assert main(["eval-policy", "--policy", str(exported), "--policy", str(run / "policy.pt"),
+                 "--data", str(built), "--split", "all", "--segment-frames", "100",
+                 "--segments", "2", "--json", str(js2)]) == 0  # fmt: skip
+    assert main(["eval-policy", "--policy", str(ens), "--data", str(built), "--split", "all",
+                 "--segment-frames", "100", "--segments", "2", "--json", str(js)]) == 0
+    assert json.loads(js.read_text()) == json.loads(js2.read_text())
+    assert main(["policy-ensemble", str(exported), "--out", str(tmp_path / "one.pt")]) == 2
+    assert "at least two" in capsys.readouterr().err
     # two KinematicsNets: the references hold every training recording once per estimator
     kin = str(REPO_ROOT / "grip/assets/kinematics_default.pt")
     two = tmp_path / "policy_two_kin"
@@ -281,7 +293,7 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     # reconstruct: npz + exports per recording, summary, resume, errors named
     recs = sorted((built / "sequences").glob("*.npz"))[:2]
     out = tmp_path / "recon"
-    argv = ["reconstruct", *map(str, recs), "--out", str(out), "--policy", str(exported),
+    argv = ["reconstruct", *map(str, recs), "--out", str(out), "--policy", str(ens),
             "--max-frames", "60", "--formats", "npz,bvh,png"]  # fmt: skip
     assert main(argv) == 0
     summary = json.loads((out / "summary.json").read_text())

@@ -188,6 +188,71 @@ def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
     assert not (tmp_path / "x.pt").exists()
 
 
+def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_path):
+    import dataclasses as dc
+
+    import torch
+
+    from policies.ensemble import PolicyEnsemble, load_policy, write_ensemble
+
+    path, _ = run
+    a = tmp_path / "a.pt"
+    export_policy(path, a, half=False)
+    ck = torch.load(a, weights_only=True)
+    gen = torch.Generator().manual_seed(0)
+    other = dict(ck)  # another network with its own normaliser: a policy trained apart
+    other["actor"] = {k: v + 0.2 * torch.randn(v.shape, generator=gen, dtype=v.dtype)
+                      for k, v in ck["actor"].items()}  # fmt: skip
+    other["obs_mean"] = {k: v + 0.3 * (ck["obs_var"][k] + 1e-8).sqrt()
+                         for k, v in ck["obs_mean"].items()}  # fmt: skip
+    other["info"] = json.dumps({"holdout": ["x", "y"]})
+    b = tmp_path / "b.pt"
+    torch.save(other, b)
+    ra, rb = PolicyRunner.load(a), PolicyRunner.load(b)
+    obs, info = GripTrackingEnv(ra.env_cfg).reset(seed=3)
+    assert np.abs(ra.act(obs) - rb.act(obs)).max() > 0.01  # (the two do differ)
+    ens = PolicyEnsemble.load([a, b])
+    np.testing.assert_allclose(ens.act(obs), (ra.act(obs) + rb.act(obs)) / 2, atol=1e-6)
+    batch = {k: np.stack([v, v]) for k, v in obs.items()}
+    assert ens.act(batch).shape == (2, ra.act(obs).size)
+    assert ens.fall_probability(info["amp_obs"]) == pytest.approx(ra.fall_probability(
+        info["amp_obs"]))  # the first member's discriminator  # fmt: skip
+    assert ens.info["holdout"] == []  # a clip only b held out trained a
+    # one file: actors and normalisers of both, one discriminator, no value networks
+    f = tmp_path / "ens.pt"
+    size, n = write_ensemble([a, b], f)
+    assert n == 2 and size == f.stat().st_size
+    loaded = load_policy(f)
+    assert isinstance(loaded, PolicyEnsemble) and len(loaded.members) == 2
+    np.testing.assert_allclose(loaded.act(obs), ens.act(obs), atol=1e-6)
+    assert loaded.members[0].disc is not None and loaded.members[1].disc is None
+    assert all(m.critic is None for m in loaded.members)
+    assert isinstance(load_policy(a), PolicyRunner)
+    # an ensemble file joins another file as its members
+    assert write_ensemble([f, a], tmp_path / "three.pt")[1] == 3
+    assert len(PolicyEnsemble.load([f, a]).members) == 3
+    # refusals name the file: one policy alone, a member that drives the body otherwise, a
+    # corrupt ensemble, and an ensemble where one policy is needed (fine-tuning)
+    with pytest.raises(ValueError, match="at least two"):
+        write_ensemble([a], tmp_path / "x.pt")
+    cfg = json.loads(ck["config"])
+    cfg["env"]["action_scale"] = 0.25
+    odd = dict(ck, config=json.dumps(cfg))
+    torch.save(odd, tmp_path / "odd.pt")
+    with pytest.raises(ValueError, match=r"odd\.pt: environment settings differ .*action_scale"):
+        write_ensemble([a, tmp_path / "odd.pt"], tmp_path / "x.pt")
+    assert not (tmp_path / "x.pt").exists()
+    rb.env_cfg = dc.replace(ra.env_cfg, reward=dc.replace(ra.env_cfg.reward, k_pos=1.0))
+    PolicyEnsemble([ra, rb])  # reward settings may differ: inference computes no reward
+    broken = torch.load(f, weights_only=True)
+    broken["members"][1] = {"format": "grip-policy"}
+    torch.save(broken, tmp_path / "broken.pt")
+    with pytest.raises(ValueError, match=r"broken\.pt \(member 1.*lacks"):
+        load_policy(tmp_path / "broken.pt")
+    with pytest.raises(ValueError, match=r"ens\.pt: an ensemble of 2 policies"):
+        PolicyRunner.load(f)
+
+
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     path, _ = run
     from stable_baselines3 import PPO

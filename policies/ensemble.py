@@ -1,0 +1,186 @@
+"""Several exported policies acting as one: the mean of their actions.
+
+Unlike the weight average of :mod:`policies.average`, which only makes sense between exports of
+one run, an ensemble may join policies trained apart: each member normalises the observation
+with its own statistics and computes its own mean action, and the ensemble plays the mean of
+those (each clipped to [-1, 1] as one policy's action is, then the mean). The members must
+drive the humanoid the same way: the same observation parts and the same environment settings
+(observation variant, action mode and scale, decision period, body and simulation); reward
+settings, which inference never uses, may differ. GRIP's fall detector uses the first
+member's discriminator.
+
+``grip policy-ensemble A.pt B.pt ... --out F.pt`` writes the members into one file
+(:func:`write_ensemble`, format :data:`policies.runner.ENSEMBLE_FORMAT`): their actors and
+observation normalisers, the first member's discriminator, no value networks (an ensemble is
+for inference; fine-tune a member). :func:`load_policy` reads a policy or an ensemble file;
+``grip eval-policy --policy A --policy B`` builds one from separate files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from envs.config import TrackingEnvConfig
+from grip.core.atomic import atomic_write
+from policies.runner import ENSEMBLE_FORMAT, VERSION, PolicyRunner, load_weights
+
+_DROPPED = ("critic", "critic_sizes")  # the value networks: training only
+_DISC = ("disc", "amp_frame_dim")
+
+
+def _driving_settings(cfg: TrackingEnvConfig) -> TrackingEnvConfig:
+    """The settings that decide how a policy's actions move the humanoid (reward and reference
+    file blanked: inference builds its own reference and never computes a reward)."""
+    return dataclasses.replace(cfg, reward=TrackingEnvConfig().reward, reference="")
+
+
+class PolicyEnsemble:
+    """The mean action of several :class:`policies.runner.PolicyRunner` (the same interface).
+
+    Args:
+        members: The policies; the first one's settings, discriminator and notes are the
+            ensemble's.
+        names: What errors call each member (file names).
+
+    Attributes:
+        members: The policies, in the order given.
+        env_cfg: The first member's environment settings.
+        disc: The first member's discriminator (GRIP's fall detector), or None.
+        info: The first member's notes, with ``holdout`` the clips held out of *every* member's
+            training (a clip another member trained on validates nothing), and ``members``.
+
+    Raises:
+        ValueError: No member, or a member whose observations or environment settings differ
+            from the first's (named, with the settings that differ).
+    """
+
+    def __init__(self, members: Sequence[PolicyRunner], names: Sequence[str] | None = None) -> None:
+        if not members:
+            raise ValueError("an ensemble needs at least one policy")
+        names = list(names) if names is not None else [f"policy {i}" for i in range(len(members))]
+        first = members[0]
+        base = _driving_settings(first.env_cfg)
+        for m, name in zip(members[1:], names[1:], strict=True):
+            if m.obs_keys != first.obs_keys:
+                raise ValueError(f"{name}: observation parts {m.obs_keys} differ from "
+                                 f"{names[0]}'s {first.obs_keys}")  # fmt: skip
+            mine = _driving_settings(m.env_cfg)
+            if mine != base:
+                diff = [f.name for f in dataclasses.fields(base)
+                        if getattr(base, f.name) != getattr(mine, f.name)]  # fmt: skip
+                raise ValueError(f"{name}: environment settings differ from {names[0]}'s "
+                                 f"({', '.join(diff)}): its actions mean something else")
+        self.members = list(members)
+        self.obs_keys = list(first.obs_keys)
+        self.env_cfg = first.env_cfg
+        self.amp_window = first.amp_window
+        self.disc = first.disc
+        held = [set(m.info.get("holdout") or ()) for m in self.members]
+        self.info = dict(first.info, holdout=sorted(set.intersection(*held)),
+                         members=list(names))  # fmt: skip
+        self._first = first
+
+    @classmethod
+    def load(cls, paths: Sequence[str | os.PathLike]) -> PolicyRunner | PolicyEnsemble:
+        """One file: :func:`load_policy`; several: the ensemble of all their policies (an
+        ensemble file among them adds its members). Errors name the file."""
+        if len(paths) == 1:
+            return load_policy(paths[0])
+        members: list[PolicyRunner] = []
+        names: list[str] = []
+        for p in paths:
+            pol = load_policy(p)
+            if isinstance(pol, PolicyEnsemble):
+                members += pol.members
+                names += [f"{p} [{i}]" for i in range(len(pol.members))]
+            else:
+                members.append(pol)
+                names.append(str(p))
+        return cls(members, names)
+
+    def use_action_noise(self, scale: float, seed: int = 0) -> None:
+        """Every member samples its action with its own noise (:meth:`PolicyRunner.
+        use_action_noise`); the ensemble plays their mean."""
+        for i, m in enumerate(self.members):
+            m.use_action_noise(scale, seed + i)
+
+    def act(self, obs: dict) -> np.ndarray:
+        """The members' mean action (each clipped to [-1, 1])."""
+        return np.mean([m.act(obs) for m in self.members], axis=0)
+
+    def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
+        """The first member's discriminator probability that AMP windows are real motion."""
+        return self._first.fall_probability(amp_obs)
+
+
+def _payloads(path: Path) -> list[dict]:
+    """The single-policy payloads of a policy or ensemble file (checked by loading them)."""
+    ck = load_weights(path, "policy file")
+    if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
+        load_policy(path)  # refuses a corrupt ensemble, naming the file
+        return list(ck["members"])
+    PolicyRunner.from_payload(ck, path)
+    return [ck]
+
+
+def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike) -> tuple[int, int]:
+    """Write the policies of ``paths`` (policy or ensemble files) into one ensemble file; returns
+    its size in bytes and its number of policies. Members keep their actors, normalisers and
+    notes as exported (float16 weights stay float16); value networks are left out, and every
+    discriminator but the first member's.
+
+    Raises:
+        ValueError: Fewer than two policies in all, a file that is not a policy, or members that
+            do not drive the humanoid alike (:class:`PolicyEnsemble`).
+    """
+    paths = [Path(p) for p in paths]
+    members: list[dict] = []
+    names: list[str] = []
+    for p in paths:
+        got = _payloads(p)
+        members += got
+        names += [str(p)] if len(got) == 1 else [f"{p} [{i}]" for i in range(len(got))]
+    if len(members) < 2:
+        raise ValueError("an ensemble needs at least two policies")
+    PolicyEnsemble([PolicyRunner.from_payload(m, n) for m, n in zip(members, names, strict=True)],
+                   names)  # refuses members that act differently  # fmt: skip
+    kept = [{k: v for k, v in m.items() if k not in _DROPPED and (i == 0 or k not in _DISC)}
+            for i, m in enumerate(members)]  # fmt: skip
+    payload = {"format": ENSEMBLE_FORMAT, "version": VERSION, "members": kept,
+               "names": json.dumps(names)}  # fmt: skip
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    atomic_write(out, lambda f: f.write(buf.getvalue()))
+    return len(buf.getvalue()), len(kept)
+
+
+def load_policy(path: str | os.PathLike) -> PolicyRunner | PolicyEnsemble:
+    """Read a policy file (:class:`PolicyRunner`) or an ensemble file (:class:`PolicyEnsemble`);
+    errors name the file and the problem."""
+    path = Path(path)
+    ck = load_weights(path, "policy file")
+    if not (isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT):
+        return PolicyRunner.from_payload(ck, path)
+    members = ck.get("members")
+    if not isinstance(members, list) or len(members) < 2:
+        raise ValueError(f"{path}: ensemble file without its list of member policies")
+    try:
+        names = [str(n) for n in json.loads(ck.get("names", "[]"))]
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{path}: ensemble file with unreadable member names ({e})") from e
+    if len(names) != len(members):
+        names = [f"member {i}" for i in range(len(members))]
+    runners = [PolicyRunner.from_payload(m, f"{path} (member {i}: {names[i]})")
+               for i, m in enumerate(members)]  # fmt: skip
+    try:
+        return PolicyEnsemble(runners, [f"{path} (member {i}: {n})" for i, n in enumerate(names)])
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from e
