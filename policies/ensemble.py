@@ -87,6 +87,28 @@ class PolicyEnsemble:
         self.info = dict(first.info, holdout=sorted(set.intersection(*held)),
                          members=list(names))  # fmt: skip
         self._first = first
+        self._stack = self._stacked_weights()
+
+    def _stacked_weights(self):
+        """Every member's normaliser and layers stacked (``(M, ...)``) when all members have
+        the same layer sizes, activation and clipping; None otherwise (they then act in turn)."""
+        from policies.runner import linear_layers
+
+        nets = [linear_layers(m.actor) for m in self.members]
+        shapes = {tuple(tuple(lin.weight.shape) for lin in net) for net in nets}
+        acts = {tuple(type(mod) for mod in m.actor if not isinstance(mod, torch.nn.Linear))
+                for m in self.members}  # fmt: skip
+        clips = {m.clip_obs for m in self.members}
+        if len(shapes) != 1 or len(acts) != 1 or len(clips) != 1:
+            return None
+        act_types = next(iter(acts))
+        act_fn = act_types[0]() if act_types else (lambda h: h)
+        layers = [(torch.stack([net[i].weight.detach().T for net in nets]).contiguous(),
+                   torch.stack([net[i].bias.detach() for net in nets])[:, None, :])
+                  for i in range(len(nets[0]))]  # fmt: skip
+        means = np.stack([m._mean for m in self.members])
+        stds = np.stack([m._std for m in self.members])
+        return means, stds, clips.pop(), layers, act_fn
 
     @classmethod
     def load(cls, paths: Sequence[str | os.PathLike]) -> PolicyRunner | PolicyEnsemble:
@@ -114,7 +136,27 @@ class PolicyEnsemble:
 
     def act(self, obs: dict) -> np.ndarray:
         """The members' mean action (each clipped to [-1, 1])."""
-        return np.mean([m.act(obs) for m in self.members], axis=0)
+        if self._stack is None or any(m._action_std is not None for m in self.members):
+            return np.mean([m.act(obs) for m in self.members], axis=0)
+        return self._stacked_act(obs)
+
+    @torch.no_grad()
+    def _stacked_act(self, obs: dict) -> np.ndarray:
+        """:meth:`act` for members of one network shape: the observation is flattened once and
+        every layer of all members is one batched product."""
+        means, stds, clip, layers, act_fn = self._stack
+        parts = [np.asarray(obs[k], np.float64) for k in self.obs_keys]
+        x = np.concatenate([p.reshape(*p.shape[:-1], -1) for p in parts], axis=-1)
+        single = x.ndim == 1
+        x = np.atleast_2d(x)
+        z = np.clip((x[None] - means[:, None]) / stds[:, None], -clip, clip)
+        h = torch.from_numpy(z.astype(np.float32))
+        for i, (w, b) in enumerate(layers):
+            h = torch.baddbmm(b, h, w)
+            if i < len(layers) - 1:
+                h = act_fn(h)
+        a = np.clip(h.numpy(), -1.0, 1.0).mean(0)
+        return a[0] if single else a
 
     def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
         """The first member's discriminator probability that AMP windows are real motion."""
