@@ -276,6 +276,9 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert main(["eval-policy", "--policy", str(ens), "--data", str(built), "--split", "all",
                  "--segment-frames", "100", "--segments", "2", "--json", str(js)]) == 0
     assert json.loads(js.read_text()) == json.loads(js2.read_text())
+    assert main(["eval-policy", "--policy", str(ens), "--mirror", "--data", str(built), "--split",
+                 "all", "--segment-frames", "100", "--segments", "2", "--json", str(js2)]) == 0
+    assert json.loads(js2.read_text())["segments"] == 2
     assert main(["policy-ensemble", str(exported), "--out", str(tmp_path / "one.pt")]) == 2
     assert "at least two" in capsys.readouterr().err
     # two KinematicsNets: the references hold every training recording once per estimator
