@@ -163,7 +163,7 @@ class PolicyRunner:
         """The policy of a loaded export (``path`` names it in errors)."""
         if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
             raise ValueError(f"{path}: an ensemble of {len(ck.get('members') or ())} policies, "
-                             "not one policy (fine-tune or average one of its members)")
+                             "not one policy (policies.ensemble.load_policy reads it)")
         if not isinstance(ck, dict) or ck.get("format") != FORMAT:
             raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
         missing = [k for k in ("config", "actor", "obs_keys", "obs_mean", "obs_var") if k not in ck]

@@ -297,10 +297,15 @@ class PolicyTrainer:
         self.progress = progress
         self.init = init
         self._init_runner = None
+        self.init_members = 1  # policies in the --init file (an ensemble starts from its first)
         if init is not None:
-            from policies.runner import PolicyRunner
+            from policies.ensemble import PolicyEnsemble, load_policy
 
-            self._init_runner = PolicyRunner.load(init)  # fails early, naming the file
+            pol = load_policy(init)  # fails early, naming the file
+            if isinstance(pol, PolicyEnsemble):
+                self.init_members = len(pol.members)
+                pol = pol.members[0]  # (ensemble files keep no value network)
+            self._init_runner = pol
         self.stage_index = 0
         self.stage_done = 0
         self.stage_done0 = 0

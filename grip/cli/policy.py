@@ -52,8 +52,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--init", type=Path, default=None, metavar="POLICY",
                    help="warm start: begin from an exported policy (e.g. "
                    "grip/assets/policy_default.pt): its policy, value network (if the file has "
-                   "one), observation normaliser and discriminator; usually with --config "
-                   "configs/policy/finetune.toml (ignored when OUT resumes)")  # fmt: skip
+                   "one), observation normaliser and discriminator; an ensemble file gives its "
+                   "first member; usually with --config configs/policy/finetune.toml (ignored "
+                   "when OUT resumes)")  # fmt: skip
     p.set_defaults(func=cmd_train)
 
     e = sub.add_parser(
@@ -142,8 +143,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "the mean of the members' actions, each computed with the member's own observation "
         "normaliser, so members may come from separate runs. They must drive the humanoid "
         "alike (observations, action mode and scale, decision period, body); the first "
-        "member's discriminator is the fall detector. Value networks are left out: fine-tune "
-        "a member, not the ensemble. Every command that takes --policy reads the file "
+        "member's discriminator is the fall detector. Value networks are left out (train-policy "
+        "--init with the file starts from its first member). Every command that takes --policy "
+        "reads the file "
         "(policies/ensemble.py).",
         epilog="example: grip policy-ensemble runs/a/policy.pt runs/b/policy.pt --out runs/ab.pt",
     )
@@ -275,6 +277,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init)
     except ValueError as e:
         raise CliError(str(e)) from e
+    if trainer.init_members > 1:
+        print(f"--init {init}: an ensemble of {trainer.init_members} policies; training starts "
+              "from its first member (ensemble files keep no value network: a fresh critic "
+              "warms up first, ppo.critic_warmup_steps)")  # fmt: skip
     atomic_write_text(prev, json.dumps(payload, indent=1))
     t0 = time.perf_counter()
     try:

@@ -251,6 +251,10 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
         load_policy(tmp_path / "broken.pt")
     with pytest.raises(ValueError, match=r"ens\.pt: an ensemble of 2 policies"):
         PolicyRunner.load(f)
+    # a warm start from an ensemble file begins from its first member (no value network)
+    tr = PolicyTrainer(_tiny(), tmp_path / "ft", SAMPLE_REFERENCE, init=f)
+    assert tr.init_members == 2 and tr._init_runner.critic is None
+    np.testing.assert_allclose(tr._init_runner.act(obs), ra.act(obs), atol=1e-6)
 
 
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
