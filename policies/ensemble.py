@@ -72,6 +72,9 @@ class PolicyEnsemble:
             if m.obs_keys != first.obs_keys:
                 raise ValueError(f"{name}: observation parts {m.obs_keys} differ from "
                                  f"{names[0]}'s {first.obs_keys}")  # fmt: skip
+            if m._mean.shape != first._mean.shape:
+                raise ValueError(f"{name}: observations of {m._mean.size} values, {names[0]}'s "
+                                 f"of {first._mean.size} (another sensor set?)")  # fmt: skip
             mine = _driving_settings(m.env_cfg)
             if mine != base:
                 diff = [f.name for f in dataclasses.fields(base)

@@ -242,6 +242,17 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
     with pytest.raises(ValueError, match=r"odd\.pt: environment settings differ .*action_scale"):
         write_ensemble([a, tmp_path / "odd.pt"], tmp_path / "x.pt")
     assert not (tmp_path / "x.pt").exists()
+    wide = dict(ck, obs_mean=dict(ck["obs_mean"]), obs_var=dict(ck["obs_var"]))
+    key = ck["obs_keys"][0]  # a policy of another sensor set: a longer first part
+    wide["obs_mean"][key] = torch.cat([ck["obs_mean"][key], ck["obs_mean"][key][:3]])
+    wide["obs_var"][key] = torch.cat([ck["obs_var"][key], ck["obs_var"][key][:3]])
+    wide["actor"] = dict(ck["actor"])
+    w0 = sorted(k for k in ck["actor"] if k.endswith(".weight"))[0]
+    wide["actor"][w0] = torch.cat([ck["actor"][w0], ck["actor"][w0][:, :3]], 1)
+    wide["actor_sizes"] = [ck["actor_sizes"][0] + 3, *ck["actor_sizes"][1:]]
+    torch.save(wide, tmp_path / "wide.pt")
+    with pytest.raises(ValueError, match=r"wide\.pt: observations of \d+ values"):
+        PolicyEnsemble.load([a, tmp_path / "wide.pt"])
     rb.env_cfg = dc.replace(ra.env_cfg, reward=dc.replace(ra.env_cfg.reward, k_pos=1.0))
     PolicyEnsemble([ra, rb])  # reward settings may differ: inference computes no reward
     broken = torch.load(f, weights_only=True)
