@@ -25,13 +25,16 @@ import numpy as np
 import torch
 
 from grip.core.atomic import atomic_write
-from policies.runner import FORMAT, load_weights
+from policies.runner import ENSEMBLE_FORMAT, FORMAT, load_weights
 
 _SAME = ("actor_sizes", "critic_sizes", "obs_keys", "clip_obs")
 
 
 def _load(path: Path) -> dict:
     ck = load_weights(path, "policy file")
+    if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
+        raise ValueError(f"{path}: an ensemble file; weight averaging takes single policies of "
+                         "one run (grip policy-ensemble joins policies of any runs)")
     if not isinstance(ck, dict) or ck.get("format") != FORMAT:
         raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
     missing = [k for k in ("config", "actor", "actor_sizes", "obs_keys", "obs_mean", "obs_var",

@@ -262,6 +262,10 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
         load_policy(tmp_path / "broken.pt")
     with pytest.raises(ValueError, match=r"ens\.pt: an ensemble of 2 policies"):
         PolicyRunner.load(f)
+    from policies.average import average_policies
+
+    with pytest.raises(ValueError, match=r"ens\.pt: an ensemble file"):
+        average_policies([f, a], tmp_path / "x.pt")
     # a warm start from an ensemble file begins from its first member (no value network)
     tr = PolicyTrainer(_tiny(), tmp_path / "ft", SAMPLE_REFERENCE, init=f)
     assert tr.init_members == 2 and tr._init_runner.critic is None
