@@ -14,7 +14,10 @@ from MuJoCo's foot-ground contact forces) plus ``kin_MPJPE_mm``: the kinematics-
 from: ``root_err_m`` / ``kin_root_err_m`` (mean horizontal pelvis distance from the truth,
 :func:`grip.core.metrics.root_error_xy`) and ``travel_ratio`` / ``kin_travel_ratio`` (ground
 covered over the truth's, :func:`grip.core.metrics.travel_ratio`) of the simulation and of
-kinematics only.
+kinematics only. ``pelvis_min_m`` is each segment's lowest pelvis height, and
+``success_rate_height`` the success rate by pelvis height alone (below 0.30 m at any frame is a
+failure, whatever the discriminator says): a lenient discriminator cannot hide a fall, and
+policies with different discriminators compare on one criterion.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ def segment_row(recon, clip, rec) -> dict:
     row["travel_ratio"] = M.travel_ratio(recon.root_pos, gt.root_pos, clip.fps)
     row["kin_travel_ratio"] = M.travel_ratio(kin_root, gt.root_pos, clip.fps)
     row["fell"] = recon.fell
+    row["pelvis_min_m"] = float(recon.root_pos[:, 2].min())
     row["frames"] = t
     return row
 
@@ -104,6 +108,9 @@ def _summary(rows: list[dict]) -> dict[str, float]:
         ok = np.isfinite(v)
         out[k] = float(np.average(v[ok], weights=frames[ok])) if ok.any() else float("nan")
     out["success_rate"] = M.success_rate([r["fell"] for r in rows])
+    low = RecoveryConfig().fall_height_m
+    out["success_rate_height"] = M.success_rate([r["fell"] or r["pelvis_min_m"] < low
+                                                 for r in rows])  # fmt: skip
     out["segments"] = len(rows)
     out["frames"] = int(frames.sum())
     return out
@@ -124,12 +131,12 @@ _TWO_DIGITS = ("root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio
 
 
 def markdown_table(summary: dict) -> str:
-    cols = ("success_rate", "MPJPE_mm", "kin_MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm",
-            "vGRF_N", "root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio",
-            "segments")  # fmt: skip
-    head = ("| category | success % | MPJPE mm | kinematics-only MPJPE mm | PA-MPJPE mm | FS m/s "
-            "| FP mm | vGRF N | root err. m | kin. root err. m | travel | kin. travel "
-            "| segments |")  # fmt: skip
+    cols = ("success_rate", "success_rate_height", "MPJPE_mm", "kin_MPJPE_mm", "PA_MPJPE_mm",
+            "FS_mps", "FP_mm", "vGRF_N", "root_err_m", "kin_root_err_m", "travel_ratio",
+            "kin_travel_ratio", "segments")  # fmt: skip
+    head = ("| category | success % | by height % | MPJPE mm | kinematics-only MPJPE mm "
+            "| PA-MPJPE mm | FS m/s | FP mm | vGRF N | root err. m | kin. root err. m | travel "
+            "| kin. travel | segments |")  # fmt: skip
     lines = [head, "|" + "---|" * (len(cols) + 1)]
     items = [*summary["categories"].items(), ("**all**", summary["overall"])]
     for name, s in items:
@@ -148,7 +155,7 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    keys = ["name", "category", "fell", "frames", *_MEAN_KEYS]
+    keys = ["name", "category", "fell", "pelvis_min_m", "frames", *_MEAN_KEYS]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")
     w.writeheader()

@@ -375,6 +375,12 @@ def test_eval_policy_rows_summary_and_files(run, tmp_path):
     s = summarize_rows(rows)
     assert s["overall"]["segments"] == 2
     assert s["overall"]["success_rate"] == 100.0 * np.mean([not r["fell"] for r in rows])
+    assert all(0 < r["pelvis_min_m"] < 2 for r in rows)
+    low = [dict(r, fell=False, pelvis_min_m=0.1) for r in rows[:1]] + rows[1:]
+    assert summarize_rows(low)["overall"]["success_rate_height"] == 100.0 * np.mean(
+        [False] + [not r["fell"] and r["pelvis_min_m"] >= 0.3 for r in rows[1:]])  # fmt: skip
+    assert summarize_rows(low)["overall"]["success_rate"] == 100.0 * np.mean(
+        [True] + [not r["fell"] for r in rows[1:]])  # a low pelvis the detector let pass
     assert "| **all** |" in markdown_table(s)
     write_rows(rows, s, tmp_path / "out")
     assert (tmp_path / "out" / "segments.csv").read_text().count("\n") == 3
