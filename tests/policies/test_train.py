@@ -137,10 +137,11 @@ def test_learning_rate_decays_over_the_end_of_the_last_stage(run, tmp_path):
         dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, learning_rate_decay_steps=-1))
 
 
-def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
+def _two_policies(run, tmp_path, actor_noise: float, info: dict | None = None):
+    """The run's export ``a.pt`` and ``b.pt``: its actor plus noise, its normaliser shifted by
+    0.3 of the spread and the variance times 1.3 (so that neither file clips a test input near
+    the means); returns both paths and a's payload."""
     import torch
-
-    from policies.average import average_policies
 
     path, _ = run
     a = tmp_path / "a.pt"
@@ -148,14 +149,24 @@ def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
     ck = torch.load(a, weights_only=True)
     gen = torch.Generator().manual_seed(0)
     other = dict(ck)
-    other["actor"] = {k: v + 0.05 * torch.randn(v.shape, generator=gen, dtype=v.dtype)
+    other["actor"] = {k: v + actor_noise * torch.randn(v.shape, generator=gen, dtype=v.dtype)
                       for k, v in ck["actor"].items()}  # fmt: skip
-    # (shifts by a fraction of the spread, so that neither file clips the test input)
     other["obs_mean"] = {k: v + 0.3 * (ck["obs_var"][k] + 1e-8).sqrt()
                          for k, v in ck["obs_mean"].items()}  # fmt: skip
     other["obs_var"] = {k: v * 1.3 for k, v in ck["obs_var"].items()}
+    if info is not None:
+        other["info"] = json.dumps(info)
     b = tmp_path / "b.pt"
     torch.save(other, b)
+    return a, b, ck
+
+
+def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
+    import torch
+
+    from policies.average import average_policies
+
+    a, b, ck = _two_policies(run, tmp_path, actor_noise=0.05)
     avg = tmp_path / "avg.pt"
     average_policies([a, b], avg)
     ra, rb, rv = (PolicyRunner.load(f) for f in (a, b, avg))
@@ -195,19 +206,8 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
 
     from policies.ensemble import PolicyEnsemble, load_policy, write_ensemble
 
-    path, _ = run
-    a = tmp_path / "a.pt"
-    export_policy(path, a, half=False)
-    ck = torch.load(a, weights_only=True)
-    gen = torch.Generator().manual_seed(0)
-    other = dict(ck)  # another network with its own normaliser: a policy trained apart
-    other["actor"] = {k: v + 0.2 * torch.randn(v.shape, generator=gen, dtype=v.dtype)
-                      for k, v in ck["actor"].items()}  # fmt: skip
-    other["obs_mean"] = {k: v + 0.3 * (ck["obs_var"][k] + 1e-8).sqrt()
-                         for k, v in ck["obs_mean"].items()}  # fmt: skip
-    other["info"] = json.dumps({"holdout": ["x", "y"]})
-    b = tmp_path / "b.pt"
-    torch.save(other, b)
+    # another network with its own normaliser and held-out clips: a policy trained apart
+    a, b, ck = _two_policies(run, tmp_path, actor_noise=0.2, info={"holdout": ["x", "y"]})
     ra, rb = PolicyRunner.load(a), PolicyRunner.load(b)
     obs, info = GripTrackingEnv(ra.env_cfg).reset(seed=3)
     assert np.abs(ra.act(obs) - rb.act(obs)).max() > 0.01  # (the two do differ)
