@@ -176,11 +176,13 @@ def _payloads(path: Path) -> list[dict]:
     return [ck]
 
 
-def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike) -> tuple[int, int]:
+def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike,
+                   precision: str = "int8") -> tuple[int, int]:  # fmt: skip
     """Write the policies of ``paths`` (policy or ensemble files) into one ensemble file; returns
-    its size in bytes and its number of policies. Members keep their actors, normalisers and
-    notes as exported (float16 weights stay float16); value networks are left out, and every
-    discriminator but the first member's.
+    its size in bytes and its number of policies. Members keep their normalisers and notes; their
+    actors are stored at ``precision`` (:func:`grip.kinematics.train.pack_weights`: int8 with a
+    float32 scale per row by default, ``fp16`` as exported); value networks are left out, and
+    every discriminator but the first member's.
 
     Raises:
         ValueError: Fewer than two policies in all, a file that is not a policy, or members that
@@ -197,8 +199,12 @@ def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike) -
         raise ValueError("an ensemble needs at least two policies")
     PolicyEnsemble([PolicyRunner.from_payload(m, n) for m, n in zip(members, names, strict=True)],
                    names)  # refuses members that act differently  # fmt: skip
+    from grip.kinematics.train import pack_weights, unpack_weights
+
     kept = [{k: v for k, v in m.items() if k not in _DROPPED and (i == 0 or k not in _DISC)}
             for i, m in enumerate(members)]  # fmt: skip
+    for m in kept:  # the actors at ``precision`` (int8: one float32 scale per weight row)
+        m["actor"] = pack_weights(unpack_weights(m["actor"]), precision)
     payload = {"format": ENSEMBLE_FORMAT, "version": VERSION, "members": kept,
                "names": json.dumps(names)}  # fmt: skip
     buf = io.BytesIO()

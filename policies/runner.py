@@ -63,8 +63,10 @@ def _copy_mlp(body: nn.Sequential, head: nn.Linear,
 
 
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
+    from grip.kinematics.train import unpack_weights  # fp32, fp16 or int8 (pack_weights)
+
     mlp = _mlp([int(s) for s in sizes], activation)
-    mlp.load_state_dict({k: v.float() for k, v in state.items()})
+    mlp.load_state_dict(unpack_weights(state))
     return mlp
 
 

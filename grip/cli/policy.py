@@ -152,6 +152,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     n.add_argument("policies", nargs="+", type=Path,
                    help="exported policy (or ensemble) files, two policies or more")  # fmt: skip
     n.add_argument("--out", required=True, type=Path, help="output .pt")
+    n.add_argument("--precision", choices=("fp32", "fp16", "int8"), default="int8",
+                   help="actor weights: int8 with a scale per row (default) or as exported")
     n.set_defaults(func=cmd_ensemble)
 
 
@@ -333,7 +335,7 @@ def cmd_ensemble(args: argparse.Namespace) -> int:
     from policies.ensemble import write_ensemble
 
     try:
-        size, n = write_ensemble(args.policies, args.out)
+        size, n = write_ensemble(args.policies, args.out, args.precision)
     except (FileNotFoundError, ValueError, OSError) as e:
         raise CliError(str(e)) from e
     print(f"wrote {args.out} ({size / 1e6:.1f} MB), an ensemble of {n} policies")
