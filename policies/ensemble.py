@@ -30,7 +30,7 @@ import torch
 
 from envs.config import TrackingEnvConfig
 from grip.core.atomic import atomic_write
-from policies.runner import ENSEMBLE_FORMAT, VERSION, PolicyRunner, load_weights
+from policies.runner import ENSEMBLE_FORMAT, VERSION, PolicyRunner, load_weights, pack_disc
 
 _DROPPED = ("critic", "critic_sizes")  # the value networks: training only
 _DISC = ("disc", "amp_frame_dim")
@@ -181,8 +181,9 @@ def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike,
     """Write the policies of ``paths`` (policy or ensemble files) into one ensemble file; returns
     its size in bytes and its number of policies. Members keep their normalisers and notes; their
     actors are stored at ``precision`` (:func:`grip.kinematics.train.pack_weights`: int8 with a
-    float32 scale per row by default, ``fp16`` as exported); value networks are left out, and
-    every discriminator but the first member's.
+    float32 scale per row by default, ``fp16`` as exported), and so is the first member's
+    discriminator network (the fall detector); value networks are left out, and every other
+    discriminator.
 
     Raises:
         ValueError: Fewer than two policies in all, a file that is not a policy, or members that
@@ -205,6 +206,8 @@ def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike,
             for i, m in enumerate(members)]  # fmt: skip
     for m in kept:  # the actors at ``precision`` (int8: one float32 scale per weight row)
         m["actor"] = pack_weights(unpack_weights(m["actor"]), precision)
+    if "disc" in kept[0]:  # the fall detector's network too
+        kept[0]["disc"] = pack_disc(kept[0]["disc"], precision)
     payload = {"format": ENSEMBLE_FORMAT, "version": VERSION, "members": kept,
                "names": json.dumps(names)}  # fmt: skip
     buf = io.BytesIO()

@@ -62,6 +62,28 @@ def _copy_mlp(body: nn.Sequential, head: nn.Linear,
     return sizes, mlp
 
 
+_DISC_NET = ("trunk", "head")
+"""Prefixes of the discriminator's network weights (the rest: its input normaliser)."""
+
+
+def _disc_state(state: dict) -> dict:
+    """A stored discriminator state as float32 (its network may be fp16 or int8)."""
+    from grip.kinematics.train import unpack_weights
+
+    net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
+    return {**{k: v for k, v in state.items() if k not in net}, **unpack_weights(net)}
+
+
+def pack_disc(state: dict, precision: str) -> dict:
+    """The discriminator's network weights at ``precision`` (:func:`grip.kinematics.train.
+    pack_weights`); its input normaliser as stored."""
+    from grip.kinematics.train import pack_weights
+
+    net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
+    return {**{k: v for k, v in state.items() if k not in net},
+            **pack_weights(_disc_state(net), precision)}  # fmt: skip
+
+
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
     from grip.kinematics.train import unpack_weights  # fp32, fp16 or int8 (pack_weights)
 
@@ -182,8 +204,7 @@ class PolicyRunner:
             if "disc" in ck:
                 disc = Discriminator(cfg.amp.window * int(ck["amp_frame_dim"]), cfg.amp.hidden,
                                      cfg.amp.loss)  # fmt: skip
-                disc.load_state_dict({k: (v.float() if k.startswith(("trunk", "head")) else v)
-                                      for k, v in ck["disc"].items()})  # fmt: skip
+                disc.load_state_dict(_disc_state(ck["disc"]))
         except (KeyError, RuntimeError, ValueError, TypeError) as e:
             raise ValueError(f"{path}: inconsistent policy file ({e})") from e
         env_cfg = dataclasses.replace(cfg.env, amp_window=cfg.amp.window)

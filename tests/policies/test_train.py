@@ -230,6 +230,12 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
     assert write_ensemble([a, b], exact, precision="fp32")[0] > size
     np.testing.assert_allclose(load_policy(exact).act(obs), ens.act(obs), atol=1e-5)
     assert loaded.members[0].disc is not None and loaded.members[1].disc is None
+    # the fall detector is stored int8 too and gives the same probability within 0.05
+    stored = torch.load(f, weights_only=True)["members"][0]["disc"]
+    assert any(v.dtype == torch.int8 for v in stored.values())
+    p_ref, p_int8 = ra.fall_probability(info["amp_obs"]), loaded.fall_probability(info["amp_obs"])
+    assert np.abs(p_int8 - p_ref).max() < 0.05
+    assert load_policy(exact).fall_probability(info["amp_obs"]) == pytest.approx(p_ref, abs=1e-5)
     assert all(m.critic is None for m in loaded.members)
     assert isinstance(load_policy(a), PolicyRunner)
     # an ensemble file joins another file as its members
