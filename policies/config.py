@@ -179,6 +179,13 @@ class PolicyRunConfig:
     also holds the left-right mirror image of every clip
     (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
     right balanced."""
+    reverse_categories: list[str] = field(default_factory=list)
+    """Category globs (e.g. ``["walk"]``) of training clips whose motions, played backwards,
+    join the reference set as extra recordings of category ``"<category>-reversed"``, with
+    sensors synthesised like the dataset's (:mod:`grip.dataset.augment`; a forward walk played
+    backwards is a backward walk). Needs a ``grip data build`` folder (its ``motions/``); a
+    stage's category globs must match the new category (``walk*`` matches
+    ``walk-reversed``). Empty: none."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a

@@ -101,7 +101,8 @@ def subject_for(clip_id: str, variant: int, cfg: BuildConfig):
     return BodyParams(height_m=round(height, 3), mass_kg=round(bmi * height**2, 1))
 
 
-def _safe_name(clip_id: str) -> str:
+def safe_name(clip_id: str) -> str:
+    """The file-name form of a clip id (``DATA/motions/<safe_name>.npz``)."""
     return clip_id.replace("/", "__")
 
 
@@ -117,7 +118,7 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
 
     t0 = time.perf_counter()
     out = Path(out_dir)
-    name = _safe_name(clip_id)
+    name = safe_name(clip_id)
     res = ClipResult(clip_id=clip_id, status="failed", category=category, source=clip_path)
     try:
         src = load_clip(clip_path)

@@ -19,6 +19,10 @@ from grip.core.rotations import quat_to_matrix
 _FORMAT_VERSION = 1
 
 
+REVERSED_SUFFIX = "-reversed"
+"""Appended to the category of a time-reversed motion (:meth:`Motion.time_reversed`)."""
+
+
 class MotionError(ValueError):
     """A motion file or array is malformed; the message names the file/key and the problem."""
 
@@ -73,6 +77,21 @@ class Motion:
         """Frames ``[start, stop)`` as a new motion."""
         return replace(self, root_pos=self.root_pos[start:stop].copy(),
                        local_quat=self.local_quat[start:stop].copy())  # fmt: skip
+
+    def time_reversed(self) -> Motion:
+        """The motion played backwards, frames in reverse order (category ``"<category>-
+        reversed"``, ``meta["time_reversed"]`` set; reversing again gives the original arrays
+        back). Forward walking played backwards is walking backwards: the joint-angle patterns
+        of backward walking are close to the time reversal of forward walking's (Winter,
+        Pluck & Yang, 1989), and the rigid-body equations are even in time, so sensors
+        synthesised from the reversed motion are those of a plausible backward walk."""
+        meta = dict(self.meta)
+        meta["time_reversed"] = not bool(meta.get("time_reversed", False))
+        cat, sfx = self.category, REVERSED_SUFFIX
+        cat = cat[: -len(sfx)] if cat.endswith(sfx) else cat + sfx
+        return replace(self, root_pos=self.root_pos[::-1].copy(),
+                       local_quat=self.local_quat[::-1].copy(), category=cat,
+                       meta=meta)  # fmt: skip
 
     # ------------------------------------------------------------------ I/O
     def save(self, path: str | os.PathLike) -> None:

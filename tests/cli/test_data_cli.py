@@ -357,3 +357,60 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
     everything = ["train-policy", "--data", str(data), "--out", str(tmp_path / "none"),
                   *TINY_POLICY, "--set", "holdout_fraction=0.99"]  # fmt: skip
     assert main(everything) == 2 and "nothing to train on" in capsys.readouterr().err
+
+
+def test_time_reversed_motions_join_the_policy_references(built: Path, tmp_path: Path,
+                                                          capsys) -> None:  # fmt: skip
+    import numpy as np
+
+    from grip.dataset.augment import time_reversed_recordings
+    from grip.dataset.build import safe_name
+    from grip.motion.motion import Motion
+    from prism_tools.io import load_recording
+
+    manifest = json.loads((built / "manifest.json").read_text())
+    split = json.loads((built / "split.json").read_text())
+    clip = next(c for c in manifest["clips"] if len(c["sequences"]) == 1
+                and c["sequences"][0] in split["train"])  # fmt: skip
+    fwd = Motion.load(built / "motions" / f"{safe_name(clip['clip_id'])}.npz")
+    back = fwd.time_reversed()  # played backwards; twice gives the clip back
+    np.testing.assert_array_equal(back.root_pos, fwd.root_pos[::-1])
+    assert back.category == f"{fwd.category}-reversed" and back.meta["time_reversed"]
+    again = back.time_reversed()
+    np.testing.assert_array_equal(again.local_quat, fwd.local_quat)
+    assert again.category == fwd.category and not again.meta["time_reversed"]
+    recs = time_reversed_recordings(built, split["train"], [clip["category"]])
+    mine = [r for r in recs if r.name.startswith(f"synthetic_{clip['clip_id']}-reversed_seq")]
+    assert len(mine) == len(clip["sequences"]) and mine[0].category.endswith("-reversed")
+    # the reversed sensors' ground truth: positions backwards, velocities negated (central
+    # differences), the same accelerations (even in time)
+    orig = load_recording(built / "sequences" / f"{clip['sequences'][0]}.npz")
+    n = min(orig.n_frames, mine[0].n_frames)
+    assert n == orig.n_frames > 2
+    g, h = orig.imu_gt["L_Foot"], mine[0].imu_gt["L_Foot"]
+    np.testing.assert_allclose(h.pos_world, g.pos_world[::-1], atol=1e-5)
+    np.testing.assert_allclose(h.vel_world[1:-1], -g.vel_world[::-1][1:-1], atol=1e-3)
+    np.testing.assert_allclose(h.acc_world[1:-1], g.acc_world[::-1][1:-1], atol=1e-2)
+    # only clips with a sequence among those given contribute (a test clip never does)
+    others = time_reversed_recordings(built, split["test"], [clip["category"]])
+    assert not any(r.name.startswith(f"synthetic_{clip['clip_id']}-") for r in others)
+    bare = tmp_path / "bare"  # a dataset without its motions: the missing file is named
+    bare.mkdir()
+    shutil.copy(built / "manifest.json", bare / "manifest.json")
+    with pytest.raises(ValueError, match=r"motions/.*\.npz: motion file of clip"):
+        time_reversed_recordings(bare, split["train"], [clip["category"]])
+    with pytest.raises(ValueError, match="manifest"):
+        time_reversed_recordings(tmp_path, split["train"], ["*"])
+    # grip train-policy: the reversed recordings join the references once (and their mirrors)
+    run = tmp_path / "rev"
+    args = ["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY,
+            "--set", f'reverse_categories=["{clip["category"]}"]']  # fmt: skip
+    assert main(args) == 0
+    names = [c.name for c in ReferenceSet.load(run / "reference_train.npz").clips]
+    assert len(names) == len(split["train"]) + len(recs)
+    assert sum(n.endswith(tuple(f"-reversed_seq{i:03d}" for i in range(9))) for n in names) \
+        == len(recs)  # fmt: skip
+    assert "time-reversed recordings" in capsys.readouterr().out
+    assert main([*args[:4], str(tmp_path / "none"), *args[5:-1],
+                 'reverse_categories=["no-such-category"]']) == 2  # fmt: skip
+    assert "no training clip" in capsys.readouterr().err
