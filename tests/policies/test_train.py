@@ -360,6 +360,8 @@ def test_category_selection_and_config_checks():
         PolicyRunConfig(ppo=PPOConfig(n_envs=1, n_steps=8, batch_size=64))
     with pytest.raises(ValueError, match=r"amp\.loss"):
         PolicyRunConfig(amp=AmpConfig(loss="wgan"))
+    with pytest.raises(ValueError, match="reverse_categories must be a list"):
+        PolicyRunConfig(reverse_categories="walk")  # a bare glob would match letter by letter
 
 
 def test_eval_policy_rows_summary_and_files(run, tmp_path):
