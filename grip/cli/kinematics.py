@@ -153,19 +153,29 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.main import CliError
-    from grip.kinematics.dataset import holdout_split, load_split_sequences
+    from grip.kinematics.dataset import holdout_split, load_split_sequences, split_files
     from grip.kinematics.train import Trainer
 
     t0 = time.perf_counter()
     tc = cfg.train
     try:
         train = load_split_sequences(data, "train", cfg.features)
+        stems = [f.stem for f in split_files(data, "train")]  # in the order of ``train``
         if tc.val_source == "holdout":
-            train, val = holdout_split(train, tc.val_fraction, tc.seed)
+            kept, val = holdout_split(train, tc.val_fraction, tc.seed)
+            names = {s.name for s in kept}
+            stems = [st for st, s in zip(stems, train, strict=True) if s.name in names]
+            train = kept
         else:
             val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(f"{data}: {e}" if str(data) not in str(e) else str(e)) from e
+    if tc.reverse_categories:
+        from grip.cli.recordings import reversed_training_recordings
+        from grip.kinematics.dataset import sequence_arrays
+
+        recs = reversed_training_recordings(data, stems, tc.reverse_categories)
+        train += [sequence_arrays(r, cfg.features) for r in recs]
     n_frames = sum(len(s.x) for s in train)
     what = "held-out training" if tc.val_source == "holdout" else "test"
     print(f"loaded {len(train)} train / {len(val)} validation ({what}) sequences "

@@ -212,28 +212,6 @@ def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
     return kept
 
 
-def reversed_training_recordings(data: Path, files: list[Path], categories: list[str]) -> list:
-    """The time-reversed recordings of the training clips of ``categories`` (``reverse_categories``,
-    :mod:`grip.dataset.augment`), with a progress bar; refuses globs that select nothing."""
-    from tqdm import tqdm
-
-    from grip.cli.main import CliError
-    from grip.dataset.augment import reversed_clip_ids, time_reversed_recordings
-
-    stems = [f.stem for f in files]
-    try:
-        n = len(reversed_clip_ids(data, stems, categories))
-        if n == 0:
-            raise CliError(f"reverse_categories={categories}: no training clip of {data} has "
-                           "such a category")  # fmt: skip
-        with tqdm(total=n, unit="clip", desc="time-reversed motions") as bar:
-            recs = time_reversed_recordings(data, stems, categories, progress=bar.update)
-    except ValueError as e:
-        raise CliError(str(e)) from e
-    print(f"{len(recs)} time-reversed recordings of {n} training clips ({categories})")
-    return recs
-
-
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -259,6 +237,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         recs = load_recordings(files)
         if cfg.reverse_categories:
+            from grip.cli.recordings import reversed_training_recordings
+
             recs += reversed_training_recordings(args.data, files, cfg.reverse_categories)
         sets = []
         for kin in kins:

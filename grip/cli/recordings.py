@@ -96,3 +96,28 @@ def add_tta_argument(parser) -> None:
     from grip.kinematics.features import TTA_MODES
 
     parser.add_argument("--tta", default="none", choices=tuple(TTA_MODES), help=TTA_HELP)
+
+
+def reversed_training_recordings(data: Path, files: Sequence[Path | str],
+                                 categories: list[str]) -> list:  # fmt: skip
+    """The time-reversed recordings of the clips of ``categories`` among the training sequence
+    files (or file stems) ``files`` (``reverse_categories`` of ``grip train-policy`` and
+    ``grip train-kin``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that
+    select nothing."""
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.dataset.augment import reversed_clip_ids, time_reversed_recordings
+
+    stems = [Path(f).stem for f in files]
+    try:
+        n = len(reversed_clip_ids(data, stems, categories))
+        if n == 0:
+            raise CliError(f"reverse_categories={categories}: no training clip of {data} has "
+                           "such a category")  # fmt: skip
+        with tqdm(total=n, unit="clip", desc="time-reversed motions") as bar:
+            recs = time_reversed_recordings(data, stems, categories, progress=bar.update)
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    print(f"{len(recs)} time-reversed recordings of {n} training clips ({categories})")
+    return recs

@@ -74,6 +74,11 @@ class TrainConfig:
             (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
             unseen by model selection.
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
+        reverse_categories: Category globs (e.g. ``["walk"]``) of training clips whose
+            motions, played backwards, join the training sequences as ``"<category>-reversed"``
+            (:mod:`grip.dataset.augment`: a forward walk played backwards is a backward walk,
+            its sensors synthesised as the dataset's); held-out clips do not contribute. Needs
+            a ``grip data build`` folder. Empty: none.
         seed: Seed of windows, noise and initialisation.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
@@ -101,6 +106,7 @@ class TrainConfig:
     val_windows: int = 256
     val_source: str = "test"
     val_fraction: float = 0.1
+    reverse_categories: list[str] = field(default_factory=list)
     seed: int = 0
     bf16: bool = False
 
@@ -115,6 +121,10 @@ class TrainConfig:
                              f"{self.category_balance}")  # fmt: skip
         if not 0.0 <= self.time_warp <= 1.0:
             raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
+        if not (isinstance(self.reverse_categories, list | tuple)
+                and all(isinstance(g, str) for g in self.reverse_categories)):
+            raise ValueError('train.reverse_categories must be a list of category globs, e.g. '
+                             '["walk"]')  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -126,6 +126,16 @@ def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None
     assert "dataset" in err and "at least 2 clips" in err and "Traceback" not in err
     assert main([*held, "--set", "train.val_source=dev"]) == 2
     assert "val_source" in capsys.readouterr().err
+    # time-reversed training clips join the training sequences (grip.dataset.augment)
+    rev = [*args, "--set", 'train.reverse_categories=["*"]']
+    rev[rev.index(str(run))] = str(tmp_path / "rev")
+    assert main(rev) == 0
+    out = capsys.readouterr().out
+    n_train = len(json.loads((built / "split.json").read_text())["train"])
+    assert f"time-reversed recordings of {n_train} training clips" in out
+    assert f"loaded {2 * n_train} train" in out
+    assert main([*rev[:-1], "train.reverse_categories=walk"]) == 2
+    assert "list of category globs" in capsys.readouterr().err
 
 
 def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path, capsys) -> None:
