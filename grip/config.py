@@ -25,6 +25,8 @@ def _coerce(value: Any, hint: Any, where: str) -> Any:
     if origin is tuple or hint is tuple:
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if typing.get_args(hint) == (str, Ellipsis) and not all(isinstance(v, str) for v in value):
+            raise ConfigError(f"{where}: expected a list of strings, got {value!r}")
         return tuple(value)
     if hint is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)

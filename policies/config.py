@@ -179,7 +179,7 @@ class PolicyRunConfig:
     also holds the left-right mirror image of every clip
     (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
     right balanced."""
-    reverse_categories: list[str] = field(default_factory=list)
+    reverse_categories: tuple[str, ...] = ()
     """Category globs (e.g. ``["walk"]``) of training clips whose motions, played backwards,
     join the reference set as extra recordings of category ``"<category>-reversed"``, with
     sensors synthesised like the dataset's (:mod:`grip.dataset.augment`; a forward walk played
@@ -204,9 +204,6 @@ class PolicyRunConfig:
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
-            (isinstance(self.reverse_categories, list | tuple)
-             and all(isinstance(g, str) for g in self.reverse_categories),
-             'reverse_categories must be a list of category globs, e.g. ["walk"]'),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip

@@ -77,11 +77,11 @@ def _disc_state(state: dict) -> dict:
 def pack_disc(state: dict, precision: str) -> dict:
     """The discriminator's network weights at ``precision`` (:func:`grip.kinematics.train.
     pack_weights`); its input normaliser as stored."""
-    from grip.kinematics.train import pack_weights
+    from grip.kinematics.train import pack_weights, unpack_weights
 
     net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
     return {**{k: v for k, v in state.items() if k not in net},
-            **pack_weights(_disc_state(net), precision)}  # fmt: skip
+            **pack_weights(unpack_weights(net), precision)}  # fmt: skip
 
 
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:

@@ -99,7 +99,7 @@ def add_tta_argument(parser) -> None:
 
 
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
-                                 categories: list[str]) -> list:  # fmt: skip
+                                 categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence
     files (or file stems) ``files`` (``reverse_categories`` of ``grip train-policy`` and
     ``grip train-kin``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that
@@ -113,11 +113,12 @@ def reversed_training_recordings(data: Path, files: Sequence[Path | str],
     try:
         n = len(reversed_clip_ids(data, stems, categories))
         if n == 0:
-            raise CliError(f"reverse_categories={categories}: no training clip of {data} has "
-                           "such a category")  # fmt: skip
+            raise CliError(f"reverse_categories={list(categories)}: no training clip of {data} "
+                           "has such a category")  # fmt: skip
         with tqdm(total=n, unit="clip", desc="time-reversed motions") as bar:
             recs = time_reversed_recordings(data, stems, categories, progress=bar.update)
     except ValueError as e:
         raise CliError(str(e)) from e
-    print(f"{len(recs)} time-reversed recordings of {n} training clips ({categories})")
+    print(f"{len(recs)} time-reversed recordings of {n} training clips "
+          f"({', '.join(categories)})")  # fmt: skip
     return recs

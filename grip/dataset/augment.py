@@ -19,9 +19,6 @@ from pathlib import Path
 
 from grip.dataset.build import MANIFEST, BuildConfig, clip_seed, safe_name
 
-REVERSED_TAG = "r0"
-"""Variant tag of the reversed recordings in their sequence names (``<clip>_r0_seq000``)."""
-
 
 def _manifest(data_dir: Path) -> dict:
     path = data_dir / MANIFEST

@@ -360,8 +360,14 @@ def test_category_selection_and_config_checks():
         PolicyRunConfig(ppo=PPOConfig(n_envs=1, n_steps=8, batch_size=64))
     with pytest.raises(ValueError, match=r"amp\.loss"):
         PolicyRunConfig(amp=AmpConfig(loss="wgan"))
-    with pytest.raises(ValueError, match="reverse_categories must be a list"):
-        PolicyRunConfig(reverse_categories="walk")  # a bare glob would match letter by letter
+    from grip.config import apply_dict
+
+    with pytest.raises(ValueError, match=r"reverse_categories: expected a list, got 'walk'"):
+        apply_dict(PolicyRunConfig(), {"reverse_categories": "walk"}, "x")  # letter by letter
+    with pytest.raises(ValueError, match="expected a list of strings"):
+        apply_dict(PolicyRunConfig(), {"stage2": {"categories": ["walk", 3]}}, "x")
+    assert apply_dict(PolicyRunConfig(), {"reverse_categories": ["walk"]},
+                      "x").reverse_categories == ("walk",)  # fmt: skip
 
 
 def test_eval_policy_rows_summary_and_files(run, tmp_path):
