@@ -6,8 +6,10 @@ from dataclasses import dataclass, field
 
 from grip.core.mjcf import MjcfConfig
 
-KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel")
-"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel)."""
+KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jhor")
+"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel);
+``OAV_Jhor`` (ours) is J_rel with the pelvis row (always 0 there) holding the horizontal error
+against the integrated root."""
 
 ACTION_MODES: tuple[str, ...] = ("relative", "absolute")
 REWARD_FORMS: tuple[str, ...] = ("mean_sq", "norm")

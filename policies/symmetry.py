@@ -100,7 +100,7 @@ class ObservationMirror:
             if self.variant != "OA":
                 d_v, rest = _vec_rows(rest, len(sk.VELOCITY_JOINTS), _VEL_PERM, mh)
                 parts.append(d_v)
-            if self.variant in ("OAV_Jglo", "OAV_Jrel"):
+            if self.variant.startswith("OAV_J"):
                 d_p, rest = _vec_rows(rest, sk.N_JOINTS, _PERM, mh)
                 p, rest = _vec_rows(rest, sk.N_JOINTS, _PERM, mh)
                 parts += [d_p, p]

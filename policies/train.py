@@ -41,12 +41,18 @@ from stable_baselines3.common.vec_env import (
 from tqdm import tqdm
 
 from envs import amp as A
+from envs import observations as O
 from envs.config import TrackingEnvConfig
+from grip.core import skeleton as sk
 from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
 from policies.config import PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers, load_weights
+
+JHOR_PRIOR_STD_M = 0.3
+"""Normaliser scale given to ``OAV_Jhor``'s horizontal root error when a run starts from an
+``OAV_Jrel`` policy (``--init``), m: about the ground a slow walk loses in a second."""
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
 
@@ -459,6 +465,8 @@ class PolicyTrainer:
                     dst.weight.copy_(s.weight)
                     dst.bias.copy_(s.bias)
 
+        theirs, ours = runner.env_cfg.kinematic_obs, self.cfg.env.kinematic_obs
+        new_cols = self._new_kinematic_inputs(theirs, ours, spaces)
         load(runner.actor, pol.mlp_extractor.policy_net, pol.action_net, "policy")
         if runner.critic is not None:
             load(runner.critic, pol.mlp_extractor.value_net, pol.value_net, "value")
@@ -469,12 +477,47 @@ class PolicyTrainer:
         for k, rms in self.venv.obs_rms.items():
             rms.mean, rms.var = runner.obs_mean[k].copy(), runner.obs_var[k].copy()
             rms.count = count
+        if new_cols is not None:
+            # The pelvis row of J_rel's d_p is always 0: its normaliser has no scale and its
+            # first-layer weights never learned anything. Give it a prior scale and zero
+            # weights, so that the new input starts out ignored and is learned from there.
+            rows, cols = new_cols
+            rms = self.venv.obs_rms["kinematic"]
+            rms.mean[rows], rms.var[rows] = 0.0, JHOR_PRIOR_STD_M**2
+            with torch.no_grad():
+                for net in (pol.mlp_extractor.policy_net, pol.mlp_extractor.value_net):
+                    linear_layers(net)[0].weight[:, cols] = 0.0
         if runner.disc is not None:
             try:
                 self.amp.disc.load_state_dict(runner.disc.state_dict())
             except RuntimeError as e:
                 raise ValueError(f"{src}: its discriminator does not fit this run's amp "
                                  f"settings ({e})") from e
+
+    def _new_kinematic_inputs(self, theirs: str, ours: str,
+                              spaces: dict) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
+        """Where ``--init``'s observation variant differs from this run's: ``None`` when they
+        are the same; for ``OAV_Jrel`` -> ``OAV_Jhor`` the pelvis row's indices in the
+        ``kinematic`` part and in the network's input (the parts concatenated in order).
+
+        Raises:
+            ValueError: naming the file, for any other pair (their inputs mean different
+                things at the same places).
+        """
+        if theirs == ours:
+            return None
+        if (theirs, ours) != ("OAV_Jrel", "OAV_Jhor"):
+            raise ValueError(f"{self.init}: trained with env.kinematic_obs={theirs!r}, this "
+                             f"run has {ours!r}; only OAV_Jrel -> OAV_Jhor can be "
+                             "fine-tuned")  # fmt: skip
+        n = O.kinematic_dim(ours)
+        rows = np.arange(n - 6 * sk.N_JOINTS, n - 6 * sk.N_JOINTS + 3)  # d_p's pelvis row
+        offset = 0
+        for k, space in spaces.items():
+            if k == "kinematic":
+                return rows, rows + offset
+            offset += int(np.prod(space.shape))
+        raise ValueError(f"{self.init}: this run has no 'kinematic' observation")
 
     # -------------------------------------------------------------- run
     def train(self) -> None:

@@ -512,3 +512,45 @@ def test_warm_start_refuses_a_policy_of_another_size(run, tmp_path):
     with pytest.raises(ValueError, match=r"junk\.pt"):
         (tmp_path / "junk.pt").write_bytes(b"junk")
         PolicyTrainer(cfg, tmp_path / "j", SAMPLE_REFERENCE, init=tmp_path / "junk.pt")
+
+
+def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_path):
+    import torch
+
+    from envs import observations as O
+    from policies.train import JHOR_PRIOR_STD_M
+
+    path, _ = run
+    exported = tmp_path / "p.pt"
+    export_policy(path, exported, half=False)
+    src = PolicyRunner.load(exported)
+    assert src.env_cfg.kinematic_obs == "OAV_Jrel"
+    cfg = _warm_cfg(0)
+    jhor = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jhor"))
+    tr = PolicyTrainer(jhor, tmp_path / "jhor", SAMPLE_REFERENCE, init=exported)
+    tr.venv = tr._build_env(tr.cfg.stage2)
+    tr.model = tr._new_model(tr.venv)
+    tr.warm_start(src)
+    n = O.kinematic_dim("OAV_Jhor")
+    rows = np.arange(n - 144, n - 141)  # d_p's pelvis row
+    rms = tr.venv.obs_rms["kinematic"]
+    np.testing.assert_array_equal(rms.var[rows], JHOR_PRIOR_STD_M**2)
+    np.testing.assert_array_equal(rms.mean[rows], 0.0)
+    keep = np.setdiff1d(np.arange(n), rows)
+    np.testing.assert_array_equal(rms.var[keep], src.obs_var["kinematic"][keep])
+    # input columns: the parts in order; only the three new ones are zeroed
+    dims = {k: int(np.prod(s.shape)) for k, s in tr.model.observation_space.spaces.items()}
+    start = sum(dims[k] for k in list(dims)[: list(dims).index("kinematic")])
+    pol = tr.model.policy
+    w, w_src = _linears(pol.mlp_extractor.policy_net)[0].weight, _linears(src.actor)[0].weight
+    cols = start + rows
+    assert torch.count_nonzero(w[:, cols]) == 0 and torch.count_nonzero(w_src[:, cols]) > 0
+    others = np.setdiff1d(np.arange(w.shape[1]), cols)
+    assert torch.equal(w[:, others], w_src[:, others])
+    assert torch.count_nonzero(_linears(pol.mlp_extractor.value_net)[0].weight[:, cols]) == 0
+    tr.venv.close()
+
+    glo = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jglo"))
+    tr = PolicyTrainer(glo, tmp_path / "jglo", SAMPLE_REFERENCE, init=exported)
+    with pytest.raises(ValueError, match=r"p\.pt: trained with env.kinematic_obs='OAV_Jrel'"):
+        tr.train()
