@@ -516,6 +516,15 @@ class GripTrackingEnv(gym.Env):
             info["amp_obs"] = self._amp.vector()
         return obs, reward, bool(terminated), bool(truncated and not terminated), info
 
+    def push_pelvis(self, force: np.ndarray) -> None:
+        """Apply a world-frame force (N, ``(3,)``) at the pelvis' centre of mass for the
+        following steps, until called again (zeros end it; a reset clears it). Training
+        perturbations (:class:`envs.wrappers.RandomPushes`)."""
+        f = np.asarray(force, dtype=np.float64).reshape(3)
+        if not np.isfinite(f).all():
+            raise ValueError(f"push force must be 3 finite values, got {force!r}")
+        self._sim.data.xfrc_applied[self._sim.pelvis_body, :3] = f
+
     def teleport(self, qpos76: np.ndarray, qvel75: np.ndarray | None = None):
         """Put the humanoid in a new state at the current frame and keep playing the clip
         (GRIP's fall recovery): ``qpos76`` is a pose vector (:func:`grip.core.reference.

@@ -45,3 +45,61 @@ class ActionRepeat(gym.Wrapper):
         info.update({key: v / n for key, v in sums.items()})
         info["frames"] = n
         return obs, np.float64(total / n), terminated, truncated, info
+
+
+class RandomPushes(gym.Wrapper):
+    """Random horizontal pushes on the pelvis while the controller trains: a body pushed off
+    its reference has to catch itself (a step, a lean), which following the reference alone
+    never asks for. Inference never wraps its environment in this.
+
+    A push starts after a wait drawn from an exponential distribution of mean ``every_s``
+    (counted from the end of the previous push, or from the reset), lasts ``duration_s`` and
+    applies a constant force in a uniformly random horizontal direction, of magnitude uniform in
+    ``[force_n / 2, force_n]``, at the pelvis' centre of mass
+    (:meth:`envs.tracking_env.GripTrackingEnv.push_pelvis`). It wraps the per-frame
+    environment (inside :class:`ActionRepeat`), so waits and durations count frames.
+    ``info["push_n"]`` holds the force applied during the step, N.
+
+    Args:
+        env: A :class:`envs.tracking_env.GripTrackingEnv` (or a wrapper of one).
+        force_n: Largest force, N (> 0).
+        every_s: Mean wait between pushes, s (> 0).
+        duration_s: Length of a push, s (> 0; at least one frame).
+        seed: Seed of the pushes' own random generator.
+    """
+
+    def __init__(self, env: gym.Env, force_n: float, every_s: float, duration_s: float,
+                 seed: int | None = None) -> None:  # fmt: skip
+        super().__init__(env)
+        if not (force_n > 0 and every_s > 0 and duration_s > 0):
+            raise ValueError("RandomPushes: force_n, every_s and duration_s must be > 0, got "
+                             f"{force_n}, {every_s}, {duration_s}")  # fmt: skip
+        self.force_n, self.every_s = float(force_n), float(every_s)
+        self._dt = float(env.unwrapped.cfg.control_dt_s)
+        self._frames = max(1, round(duration_s / self._dt))
+        self._rng = np.random.default_rng(seed)
+        self._force = np.zeros(3)
+        self._left = 0
+        self._wait = self._draw_wait()
+
+    def _draw_wait(self) -> int:
+        return max(1, round(self._rng.exponential(self.every_s) / self._dt))
+
+    def reset(self, **kwargs):
+        self._left, self._wait = 0, self._draw_wait()
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        if self._left == 0:
+            self._wait -= 1
+            if self._wait <= 0:
+                ang = self._rng.uniform(0.0, 2.0 * np.pi)
+                mag = self.force_n * self._rng.uniform(0.5, 1.0)
+                self._force = np.array([mag * np.cos(ang), mag * np.sin(ang), 0.0])
+                self._left, self._wait = self._frames, self._draw_wait()
+        force = self._force if self._left > 0 else np.zeros(3)
+        self.env.unwrapped.push_pelvis(force)
+        self._left = max(self._left - 1, 0)
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info["push_n"] = float(np.linalg.norm(force))
+        return obs, reward, terminated, truncated, info

@@ -186,6 +186,14 @@ class PolicyRunConfig:
     backwards is a backward walk). Needs a ``grip data build`` folder (its ``motions/``); a
     stage's category globs must match the new category (``walk*`` matches
     ``walk-reversed``). Empty: none."""
+    push_force_n: float = 0.0
+    """Training perturbations (:class:`envs.wrappers.RandomPushes`): the largest horizontal
+    force of a random push on the pelvis, N; 0 (the default) = no pushes. Inference never
+    pushes."""
+    push_every_s: float = 3.0
+    """Mean wait between pushes, s."""
+    push_duration_s: float = 0.2
+    """Length of a push, s."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a
@@ -204,6 +212,8 @@ class PolicyRunConfig:
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
+            (self.push_force_n >= 0 and self.push_every_s > 0 and self.push_duration_s > 0,
+             "push_force_n must be >= 0 (0 = off), push_every_s and push_duration_s > 0"),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip

@@ -85,14 +85,20 @@ def load_reference(path: str) -> ReferenceSet:
 class EnvFactory:
     """Picklable constructor of one training environment (for subprocess vector envs)."""
 
-    def __init__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int) -> None:
+    def __init__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int,
+                 push: tuple[float, float, float] = (0.0, 3.0, 0.2)) -> None:  # fmt: skip
         self.env_cfg, self.categories, self.seed = env_cfg, categories, seed
+        self.push = push  # (force N, mean wait s, duration s); force 0 = no pushes
 
     def __call__(self):
         from envs.tracking_env import GripTrackingEnv
 
         ref = select_clips(load_reference(self.env_cfg.reference), self.categories)
         env = GripTrackingEnv(self.env_cfg, ref)
+        if self.push[0] > 0:
+            from envs.wrappers import RandomPushes
+
+            env = RandomPushes(env, *self.push, seed=self.seed + 7)
         if self.env_cfg.action_repeat > 1:
             from envs.wrappers import ActionRepeat
 
@@ -130,7 +136,9 @@ class AmpReward(VecEnvWrapper):
 
 def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int) -> VecEnv:
     env_cfg = cfg.env_config(stage, reference)
-    fns = [EnvFactory(env_cfg, stage.categories, seed + 1000 * i) for i in range(cfg.ppo.n_envs)]
+    push = (cfg.push_force_n, cfg.push_every_s, cfg.push_duration_s)
+    fns = [EnvFactory(env_cfg, stage.categories, seed + 1000 * i, push)
+           for i in range(cfg.ppo.n_envs)]  # fmt: skip
     if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:
         return SubprocVecEnv(fns, start_method="forkserver")
     return DummyVecEnv(fns)

@@ -554,3 +554,28 @@ def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_pa
     tr = PolicyTrainer(glo, tmp_path / "jglo", SAMPLE_REFERENCE, init=exported)
     with pytest.raises(ValueError, match=r"p\.pt: trained with env.kinematic_obs='OAV_Jrel'"):
         tr.train()
+
+
+def test_training_environments_are_pushed_only_when_asked():
+    from envs.wrappers import ActionRepeat, RandomPushes
+    from policies.train import make_vec_env
+
+    def chain(env) -> list[type]:
+        out = []
+        while hasattr(env, "env"):
+            out.append(type(env))
+            env = env.env
+        return out
+
+    cfg = _tiny()
+    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, action_repeat=3))
+    for force, pushed in ((0.0, False), (120.0, True)):
+        c = dataclasses.replace(cfg, push_force_n=force, push_every_s=1.5, push_duration_s=0.1)
+        venv = make_vec_env(c, c.stage2, SAMPLE_REFERENCE, seed=0)
+        kinds = chain(venv.envs[0])
+        # inside the action repeat: waits and pushes count frames
+        assert kinds == ([ActionRepeat, RandomPushes] if pushed else [ActionRepeat])
+        if pushed:
+            w = venv.envs[0].env
+            assert w.force_n == 120.0 and w._frames == 10
+        venv.close()
