@@ -78,7 +78,7 @@ class RandomPushes(gym.Wrapper):
         self._dt = float(env.unwrapped.cfg.control_dt_s)
         self._frames = max(1, round(duration_s / self._dt))
         self._rng = np.random.default_rng(seed)
-        self._force = np.zeros(3)
+        self._force = self._none = np.zeros(3)
         self._left = 0
         self._wait = self._draw_wait()
 
@@ -97,7 +97,7 @@ class RandomPushes(gym.Wrapper):
                 mag = self.force_n * self._rng.uniform(0.5, 1.0)
                 self._force = np.array([mag * np.cos(ang), mag * np.sin(ang), 0.0])
                 self._left, self._wait = self._frames, self._draw_wait()
-        force = self._force if self._left > 0 else np.zeros(3)
+        force = self._force if self._left > 0 else self._none
         self.env.unwrapped.push_pelvis(force)
         self._left = max(self._left - 1, 0)
         obs, reward, terminated, truncated, info = self.env.step(action)

@@ -86,16 +86,16 @@ class EnvFactory:
     """Picklable constructor of one training environment (for subprocess vector envs)."""
 
     def __init__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int,
-                 push: tuple[float, float, float] = (0.0, 3.0, 0.2)) -> None:  # fmt: skip
+                 push: tuple[float, float, float] | None = None) -> None:  # fmt: skip
         self.env_cfg, self.categories, self.seed = env_cfg, categories, seed
-        self.push = push  # (force N, mean wait s, duration s); force 0 = no pushes
+        self.push = push  # RandomPushes' (force N, mean wait s, duration s); None = no pushes
 
     def __call__(self):
         from envs.tracking_env import GripTrackingEnv
 
         ref = select_clips(load_reference(self.env_cfg.reference), self.categories)
         env = GripTrackingEnv(self.env_cfg, ref)
-        if self.push[0] > 0:
+        if self.push is not None:
             from envs.wrappers import RandomPushes
 
             env = RandomPushes(env, *self.push, seed=self.seed + 7)
@@ -136,7 +136,9 @@ class AmpReward(VecEnvWrapper):
 
 def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int) -> VecEnv:
     env_cfg = cfg.env_config(stage, reference)
-    push = (cfg.push_force_n, cfg.push_every_s, cfg.push_duration_s)
+    push = None  # RandomPushes only with a positive force
+    if cfg.push_force_n > 0:
+        push = (cfg.push_force_n, cfg.push_every_s, cfg.push_duration_s)
     fns = [EnvFactory(env_cfg, stage.categories, seed + 1000 * i, push)
            for i in range(cfg.ppo.n_envs)]  # fmt: skip
     if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:
