@@ -302,11 +302,19 @@ class PolicyTrainer:
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
         init: An exported policy (``policy.pt``) to start from instead of random weights
             (:meth:`warm_start`); ignored when the run resumes from its own checkpoint.
+        init_member: Which member of an ensemble ``init`` to start from (0, the first, by
+            default). Members after the first carry no discriminator of their own: the file's
+            (the first member's) is taken.
+
+    Raises:
+        ValueError: naming the file, when ``init`` is not a policy, or ``init_member`` is not
+            one of its members.
     """
 
     def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
                  reference: str | os.PathLike, progress: Callable | None = None,
-                 init: str | os.PathLike | None = None) -> None:  # fmt: skip
+                 init: str | os.PathLike | None = None,
+                 init_member: int = 0) -> None:  # fmt: skip
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.reference = str(reference)
@@ -314,13 +322,22 @@ class PolicyTrainer:
         self.init = init
         self._init_runner = None
         self.init_members = 1  # policies in the --init file (an ensemble starts from its first)
+        self.init_name = str(init)  # the policy started from (an ensemble's member by name)
         if init is not None:
             from policies.ensemble import PolicyEnsemble, load_policy
 
             pol = load_policy(init)  # fails early, naming the file
+            n = len(pol.members) if isinstance(pol, PolicyEnsemble) else 1
+            if not 0 <= init_member < n:
+                raise ValueError(f"{init}: no member {init_member} (the file holds {n} "
+                                 f"{'policies' if n > 1 else 'policy'}: 0..{n - 1})")  # fmt: skip
             if isinstance(pol, PolicyEnsemble):
-                self.init_members = len(pol.members)
-                pol = pol.members[0]  # (ensemble files keep no value network)
+                self.init_members = n
+                self.init_name = pol.info["members"][init_member]
+                first = pol.members[0]
+                pol = pol.members[init_member]  # (ensemble files keep no value network)
+                if pol.disc is None:  # later members share the file's fall detector
+                    pol.disc = first.disc
             self._init_runner = pol
         self.stage_index = 0
         self.stage_done = 0

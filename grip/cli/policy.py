@@ -53,8 +53,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="warm start: begin from an exported policy (e.g. "
                    "grip/assets/policy_default.pt): its policy, value network (if the file has "
                    "one), observation normaliser and discriminator; an ensemble file gives its "
-                   "first member; usually with --config configs/policy/finetune.toml (ignored "
-                   "when OUT resumes)")  # fmt: skip
+                   "first member (see --init-member); usually with --config "
+                   "configs/policy/finetune.toml (ignored when OUT resumes)")  # fmt: skip
+    p.add_argument("--init-member", type=int, default=0, metavar="K",
+                   help="with an ensemble file as --init: start from its member K (0 = the "
+                   "first, in the order 'grip policy-ensemble' joined them; training prints "
+                   "the member's name); later members take the file's discriminator")  # fmt: skip
     p.set_defaults(func=cmd_train)
 
     e = sub.add_parser(
@@ -279,14 +283,19 @@ def cmd_train(args: argparse.Namespace) -> int:
         started_from = str(init.resolve())
     if started_from is not None:
         payload["init"] = started_from  # what the run started from, kept on resume
+        member = json.loads(prev.read_text()).get("init_member") if init is None else (
+            args.init_member)  # fmt: skip
+        if member:
+            payload["init_member"] = member
     try:
-        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init)
+        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init,
+                                init_member=args.init_member)  # fmt: skip
     except ValueError as e:
         raise CliError(str(e)) from e
     if trainer.init_members > 1:
         print(f"--init {init}: an ensemble of {trainer.init_members} policies; training starts "
-              "from its first member (ensemble files keep no value network: a fresh critic "
-              "warms up first, ppo.critic_warmup_steps)")  # fmt: skip
+              f"from its member {args.init_member}, {trainer.init_name} (ensemble files keep no "
+              "value network: a fresh critic warms up first, ppo.critic_warmup_steps)")  # fmt: skip
     atomic_write_text(prev, json.dumps(payload, indent=1))
     t0 = time.perf_counter()
     try:

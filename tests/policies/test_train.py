@@ -280,6 +280,16 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
     tr = PolicyTrainer(_tiny(), tmp_path / "ft", SAMPLE_REFERENCE, init=exact)
     assert tr.init_members == 2 and tr._init_runner.critic is None
     np.testing.assert_allclose(tr._init_runner.act(obs), ra.act(obs), atol=1e-6)
+    # or from a later member, which takes the file's discriminator (it stores one)
+    tr = PolicyTrainer(_tiny(), tmp_path / "ft1", SAMPLE_REFERENCE, init=exact, init_member=1)
+    np.testing.assert_allclose(tr._init_runner.act(obs), rb.act(obs), atol=1e-6)
+    assert tr._init_runner.disc is not None and "member 1" in tr.init_name
+    assert tr._init_runner.fall_probability(info["amp_obs"]) == pytest.approx(
+        ra.fall_probability(info["amp_obs"]), abs=1e-5)  # fmt: skip
+    with pytest.raises(ValueError, match=r"exact\.pt: no member 2 \(the file holds 2 policies"):
+        PolicyTrainer(_tiny(), tmp_path / "ft2", SAMPLE_REFERENCE, init=exact, init_member=2)
+    with pytest.raises(ValueError, match=r"\.pt: no member 1 \(the file holds 1 policy"):
+        PolicyTrainer(_tiny(), tmp_path / "ft3", SAMPLE_REFERENCE, init=a, init_member=1)
 
 
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
