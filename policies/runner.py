@@ -215,10 +215,13 @@ class PolicyRunner:
 
 
 def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool = True,
-                  info: dict | None = None) -> int:  # fmt: skip
+                  info: dict | None = None, precision: str | None = None) -> int:  # fmt: skip
     """Write the inference file of a training run's checkpoint; returns its size in bytes.
 
-    Weights are float16 with ``half`` (cast back on load); normaliser statistics stay float64.
+    Weights are float16 with ``half`` (cast back on load), float32 without; ``precision``
+    (``"fp32"``, ``"fp16"`` or ``"int8"``, :func:`grip.kinematics.train.pack_weights`: one
+    float32 scale per weight row) overrides ``half`` and applies to the policy, value and
+    discriminator networks alike. Normaliser statistics and the log std stay as they are.
     ``info`` (JSON) is kept in the file; the run's held-out sequences (``RUN/holdout.json``)
     join it as ``info["holdout"]``, for ``grip eval-policy --split holdout``.
     """
@@ -237,7 +240,9 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     sizes, actor = _copy_mlp(pol.mlp_extractor.policy_net, pol.action_net, cfg.ppo.activation)
     critic_sizes, critic = _copy_mlp(pol.mlp_extractor.value_net, pol.value_net,
                                      cfg.ppo.activation)  # fmt: skip
-    cast = (lambda v: v.half()) if half else (lambda v: v)
+    from grip.kinematics.train import pack_weights
+
+    precision = precision or ("fp16" if half else "fp32")
     info = dict(info or {})
     holdout = run_dir / "holdout.json"  # grip train-policy's held-out clips (holdout_fraction)
     if holdout.is_file():
@@ -251,17 +256,16 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     amp_ck = load_weights(ck_dir / "amp.pt", "discriminator checkpoint")
     payload = {
         "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
-        "actor_sizes": sizes, "actor": {k: cast(v) for k, v in actor.state_dict().items()},
+        "actor_sizes": sizes, "actor": pack_weights(actor.state_dict(), precision),
         "obs_keys": keys,
         "obs_mean": {k: torch.as_tensor(norm[f"obs/{k}/mean"]) for k in keys},
         "obs_var": {k: torch.as_tensor(norm[f"obs/{k}/var"]) for k in keys},
         "obs_count": float(norm[f"obs/{keys[0]}/count"]),
         "log_std": pol.log_std.detach().clone(),
         "critic_sizes": critic_sizes,
-        "critic": {k: cast(v) for k, v in critic.state_dict().items()},
+        "critic": pack_weights(critic.state_dict(), precision),
         "clip_obs": cfg.ppo.clip_obs, "amp_frame_dim": FRAME_DIM,
-        "disc": {k: (cast(v) if k.startswith(("trunk", "head")) else v)
-                 for k, v in amp_ck["disc"].items()},
+        "disc": pack_disc(amp_ck["disc"], precision),
         "info": json.dumps(info),
     }  # fmt: skip
     buf = io.BytesIO()

@@ -294,6 +294,7 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
 
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     path, _ = run
+    import torch
     from stable_baselines3 import PPO
 
     out = tmp_path / "policy.pt"
@@ -313,6 +314,18 @@ def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     half = tmp_path / "half.pt"
     assert export_policy(path, half) < out.stat().st_size
     np.testing.assert_allclose(PolicyRunner.load(half).act(obs), expected, atol=2e-2)
+    # int8 (a scale per row) for all three networks: smaller still, and it acts, values and
+    # judges nearly as the fp32 file does (the tiny test network; the shipped one: README)
+    small = tmp_path / "int8.pt"
+    assert export_policy(path, small, precision="int8") < half.stat().st_size
+    stored = torch.load(small, weights_only=True)
+    for part in ("actor", "critic", "disc"):
+        assert any(v.dtype == torch.int8 for v in stored[part].values()), part
+    q = PolicyRunner.load(small)
+    assert 0 < np.abs(q.act(obs) - expected).max() < 0.1
+    x = torch.randn(4, runner.critic[0].in_features)
+    assert torch.allclose(q.critic(x), runner.critic(x), rtol=0.05, atol=0.05)
+    assert np.abs(q.fall_probability(info["amp_obs"]) - p).max() < 0.05
 
 
 def test_action_noise_samples_the_trained_gaussian_and_clips(run, tmp_path):
