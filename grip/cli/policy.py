@@ -107,6 +107,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "SCALE (1: the exploration noise of training) instead of the mean action "
                    "(0, the default); a diagnostic")  # fmt: skip
     e.add_argument("--seed", type=int, default=0, help="seed of the action noise")
+    e.add_argument("--repeats", type=int, default=1, metavar="N",
+                   help="replay every segment N times with --action-noise seeds SEED, SEED+1, "
+                   "...: the table pools the replays, and the success rate of each, their mean "
+                   "and standard deviation are printed and written to --json (how much a "
+                   "success rate moves under a small perturbation; needs --action-noise > 0)",
+                   )  # fmt: skip
     add_tta_argument(e)
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
@@ -385,6 +391,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                           est.cfg.features.insoles)  # fmt: skip
     except ValueError as e:
         raise CliError(str(e)) from e
+    if args.repeats < 1:
+        raise CliError(f"--repeats must be >= 1, got {args.repeats}")
+    if args.repeats > 1 and args.action_noise <= 0:
+        raise CliError("--repeats replays deterministic actions identically: give it "
+                       "--action-noise SCALE > 0 (e.g. 0.1)")  # fmt: skip
     try:
         runner.use_action_noise(args.action_noise, args.seed)
     except ValueError as e:
@@ -405,10 +416,27 @@ def cmd_eval(args: argparse.Namespace) -> int:
     recs = load_recordings(files, args.category,
                            args.segment_frames, limit=args.segments,
                            segment_stride=args.stride)  # fmt: skip
-    with tqdm(total=len(recs), unit="seg", desc="episodes") as bar:
-        rows = evaluate_policy(runner, est, recs, progress=bar.update, reference=args.reference)
+    passes: list[list[dict]] = []
+    with tqdm(total=len(recs) * args.repeats, unit="seg", desc="episodes") as bar:
+        for i in range(args.repeats):
+            if i:
+                runner.use_action_noise(args.action_noise, args.seed + i)
+            got = evaluate_policy(runner, est, recs, progress=bar.update,
+                                  reference=args.reference)  # fmt: skip
+            passes.append([dict(r, replay=i) for r in got] if args.repeats > 1 else got)
+    rows = [r for p in passes for r in p]
     summary = summarize_rows(rows)
     print(markdown_table(summary))
+    if args.repeats > 1:
+        from grip.eval.policy import replay_spread
+
+        spread = replay_spread(passes)
+        summary["overall"].update(spread)
+        each = ", ".join(f"{v:.1f}" for v in spread["success_rate_replays"])
+        print(f"success over {args.repeats} replays (--action-noise {args.action_noise}, seeds "
+              f"{args.seed}..{args.seed + args.repeats - 1}): mean "
+              f"{spread['success_rate_mean']:.1f} %, sd {spread['success_rate_sd']:.1f} "
+              f"({each}); the table pools them")  # fmt: skip
     if args.out is not None:
         write_rows(rows, summary, args.out)
         print(f"wrote {args.out}/segments.csv and {args.out}/summary.md")

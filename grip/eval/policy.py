@@ -127,6 +127,16 @@ def summarize_rows(rows: list[dict]) -> dict:
     }
 
 
+def replay_spread(passes: list[list[dict]]) -> dict[str, object]:
+    """The success rate of each replay of the same segments (``passes``: one row list per
+    replay, e.g. with other action-noise seeds), their mean and sample standard deviation (0
+    for one replay), in percent."""
+    rates = [M.success_rate([r["fell"] for r in rows]) for rows in passes]
+    sd = float(np.std(rates, ddof=1)) if len(rates) > 1 else 0.0
+    return {"success_rate_replays": rates, "success_rate_mean": float(np.mean(rates)),
+            "success_rate_sd": sd}  # fmt: skip
+
+
 _TWO_DIGITS = ("root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio")
 
 
@@ -156,6 +166,8 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = ["name", "category", "fell", "pelvis_min_m", "frames", *_MEAN_KEYS]
+    if rows and "replay" in rows[0]:  # grip eval-policy --repeats: which replay a row is of
+        keys.insert(1, "replay")
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")
     w.writeheader()

@@ -276,6 +276,22 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
         assert key in res
     assert res["segments"] == 2
     assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    # replays under action noise: each one's success rate, their mean (the pooled rate) and sd
+    rep = ["eval-policy", "--policy", str(exported), "--data", str(built), "--split", "all",
+           "--segment-frames", "100", "--segments", "2", "--json", str(js)]  # fmt: skip
+    assert main([*rep, "--repeats", "3", "--action-noise", "1", "--out", str(tmp_path / "r")]) == 0
+    res = json.loads(js.read_text())
+    assert len(res["success_rate_replays"]) == 3 and res["segments"] == 6
+    assert res["success_rate_mean"] == pytest.approx(res["success_rate"])
+    assert res["success_rate_sd"] >= 0 and "success over 3 replays" in capsys.readouterr().out
+    head = (tmp_path / "r" / "segments.csv").read_text().splitlines()
+    assert head[0].split(",")[1] == "replay" and len(head) == 7
+    assert main([*rep, "--repeats", "2"]) == 2  # deterministic replays would be identical
+    assert "--action-noise" in capsys.readouterr().err
+    # an int8 export is smaller than the fp16 one and evaluates
+    small = tmp_path / "int8.pt"
+    assert main(["policy-export", str(run), "--out", str(small), "--precision", "int8"]) == 0
+    assert small.stat().st_size < exported.stat().st_size
     # an ensemble: from repeated --policy, or from one grip policy-ensemble file
     ens = tmp_path / "ens.pt"
     assert main(["policy-ensemble", str(exported), str(run / "policy.pt"), "--out", str(ens),
