@@ -240,6 +240,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
     if args.init is not None and not args.init.is_file():
         raise CliError(f"{args.init}: no such policy file")
+    if args.init_member and args.init is None:
+        raise CliError("--init-member picks a member of the --init file: give --init too")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     kins = [kin_checkpoint(k) for k in (args.kin or [None])]

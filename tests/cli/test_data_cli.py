@@ -265,6 +265,8 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert main([*done, "--set", "ppo.learning_rate=1e-4"]) == 0  # optimiser settings may change
     assert main([*done, "--set", "ppo.net_arch=[32]"]) == 2  # the network may not: refused
     assert "ppo.net_arch" in capsys.readouterr().err
+    assert main([*done, "--init-member", "1"]) == 2  # a member of no --init file
+    assert "give --init too" in capsys.readouterr().err
     exported = tmp_path / "small.pt"
     assert main(["policy-export", str(run), "--out", str(exported)]) == 0
     js = tmp_path / "eval.json"
