@@ -12,14 +12,15 @@ of the category's segments.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
 from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
 from grip.core import skeleton as sk
+from grip.kinematics.evaluate import predict_segments
 from grip.kinematics.features import targets
 from grip.kinematics.inference import KinematicsEstimator
-from prism_tools.chunking import segments
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "legs": ("L_Hip", "R_Hip", "L_Knee", "R_Knee", "L_Ankle", "R_Ankle", "L_Foot", "R_Foot"),
@@ -31,18 +32,14 @@ GROUPS: dict[str, tuple[str, ...]] = {
 
 def joint_errors(est: KinematicsEstimator, recs: list) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame, per-joint root-relative errors ``(F, 24)`` (m) and true pelvis heights
-    ``(F,)`` (m) over the 500-frame segments of ``recs``."""
-    segs = [r.slice_frames(s.start, s.stop) for r in recs
-            for s in segments(r.n_frames, 500, min_length=10)]  # fmt: skip
-    if not segs:
-        raise SystemExit("no segments: is the category in this split?")
+    ``(F,)`` (m) over the 500-frame segments of ``recs`` (those of ``grip eval-kin``)."""
     errs, heights = [], []
-    for i in range(0, len(segs), 32):
-        part = segs[i : i + 32]
-        for rec, out in zip(part, est.predict(part), strict=True):
-            gt = targets(rec)
-            errs.append(np.linalg.norm(out.joint_pos - gt.joint_pos, axis=-1))
-            heights.append(gt.root_pos[:, 2])
+    for rec, out in predict_segments(est, recs):
+        gt = targets(rec)
+        errs.append(np.linalg.norm(out.joint_pos - gt.joint_pos, axis=-1))
+        heights.append(gt.root_pos[:, 2])
+    if not errs:
+        raise SystemExit("no segments: is the category in this split?")
     return np.concatenate(errs), np.concatenate(heights)
 
 
@@ -56,8 +53,6 @@ def main() -> None:
     ap.add_argument("--lowered", type=float, default=0.25,
                     help="metres below the category's highest pelvis that count as lowered")
     args = ap.parse_args()
-    from pathlib import Path
-
     recs = [r for r in load_recordings(split_paths(Path(args.data), args.split))
             if r.category == args.category]  # fmt: skip
     est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.model))

@@ -216,6 +216,37 @@ def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike,
     return len(buf.getvalue()), len(kept)
 
 
+def member_payload(path: str | os.PathLike, k: int) -> tuple[dict, str, int]:
+    """Member ``k`` of an ensemble file as a single-policy payload (with the file's
+    discriminator, which only the first member stores), its name, and the number of policies
+    in the file. A single-policy file is its own member 0.
+
+    Raises:
+        ValueError: naming the file, when it is no policy or holds no member ``k``.
+    """
+    path = Path(path)
+    got = _payloads(path)  # checked by loading
+    if not 0 <= k < len(got):
+        n = len(got)
+        raise ValueError(f"{path}: no member {k} (the file holds {n} "
+                         f"{'policies' if n > 1 else 'policy'}: 0..{n - 1})")  # fmt: skip
+    if len(got) == 1:
+        return got[0], str(path), 1
+    names = load_policy(path).info["members"]
+    return {**got[k], **{key: got[0][key] for key in _DISC if key in got[0]}}, names[k], len(got)
+
+
+def write_member(path: str | os.PathLike, k: int, out: str | os.PathLike) -> int:
+    """Write member ``k`` of an ensemble file as a policy file of its own (:func:`member_payload`:
+    its actor as stored, its normaliser, the file's discriminator, no value network); returns
+    its size in bytes."""
+    payload, _, _ = member_payload(path, k)
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    atomic_write(out, lambda f: f.write(buf.getvalue()))
+    return len(buf.getvalue())
+
+
 def load_policy(path: str | os.PathLike) -> PolicyRunner | PolicyEnsemble:
     """Read a policy file (:class:`PolicyRunner`) or an ensemble file (:class:`PolicyEnsemble`);
     errors name the file and the problem."""

@@ -324,20 +324,11 @@ class PolicyTrainer:
         self.init_members = 1  # policies in the --init file (an ensemble starts from its first)
         self.init_name = str(init)  # the policy started from (an ensemble's member by name)
         if init is not None:
-            from policies.ensemble import PolicyEnsemble, load_policy
+            from policies.ensemble import member_payload
+            from policies.runner import PolicyRunner
 
-            pol = load_policy(init)  # fails early, naming the file
-            n = len(pol.members) if isinstance(pol, PolicyEnsemble) else 1
-            if not 0 <= init_member < n:
-                raise ValueError(f"{init}: no member {init_member} (the file holds {n} "
-                                 f"{'policies' if n > 1 else 'policy'}: 0..{n - 1})")  # fmt: skip
-            if isinstance(pol, PolicyEnsemble):
-                self.init_members = n
-                self.init_name = pol.info["members"][init_member]
-                first = pol.members[0]
-                pol = pol.members[init_member]  # (ensemble files keep no value network)
-                if pol.disc is None:  # later members share the file's fall detector
-                    pol.disc = first.disc
+            ck, self.init_name, self.init_members = member_payload(init, init_member)
+            pol = PolicyRunner.from_payload(ck, self.init_name)  # (ensembles keep no critic)
             self._init_runner = pol
         self.stage_index = 0
         self.stage_done = 0

@@ -170,6 +170,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="actor weights: int8 with a scale per row (default) or as exported")
     n.set_defaults(func=cmd_ensemble)
 
+    m = sub.add_parser(
+        "policy-member",
+        help="write one member of an ensemble file as a policy file of its own",
+        description="Write member K of an ensemble file (0 = the first, in the order 'grip "
+        "policy-ensemble' joined them) as a single-policy file: its actor as stored, its "
+        "observation normaliser and the file's discriminator (the fall detector); no value "
+        "network. Evaluate it alone, or join it with others into a new ensemble.",
+        epilog="example: grip policy-member grip/assets/policy_default.pt 0 --out e.pt",
+    )
+    m.add_argument("ensemble", type=Path, help="ensemble file")
+    m.add_argument("member", type=int, help="member index K")
+    m.add_argument("--out", required=True, type=Path, help="output .pt")
+    m.set_defaults(func=cmd_member)
+
 
 RESUMABLE: tuple[str, ...] = (
     "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
@@ -290,15 +304,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     payload = {"config": run_config_dict(cfg), "git": git_hash(),
                "data": str(args.data.resolve()),
                "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
-    started_from = json.loads(prev.read_text()).get("init") if resuming and prev.is_file() else None
+    # what the run started from: this call's --init, or on resume what config.json recorded
+    began = json.loads(prev.read_text()) if resuming and prev.is_file() else {}
     if init is not None:
-        started_from = str(init.resolve())
-    if started_from is not None:
-        payload["init"] = started_from  # what the run started from, kept on resume
-        member = json.loads(prev.read_text()).get("init_member") if init is None else (
-            args.init_member)  # fmt: skip
-        if member:
-            payload["init_member"] = member
+        began = {"init": str(init.resolve()), "init_member": args.init_member}
+    payload.update({k: began[k] for k in ("init", "init_member") if began.get(k) is not None})
     try:
         trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init,
                                 init_member=args.init_member)  # fmt: skip
@@ -365,6 +375,18 @@ def cmd_ensemble(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError, OSError) as e:
         raise CliError(str(e)) from e
     print(f"wrote {args.out} ({size / 1e6:.1f} MB), an ensemble of {n} policies")
+    return 0
+
+
+def cmd_member(args: argparse.Namespace) -> int:
+    from grip.cli.main import CliError
+    from policies.ensemble import write_member
+
+    try:
+        size = write_member(args.ensemble, args.member, args.out)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        raise CliError(str(e)) from e
+    print(f"wrote {args.out} ({size / 1e6:.1f} MB), member {args.member} of {args.ensemble}")
     return 0
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -46,6 +46,26 @@ def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
     }
 
 
+def predict_segments(
+    est: KinematicsEstimator,
+    recs: list,
+    segment_frames: int = 500,
+    batch: int = 32,
+    progress: Callable[[int], object] | None = None,
+) -> Iterator[tuple[object, object]]:
+    """Cut recordings into segments (each initialised from its first frame's ground truth, the
+    GRIP protocol), run them in batches and yield ``(segment recording, estimate)`` pairs."""
+    from prism_tools.chunking import segments
+
+    segs = [rec.slice_frames(sl.start, sl.stop) for rec in recs
+            for sl in segments(rec.n_frames, segment_frames, min_length=10)]  # fmt: skip
+    for i in range(0, len(segs), batch):
+        part = segs[i : i + batch]
+        yield from zip(part, est.predict(part), strict=True)
+        if progress is not None:
+            progress(len(part))
+
+
 def evaluate_recordings(
     est: KinematicsEstimator,
     recs: list,
@@ -54,24 +74,11 @@ def evaluate_recordings(
     progress: Callable[[int], object] | None = None,
     joints: str = "pose",
 ) -> list[dict]:
-    """Cut recordings into segments (each initialised from its first frame's ground truth, the
-    GRIP protocol), run them in batches and return one metrics dict per segment (with
-    ``name`` and ``category``)."""
-    from prism_tools.chunking import segments
-
-    segs = []
-    for rec in recs:
-        for sl in segments(rec.n_frames, segment_frames, min_length=10):
-            segs.append(rec.slice_frames(sl.start, sl.stop))
-    rows = []
-    for i in range(0, len(segs), batch):
-        part = segs[i : i + batch]
-        for rec, out in zip(part, est.predict(part), strict=True):
-            rows.append({"name": rec.name, "category": rec.category or "unknown",
-                         **segment_metrics(out, rec, joints)})  # fmt: skip
-        if progress is not None:
-            progress(len(part))
-    return rows
+    """:func:`predict_segments` scored: one metrics dict per segment (with ``name`` and
+    ``category``)."""
+    pairs = predict_segments(est, recs, segment_frames, batch, progress)
+    return [{"name": rec.name, "category": rec.category or "unknown",
+             **segment_metrics(out, rec, joints)} for rec, out in pairs]  # fmt: skip
 
 
 def aggregate(rows: list[dict]) -> dict:

@@ -310,6 +310,18 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert json.loads(js2.read_text())["segments"] == 2
     assert main(["policy-ensemble", str(exported), "--out", str(tmp_path / "one.pt")]) == 2
     assert "at least two" in capsys.readouterr().err
+    # a member written out alone acts as the ensemble's member (with the file's fall detector)
+    from policies.ensemble import load_policy
+
+    one = tmp_path / "member1.pt"
+    assert main(["policy-member", str(ens), "1", "--out", str(one)]) == 0
+    alone, whole = load_policy(one), load_policy(ens)
+    assert alone.disc is not None and alone.critic is None
+    for a, b in zip(alone.actor.state_dict().values(), whole.members[1].actor.state_dict().values(),
+                    strict=True):  # fmt: skip
+        assert a.equal(b)
+    assert main(["policy-member", str(ens), "2", "--out", str(tmp_path / "m2.pt")]) == 2
+    assert "no member 2" in capsys.readouterr().err and not (tmp_path / "m2.pt").exists()
     # two KinematicsNets: the references hold every training recording once per estimator
     kin = str(REPO_ROOT / "grip/assets/kinematics_default.pt")
     two = tmp_path / "policy_two_kin"
