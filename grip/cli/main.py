@@ -11,7 +11,18 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from grip.cli import baselines, bench, bench_env, body, data, demo, export, kinematics, policy
+from grip.cli import (
+    baselines,
+    bench,
+    bench_env,
+    body,
+    data,
+    demo,
+    distill,
+    export,
+    kinematics,
+    policy,
+)
 from grip.cli import reconstruct as reconstruct_cmd
 
 
@@ -30,8 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
     sub.required = True
-    for module in (data, body, kinematics, baselines, policy, reconstruct_cmd, bench, bench_env,
-                   demo, export):  # fmt: skip
+    for module in (data, body, kinematics, baselines, policy, distill, reconstruct_cmd, bench,
+                   bench_env, demo, export):  # fmt: skip
         module.add_parser(sub)
     return parser
 

@@ -240,12 +240,55 @@ def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
     return kept
 
 
+def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins: list[Path],
+                             reverse_categories: tuple[str, ...] = (),
+                             mirror: bool = False) -> None:  # fmt: skip
+    """Write the training reference set ``ref_path`` (the recordings ``files`` of dataset
+    ``data`` with the estimates of each KinematicsNet checkpoint in ``kins``; training clips of
+    ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``)
+    unless it exists. Shared by ``grip train-policy`` and ``grip distill-policy``."""
+    from tqdm import tqdm
+
+    from grip.cli.main import CliError
+    from grip.cli.recordings import load_recordings
+
+    if ref_path.is_file():
+        return
+    from grip.kinematics.inference import KinematicsEstimator
+    from grip.kinematics.reference import build_reference_set, merge_reference_sets
+
+    recs = load_recordings(files)
+    if reverse_categories:
+        from grip.cli.recordings import reversed_training_recordings
+
+        recs += reversed_training_recordings(data, files, reverse_categories)
+    sets = []
+    for kin in kins:
+        try:
+            est = KinematicsEstimator.from_checkpoint(kin)
+        except ValueError as e:
+            raise CliError(str(e)) from e
+        desc = f"KinematicsNet estimates ({kin.name})"
+        with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
+            sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin)))
+    try:
+        ref = merge_reference_sets(sets, source=str(ref_path))
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    if mirror:
+        from grip.kinematics.reference import with_mirrored_clips
+
+        ref = with_mirrored_clips(ref)
+    ref.save(ref_path)
+    print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
     from grip.cli.paths import load_run_config
-    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
+    from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.train import git_hash
     from policies.config import PolicyRunConfig
@@ -261,34 +304,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     kins = [kin_checkpoint(k) for k in (args.kin or [None])]
     ref_path = out / "reference_train.npz"
     files = training_files(split_paths(args.data, "train"), cfg, out)
-    if not ref_path.is_file():
-        from grip.kinematics.inference import KinematicsEstimator
-        from grip.kinematics.reference import build_reference_set, merge_reference_sets
-
-        recs = load_recordings(files)
-        if cfg.reverse_categories:
-            from grip.cli.recordings import reversed_training_recordings
-
-            recs += reversed_training_recordings(args.data, files, cfg.reverse_categories)
-        sets = []
-        for kin in kins:
-            try:
-                est = KinematicsEstimator.from_checkpoint(kin)
-            except ValueError as e:
-                raise CliError(str(e)) from e
-            desc = f"KinematicsNet estimates ({kin.name})"
-            with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
-                sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin)))
-        try:
-            ref = merge_reference_sets(sets, source=str(ref_path))
-        except ValueError as e:
-            raise CliError(str(e)) from e
-        if cfg.mirror_references:
-            from grip.kinematics.reference import with_mirrored_clips
-
-            ref = with_mirrored_clips(ref)
-        ref.save(ref_path)
-        print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
+    build_training_reference(ref_path, args.data, files, kins, cfg.reverse_categories,
+                             cfg.mirror_references)  # fmt: skip
     prev = out / "config.json"
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
         changed = changed_settings(json.loads(prev.read_text())["config"], run_config_dict(cfg),

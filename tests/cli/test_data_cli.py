@@ -454,3 +454,83 @@ def test_time_reversed_motions_join_the_policy_references(built: Path, tmp_path:
     assert main([*args[:4], str(tmp_path / "none"), *args[5:-1],
                  'reverse_categories=["no-such-category"]']) == 2  # fmt: skip
     assert "no training clip" in capsys.readouterr().err
+
+
+TINY_DISTILL = ["--set", "iterations=2", "--set", "decisions_per_iteration=64",
+                "--set", "n_envs=2", "--set", "max_samples=256", "--set", "categories=[]",
+                "--set", "reverse_categories=[]", "--set", "mirror_references=false",
+                "--set", "max_episode_frames=40", "--set", "epochs=30",
+                "--set", "batch_size=64", "--set", "learning_rate=1e-2"]  # fmt: skip
+"""A DAgger run of a few seconds (``grip distill-policy`` settings)."""
+
+
+def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
+    built: Path, tmp_path: Path, capsys
+) -> None:
+    import numpy as np
+    import torch
+
+    from policies.ensemble import load_policy
+
+    pols = []
+    for seed in (0, 1):  # two tiny policies that act differently: the teacher is their mean
+        run = tmp_path / f"p{seed}"
+        assert main(["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY,
+                     "--set", f"seed={seed}"]) == 0  # fmt: skip
+        pols.append(run / "policy.pt")
+    # member 0 pushes every action by +0.4: the mean action is member 1's + 0.2
+    from grip.kinematics.train import pack_weights
+    from policies.runner import linear_layers
+
+    payload = torch.load(pols[0], weights_only=True)
+    shifted = load_policy(pols[0])
+    with torch.no_grad():
+        linear_layers(shifted.actor)[-1].bias += 0.4
+    payload["actor"] = pack_weights(shifted.actor.state_dict(), "fp32")
+    pols[0] = tmp_path / "shifted.pt"
+    torch.save(payload, pols[0])
+    out = tmp_path / "distill"
+    args = ["distill-policy", "--teacher", str(pols[0]), "--teacher", str(pols[1]),
+            "--data", str(built), "--out", str(out), *TINY_DISTILL, "--set", "init_member=1"]
+    assert main(args) == 0
+    state = json.loads((out / "checkpoint" / "state.json").read_text())
+    hist = state["history"]
+    assert state["iteration"] == 2 and [h["iteration"] for h in hist] == [1, 2]
+    assert [h["beta"] for h in hist] == [1.0, 0.5] and all(h["decisions"] == 64 for h in hist)
+    # the student starts as member 1 and ends much closer to the members' mean action
+    assert hist[0]["onpolicy_mse"] > 0 and hist[-1]["fit_mse"] < 0.5 * hist[0]["onpolicy_mse"]
+    assert sorted(p.name for p in (out / "data").iterdir()) == ["iter_000.npz", "iter_001.npz"]
+    assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
+    student, teacher = load_policy(out / "policy.pt"), load_policy(pols[1])
+    assert json.loads((out / "config.json").read_text())["config"]["init_member"] == 1
+    assert student.info["distilled"]["iterations"] == 2 and student.disc is not None
+    assert student.obs_keys == teacher.obs_keys and np.allclose(student._mean, teacher._mean)
+    changed = [not a.equal(b) for a, b in zip(student.actor.state_dict().values(),
+                                              teacher.actor.state_dict().values(), strict=True)]
+    assert any(changed)
+    with np.load(out / "data" / "iter_001.npz") as z:  # teacher labels of the student's states
+        x, y = torch.from_numpy(z["x"]).float(), z["y"].astype(np.float32)
+    both = load_policy(pols[0]), teacher
+    with torch.no_grad():  # (x holds member 1's normalised inputs: member 1 acts on it directly)
+        a1 = np.clip(both[1].actor(x).numpy(), -1, 1)
+    assert np.abs(a1 - y).max() > 1e-3  # the label is not member 1's own action
+    # resume: more iterations continue the run; other settings are refused by name
+    assert main([*args, "--set", "iterations=3"]) == 0
+    assert json.loads((out / "checkpoint" / "state.json").read_text())["iteration"] == 3
+    assert len(list((out / "data").glob("iter_*.npz"))) == 3
+    capsys.readouterr()
+    assert main([*args, "--set", "iterations=3", "--set", "beta_decay=0.9"]) == 2
+    assert "beta_decay" in capsys.readouterr().err
+    # the distilled file plays like any policy; bad members and teachers are named
+    js = tmp_path / "d.json"
+    assert main(["eval-policy", "--policy", str(out / "policy.pt"), "--data", str(built),
+                 "--split", "all", "--segment-frames", "100", "--segments", "1",
+                 "--json", str(js)]) == 0  # fmt: skip
+    assert json.loads(js.read_text())["segments"] == 1
+    bad = ["distill-policy", "--teacher", str(pols[0]), "--data", str(built), "--out",
+           str(tmp_path / "d2"), *TINY_DISTILL]  # fmt: skip
+    assert main([*bad, "--set", "init_member=3"]) == 2
+    assert "init_member 3" in capsys.readouterr().err
+    assert main([*bad[:2], str(tmp_path / "none.pt"), *bad[3:]]) == 2
+    assert "none.pt" in capsys.readouterr().err
+    assert main([*bad, "--set", "beta0=2"]) == 2

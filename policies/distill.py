@@ -1,0 +1,412 @@
+"""Distil a teacher policy (usually an ensemble) into one network with DAgger.
+
+The shipped controller is an ensemble whose mean action keeps more segments on their feet than
+any of its members alone (README, "Ensembles"). :class:`Distiller` trains a single student
+network to act like the teacher on the states the *student* visits (DAgger, Ross et al. 2011):
+
+1. Roll out the training environments (GRIP's stage 2: random starts, falls end episodes) with
+   the student acting, except that each action is the teacher's with probability ``beta_i =
+   beta0 x beta_decay^i`` in iteration ``i`` (iteration 0 with ``beta0 = 1`` is behaviour
+   cloning on the teacher's own states).
+2. Label every visited observation with the teacher's action and add it to the data set (the
+   newest ``max_samples`` are kept).
+3. Fit the student to all labels by mean-squared error for ``epochs`` passes.
+
+The student has one member's network shape and observation normaliser and starts from that
+member's weights (``init_member``), so its file is an ordinary policy file: ``grip eval-policy``
+plays it and ``grip train-policy --init`` fine-tunes it with PPO. Runs checkpoint after every
+iteration (``RUN/checkpoint/``, ``RUN/data/iter_NNN.npz``) and resume.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from grip.core.atomic import atomic_write, atomic_write_text
+
+
+@dataclass(frozen=True)
+class DistillConfig:
+    """Settings of ``grip distill-policy`` (``configs/policy/distill.toml``).
+
+    Attributes:
+        iterations: DAgger iterations (each: a rollout, then a fit).
+        decisions_per_iteration: Policy decisions collected per iteration, all environments
+            together (one decision = ``env.action_repeat`` frames of the teacher's settings).
+        n_envs: Environments stepped together.
+        beta0: Share of the teacher's actions in iteration 0 (1: behaviour cloning first).
+        beta_decay: Factor on that share after each iteration.
+        epochs: Passes over the whole data set per iteration.
+        batch_size: Samples per gradient step.
+        learning_rate: Adam's step size.
+        max_samples: Samples kept (the oldest are dropped).
+        init_member: The teacher's member whose network shape, normaliser, discriminator and
+            (unless ``fresh_student``) weights the student takes.
+        fresh_student: Start from random weights instead of the member's.
+        categories: Motion categories of the training clips (globs).
+        max_episode_frames: Truncate episodes after this many decisions (0: the clip's end).
+        fall_height_m: An episode ends when the pelvis is below this height, m.
+        reverse_categories: As ``grip train-policy``'s: training clips of these categories,
+            played backwards, join the reference set (``RUN/reference_train.npz``).
+        mirror_references: As ``grip train-policy``'s: the mirror image of every clip joins.
+        threads: Torch threads (0: all cores).
+        seed: Seed of the environments, the mixing and the minibatches.
+    """
+
+    iterations: int = 8
+    decisions_per_iteration: int = 40960
+    n_envs: int = 16
+    beta0: float = 1.0
+    beta_decay: float = 0.5
+    epochs: int = 2
+    batch_size: int = 2048
+    learning_rate: float = 1e-4
+    max_samples: int = 400_000
+    init_member: int = 0
+    fresh_student: bool = False
+    categories: tuple[str, ...] = ("walk*", "run*", "dash*")
+    max_episode_frames: int = 1000
+    fall_height_m: float = 0.3
+    reverse_categories: tuple[str, ...] = ("walk",)
+    mirror_references: bool = True
+    threads: int = 0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        checks = (
+            (self.iterations >= 1, "iterations must be >= 1"),
+            (self.n_envs >= 1, "n_envs must be >= 1"),
+            (self.decisions_per_iteration >= self.n_envs,
+             "decisions_per_iteration must be at least n_envs"),
+            (0.0 <= self.beta0 <= 1.0 and 0.0 <= self.beta_decay <= 1.0,
+             "beta0 and beta_decay must be in [0, 1]"),
+            (self.epochs >= 1 and self.batch_size >= 1, "epochs and batch_size must be >= 1"),
+            (self.learning_rate > 0, "learning_rate must be > 0"),
+            (self.max_samples >= self.decisions_per_iteration,
+             "max_samples must hold at least one iteration's decisions"),
+            (self.init_member >= 0, "init_member must be >= 0"),
+            (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
+             "fall_height_m and max_episode_frames must be >= 0"),
+        )  # fmt: skip
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(f"DistillConfig: {msg}")
+
+    def beta(self, iteration: int) -> float:
+        """The teacher's share of the actions played in ``iteration``."""
+        return self.beta0 * self.beta_decay**iteration
+
+
+def teacher_payloads(paths: Sequence[str | os.PathLike]) -> tuple[list[dict], list[str]]:
+    """The single-policy payloads of every member of the policy or ensemble files ``paths`` and
+    their names; each carries the first file's discriminator when it has none of its own."""
+    from policies.ensemble import member_payload
+
+    payloads: list[dict] = []
+    names: list[str] = []
+    for p in paths:
+        _, _, n = member_payload(p, 0)
+        for k in range(n):
+            ck, name, _ = member_payload(p, k)
+            payloads.append(ck)
+            names.append(name)
+    if payloads and "disc" in payloads[0]:
+        for ck in payloads[1:]:
+            ck.setdefault("disc", payloads[0]["disc"])
+            ck.setdefault("amp_frame_dim", payloads[0]["amp_frame_dim"])
+    return payloads, names
+
+
+class Distiller:
+    """A resumable DAgger run in ``run_dir``.
+
+    Args:
+        cfg: Settings.
+        teacher: Policy or ensemble files whose (mean) action the student learns.
+        run_dir: Run folder (created or resumed).
+        reference: The training reference set (``.npz``, as ``grip train-policy`` builds it).
+        progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
+        log: Where each iteration's summary line goes (None: nowhere).
+
+    Raises:
+        ValueError: naming the file, when a teacher file is not a policy, its members act
+            differently, or ``cfg.init_member`` is not one of them.
+    """
+
+    def __init__(self, cfg: DistillConfig, teacher: Sequence[str | os.PathLike],
+                 run_dir: str | os.PathLike, reference: str | os.PathLike,
+                 progress: Callable | None = None,
+                 log: Callable[[str], None] | None = None) -> None:  # fmt: skip
+        from policies.ensemble import PolicyEnsemble
+        from policies.runner import PolicyRunner
+
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        self.reference = str(reference)
+        self.progress = progress
+        self.log = log or (lambda _s: None)
+        self.teacher_files = [str(p) for p in teacher]
+        payloads, self.teacher_names = teacher_payloads(self.teacher_files)
+        if not cfg.init_member < len(payloads):
+            raise ValueError(f"init_member {cfg.init_member}: the teacher has {len(payloads)} "
+                             f"member(s) (0..{len(payloads) - 1})")  # fmt: skip
+        runners = [PolicyRunner.from_payload(ck, n)
+                   for ck, n in zip(payloads, self.teacher_names, strict=True)]  # fmt: skip
+        self.teacher = (
+            runners[0] if len(runners) == 1 else PolicyEnsemble(runners, self.teacher_names)
+        )
+        self.base = payloads[cfg.init_member]
+        self.student = PolicyRunner.from_payload(self.base, self.teacher_names[cfg.init_member])
+        if cfg.fresh_student:
+            for m in self.student.actor:
+                if isinstance(m, torch.nn.Linear):
+                    m.reset_parameters()
+        self.optim = torch.optim.Adam(self.student.actor.parameters(), lr=cfg.learning_rate)
+        self.iteration = 0
+        self.history: list[dict] = []
+        self._wall0 = 0.0
+        self._t0 = time.time()
+
+    # -------------------------------------------------------------- bookkeeping
+    @property
+    def ckpt_dir(self) -> Path:
+        return self.run_dir / "checkpoint"
+
+    @property
+    def data_dir(self) -> Path:
+        return self.run_dir / "data"
+
+    def wall_s(self) -> float:
+        return self._wall0 + time.time() - self._t0
+
+    def save_checkpoint(self) -> None:
+        """The student, its optimiser and the history, written atomically (file by file; the
+        state file last, so a run killed in between resumes from the previous iteration)."""
+        self.ckpt_dir.mkdir(parents=True, exist_ok=True)
+        buf = io.BytesIO()
+        torch.save({"actor": self.student.actor.state_dict(), "optim": self.optim.state_dict(),
+                    "iteration": self.iteration}, buf)  # fmt: skip
+        atomic_write(self.ckpt_dir / "student.pt", lambda f: f.write(buf.getvalue()))
+        state = {"iteration": self.iteration, "wall_s": self.wall_s(), "history": self.history}
+        atomic_write_text(self.ckpt_dir / "state.json", json.dumps(state))
+
+    def _resume(self) -> None:
+        from policies.runner import load_weights
+
+        p = self.ckpt_dir / "state.json"
+        if not p.is_file():
+            return
+        try:
+            state = json.loads(p.read_text())
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{p}: unreadable distillation state ({e})") from e
+        ck = load_weights(self.ckpt_dir / "student.pt", "distillation checkpoint")
+        if int(ck.get("iteration", -1)) != int(state["iteration"]):
+            raise ValueError(
+                f"{self.ckpt_dir}: student.pt (iteration {ck.get('iteration')}) "
+                f"and state.json (iteration {state['iteration']}) disagree"
+            )
+        self.student.actor.load_state_dict(ck["actor"])
+        self.optim.load_state_dict(ck["optim"])
+        self.iteration, self._wall0 = int(state["iteration"]), float(state["wall_s"])
+        self.history = list(state["history"])
+
+    # -------------------------------------------------------------- data
+    def _data_files(self) -> list[Path]:
+        return sorted(self.data_dir.glob("iter_*.npz"))[: self.iteration]
+
+    def _load_data(self) -> tuple[np.ndarray, np.ndarray]:
+        """The newest ``max_samples`` samples of the iterations done: normalised student inputs
+        and teacher actions (float16 on disk)."""
+        xs, ys, n = [], [], 0
+        for f in reversed(self._data_files()):
+            try:
+                with np.load(f, allow_pickle=False) as z:
+                    x, y = z["x"], z["y"]
+            except (OSError, ValueError, KeyError) as e:
+                raise ValueError(f"{f}: unreadable distillation data ({e})") from e
+            xs.append(x)
+            ys.append(y)
+            n += len(x)
+            if n >= self.cfg.max_samples:
+                break
+        x = np.concatenate(xs[::-1])[-self.cfg.max_samples :]
+        y = np.concatenate(ys[::-1])[-self.cfg.max_samples :]
+        return x, y
+
+    def _make_env(self):
+        from stable_baselines3.common.vec_env import DummyVecEnv
+
+        from policies.train import EnvFactory
+
+        c = self.cfg
+        env_cfg = dataclasses.replace(
+            self.teacher.env_cfg, reference=self.reference, random_start=True, clip_index=-1,
+            termination_dist_m=0.0, fall_height_m=c.fall_height_m,
+            max_episode_frames=c.max_episode_frames,
+        )  # fmt: skip
+        seed = c.seed + 7919 * self.iteration
+        return DummyVecEnv([EnvFactory(env_cfg, c.categories, seed + 1000 * i)
+                            for i in range(c.n_envs)])  # fmt: skip
+
+    def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
+        """One rollout of ``decisions_per_iteration`` decisions with the student acting (the
+        teacher with probability ``beta``); returns the normalised inputs, the teacher's actions
+        and the rollout's statistics."""
+        c = self.cfg
+        beta = c.beta(self.iteration)
+        rng = np.random.default_rng(c.seed + 104729 * (self.iteration + 1))
+        venv = self._make_env()
+        steps = -(-c.decisions_per_iteration // c.n_envs)
+        xs, ys = [], []
+        sq_err = 0.0
+        ended = falls = 0
+        ep_len = np.zeros(c.n_envs, np.int64)
+        lens: list[int] = []
+        try:
+            obs = venv.reset()
+            for _ in range(steps):
+                x = self.student._flat(obs)
+                a_t = self.teacher.act(obs)
+                with torch.no_grad():
+                    a_s = self.student.actor(torch.as_tensor(x, dtype=torch.float32)).numpy()
+                a_s = np.clip(a_s, -1.0, 1.0)
+                sq_err += float(((a_s - a_t) ** 2).mean(1).sum())
+                use_t = rng.random(c.n_envs) < beta
+                xs.append(x.astype(np.float16))
+                ys.append(a_t.astype(np.float16))
+                obs, _r, dones, infos = venv.step(np.where(use_t[:, None], a_t, a_s))
+                ep_len += 1
+                for i in np.flatnonzero(dones):
+                    ended += 1
+                    falls += not infos[i].get("TimeLimit.truncated", False)
+                    lens.append(int(ep_len[i]))
+                    ep_len[i] = 0
+                if bar is not None:
+                    bar.update(c.n_envs)
+        finally:
+            venv.close()
+        n = steps * c.n_envs
+        stats = {"beta": beta, "decisions": n, "episodes": ended, "falls": falls,
+                 "falls_per_1k": 1000.0 * falls / n,
+                 "ep_len": float(np.mean(lens)) if lens else float("nan"),
+                 "onpolicy_mse": sq_err / n}  # fmt: skip
+        return np.concatenate(xs), np.concatenate(ys), stats
+
+    def fit(self, x: np.ndarray, y: np.ndarray) -> float:
+        """``epochs`` passes of mean-squared error over ``(x, y)``; returns the last pass's mean
+        loss."""
+        c = self.cfg
+        rng = np.random.default_rng(c.seed + 15485863 * (self.iteration + 1))
+        actor = self.student.actor.train()
+        xt, yt = torch.from_numpy(x), torch.from_numpy(y)
+        loss_sum = 0.0
+        for _ in range(c.epochs):
+            order = torch.from_numpy(rng.permutation(len(x)))
+            loss_sum, seen = 0.0, 0
+            for s in range(0, len(x), c.batch_size):
+                idx = order[s : s + c.batch_size]
+                pred = actor(xt[idx].float())
+                loss = torch.nn.functional.mse_loss(pred, yt[idx].float())
+                self.optim.zero_grad()
+                loss.backward()
+                self.optim.step()
+                loss_sum += float(loss.detach()) * len(idx)
+                seen += len(idx)
+            loss_sum /= max(seen, 1)
+        actor.eval()
+        return loss_sum
+
+    # -------------------------------------------------------------- run
+    def run(self) -> None:
+        """Run (or resume) the iterations left, checkpointing after each."""
+        c = self.cfg
+        if c.threads:
+            torch.set_num_threads(c.threads)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.data_dir.mkdir(exist_ok=True)
+        self._resume()
+        per_iter = -(-c.decisions_per_iteration // c.n_envs) * c.n_envs
+        bar = None
+        if self.progress is not None:
+            bar = self.progress(total=c.iterations * per_iter, initial=self.iteration * per_iter,
+                                unit="decision", smoothing=0.05)  # fmt: skip
+        try:
+            while self.iteration < c.iterations:
+                t0 = time.time()
+                x, y, stats = self.collect(bar)
+                f = self.data_dir / f"iter_{self.iteration:03d}.npz"
+                atomic_write(f, lambda fh, x=x, y=y: np.savez(fh, x=x, y=y))
+                t1 = time.time()
+                self.iteration += 1
+                xa, ya = self._load_data()
+                stats["fit_mse"] = self.fit(xa, ya)
+                stats.update(iteration=self.iteration, samples=len(xa),
+                             collect_s=t1 - t0, fit_s=time.time() - t1)  # fmt: skip
+                self.history.append(stats)
+                self.save_checkpoint()
+                self.log(f"iteration {self.iteration}/{c.iterations}: beta {stats['beta']:.3f}, "
+                         f"falls {stats['falls']} of {stats['episodes']} episodes "
+                         f"({stats['falls_per_1k']:.2f} per 1k decisions), on-policy MSE "
+                         f"{stats['onpolicy_mse']:.4f}, fit MSE {stats['fit_mse']:.4f} on "
+                         f"{len(xa)} samples ({stats['collect_s']:.0f} + "
+                         f"{stats['fit_s']:.0f} s)")  # fmt: skip
+        finally:
+            if bar is not None:
+                bar.close()
+
+    def export(self, out: str | os.PathLike, precision: str = "fp16") -> int:
+        """Write the student as a policy file (the member's payload with the student's actor);
+        returns its size in bytes."""
+        from grip.kinematics.train import pack_weights
+
+        payload = dict(self.base)
+        payload["actor"] = pack_weights(self.student.actor.state_dict(), precision)
+        info = json.loads(payload.get("info", "{}"))
+        info = {k: v for k, v in info.items() if k == "holdout"}
+        info["distilled"] = {"teacher": self.teacher_names, "init_member": self.cfg.init_member,
+                             "iterations": self.iteration,
+                             "decisions": sum(h["decisions"] for h in self.history),
+                             "wall_s": self.wall_s()}  # fmt: skip
+        payload["info"] = json.dumps(info)
+        buf = io.BytesIO()
+        torch.save(payload, buf)
+        atomic_write(out, lambda f: f.write(buf.getvalue()))
+        return len(buf.getvalue())
+
+
+def plot_distill_curves(history: list[dict], out_png: str | os.PathLike) -> None:
+    """Falls per 1,000 decisions and the student's error against the teacher, per iteration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    it = [h["iteration"] for h in history]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
+    axes[0].plot(it, [h["falls_per_1k"] for h in history], "o-")
+    axes[0].set_ylabel("falls per 1,000 decisions")
+    axes[1].plot(it, [h["onpolicy_mse"] for h in history], "o-", label="on its states, before fit")
+    axes[1].plot(it, [h["fit_mse"] for h in history], "s--", label="fit (all data)")
+    axes[1].set_ylabel("student - teacher action MSE")
+    axes[1].set_yscale("log")
+    axes[1].legend()
+    axes[2].plot(it, [h["beta"] for h in history], "o-")
+    axes[2].set_ylabel("teacher's share of actions (beta)")
+    for ax in axes:
+        ax.set_xlabel("DAgger iteration")
+        ax.grid(alpha=0.3)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    atomic_write(out_png, lambda f: f.write(buf.getvalue()))
