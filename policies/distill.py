@@ -56,6 +56,15 @@ class DistillConfig:
         categories: Motion categories of the training clips (globs).
         max_episode_frames: Truncate episodes after this many decisions (0: the clip's end).
         fall_height_m: An episode ends when the pelvis is below this height, m.
+        action_noise: Standard deviation of Gaussian noise added to every action played
+            (clipped to [-1, 1]); the label stays the teacher's action without noise. Noise in
+            the rollouts shows the student the teacher's corrections from states a little off
+            its own path (DART, Laskey et al. 2017). 0: none.
+        push_force_n: Random pushes on the pelvis during the rollouts
+            (:class:`envs.wrappers.RandomPushes`, as ``grip train-policy``'s), largest force, N;
+            0: none.
+        push_every_s: Mean wait between pushes, s.
+        push_duration_s: Length of a push, s.
         reverse_categories: As ``grip train-policy``'s: training clips of these categories,
             played backwards, join the reference set (``RUN/reference_train.npz``).
         mirror_references: As ``grip train-policy``'s: the mirror image of every clip joins.
@@ -79,6 +88,10 @@ class DistillConfig:
     fall_height_m: float = 0.3
     reverse_categories: tuple[str, ...] = ("walk",)
     mirror_references: bool = True
+    action_noise: float = 0.0
+    push_force_n: float = 0.0
+    push_every_s: float = 3.0
+    push_duration_s: float = 0.2
     threads: int = 0
     seed: int = 0
 
@@ -95,6 +108,9 @@ class DistillConfig:
             (self.max_samples >= self.decisions_per_iteration,
              "max_samples must hold at least one iteration's decisions"),
             (self.init_member >= 0, "init_member must be >= 0"),
+            (self.action_noise >= 0, "action_noise must be >= 0"),
+            (self.push_force_n >= 0 and self.push_every_s > 0 and self.push_duration_s > 0,
+             "push_force_n must be >= 0 (0 = off), push_every_s and push_duration_s > 0"),
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
              "fall_height_m and max_episode_frames must be >= 0"),
         )  # fmt: skip
@@ -256,7 +272,8 @@ class Distiller:
             max_episode_frames=c.max_episode_frames,
         )  # fmt: skip
         seed = c.seed + 7919 * self.iteration
-        return DummyVecEnv([EnvFactory(env_cfg, c.categories, seed + 1000 * i)
+        push = (c.push_force_n, c.push_every_s, c.push_duration_s) if c.push_force_n > 0 else None
+        return DummyVecEnv([EnvFactory(env_cfg, c.categories, seed + 1000 * i, push)
                             for i in range(c.n_envs)])  # fmt: skip
 
     def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -285,7 +302,10 @@ class Distiller:
                 use_t = rng.random(c.n_envs) < beta
                 xs.append(x.astype(np.float16))
                 ys.append(a_t.astype(np.float16))
-                obs, _r, dones, infos = venv.step(np.where(use_t[:, None], a_t, a_s))
+                a = np.where(use_t[:, None], a_t, a_s)
+                if c.action_noise > 0:
+                    a = np.clip(a + c.action_noise * rng.standard_normal(a.shape), -1.0, 1.0)
+                obs, _r, dones, infos = venv.step(a)
                 ep_len += 1
                 for i in np.flatnonzero(dones):
                     ended += 1

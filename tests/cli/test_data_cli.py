@@ -534,3 +534,12 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert main([*bad[:2], str(tmp_path / "none.pt"), *bad[3:]]) == 2
     assert "none.pt" in capsys.readouterr().err
     assert main([*bad, "--set", "beta0=2"]) == 2
+    assert main([*bad, "--set", "action_noise=-1"]) == 2
+    # noise on the played actions and pushes move the rollouts off the teacher's own states
+    noisy = tmp_path / "noisy"
+    assert main([*args[:8], str(noisy), *TINY_DISTILL, "--set", "init_member=1",
+                 "--set", "iterations=1", "--set", "action_noise=0.5",
+                 "--set", "push_force_n=300", "--set", "push_every_s=0.1"]) == 0  # fmt: skip
+    with np.load(out / "data" / "iter_000.npz") as a, np.load(noisy / "data" / "iter_000.npz") as b:
+        assert a["x"].shape == b["x"].shape and not np.array_equal(a["x"], b["x"])
+        np.testing.assert_array_equal(a["x"][:2], b["x"][:2])  # the same first states
