@@ -79,7 +79,7 @@ class DistillConfig:
     beta_decay: float = 0.5
     epochs: int = 2
     batch_size: int = 2048
-    learning_rate: float = 1e-4
+    learning_rate: float = 3e-4
     max_samples: int = 400_000
     init_member: int = 0
     fresh_student: bool = False
