@@ -126,14 +126,12 @@ class DistillConfig:
 def teacher_payloads(paths: Sequence[str | os.PathLike]) -> tuple[list[dict], list[str]]:
     """The single-policy payloads of every member of the policy or ensemble files ``paths`` and
     their names; each carries the first file's discriminator when it has none of its own."""
-    from policies.ensemble import member_payload
+    from policies.ensemble import member_payloads
 
     payloads: list[dict] = []
     names: list[str] = []
     for p in paths:
-        _, _, n = member_payload(p, 0)
-        for k in range(n):
-            ck, name, _ = member_payload(p, k)
+        for ck, name in member_payloads(p):
             payloads.append(ck)
             names.append(name)
     if payloads and "disc" in payloads[0]:

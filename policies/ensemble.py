@@ -224,16 +224,25 @@ def member_payload(path: str | os.PathLike, k: int) -> tuple[dict, str, int]:
     Raises:
         ValueError: naming the file, when it is no policy or holds no member ``k``.
     """
-    path = Path(path)
-    got = _payloads(path)  # checked by loading
-    if not 0 <= k < len(got):
-        n = len(got)
+    members = member_payloads(path)
+    if not 0 <= k < len(members):
+        n = len(members)
         raise ValueError(f"{path}: no member {k} (the file holds {n} "
                          f"{'policies' if n > 1 else 'policy'}: 0..{n - 1})")  # fmt: skip
+    return members[k][0], members[k][1], len(members)
+
+
+def member_payloads(path: str | os.PathLike) -> list[tuple[dict, str]]:
+    """Every member of a policy or ensemble file as a single-policy payload (later members with
+    the file's discriminator, which only the first stores) and its name; the file is read and
+    checked once. A single-policy file is its own only member."""
+    path = Path(path)
+    got = _payloads(path)  # checked by loading
     if len(got) == 1:
-        return got[0], str(path), 1
+        return [(got[0], str(path))]
     names = load_policy(path).info["members"]
-    return {**got[k], **{key: got[0][key] for key in _DISC if key in got[0]}}, names[k], len(got)
+    disc = {key: got[0][key] for key in _DISC if key in got[0]}
+    return [({**m, **disc}, n) for m, n in zip(got, names, strict=True)]
 
 
 def write_member(path: str | os.PathLike, k: int, out: str | os.PathLike) -> int:
