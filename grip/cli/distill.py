@@ -76,7 +76,9 @@ def cmd_distill(args: argparse.Namespace) -> int:
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
         old = json.loads(prev.read_text())
         fixed = {k: v for k, v in record["config"].items() if k != "iterations"}
-        was = {k: v for k, v in old.get("config", {}).items() if k != "iterations"}
+        # settings added since the run started count as their defaults
+        default = json.loads(json.dumps(dataclasses.asdict(DistillConfig())))
+        was = {k: v for k, v in {**default, **old.get("config", {})}.items() if k != "iterations"}
         if old.get("teacher") != record["teacher"] or json.loads(json.dumps(fixed)) != was:
             changed = sorted(k for k in fixed if json.loads(json.dumps(fixed[k])) != was.get(k))
             what = ", ".join(changed + (["--teacher"] if old.get("teacher") != record["teacher"]

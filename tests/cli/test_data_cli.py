@@ -521,6 +521,11 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     capsys.readouterr()
     assert main([*args, "--set", "iterations=3", "--set", "beta_decay=0.9"]) == 2
     assert "beta_decay" in capsys.readouterr().err
+    rec = json.loads((out / "config.json").read_text())  # a run from before a setting existed
+    del rec["config"]["action_noise"]
+    (out / "config.json").write_text(json.dumps(rec))
+    assert main([*args, "--set", "iterations=3"]) == 0  # resumes: the new setting's default
+    assert main([*args, "--set", "iterations=3", "--set", "action_noise=0.2"]) == 2
     # the distilled file plays like any policy; bad members and teachers are named
     js = tmp_path / "d.json"
     assert main(["eval-policy", "--policy", str(out / "policy.pt"), "--data", str(built),
