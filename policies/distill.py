@@ -125,7 +125,7 @@ class DistillConfig:
 
 def teacher_payloads(paths: Sequence[str | os.PathLike]) -> tuple[list[dict], list[str]]:
     """The single-policy payloads of every member of the policy or ensemble files ``paths`` and
-    their names; each carries the first file's discriminator when it has none of its own."""
+    their names (:func:`policies.ensemble.member_payloads`)."""
     from policies.ensemble import member_payloads
 
     payloads: list[dict] = []
@@ -134,10 +134,6 @@ def teacher_payloads(paths: Sequence[str | os.PathLike]) -> tuple[list[dict], li
         for ck, name in member_payloads(p):
             payloads.append(ck)
             names.append(name)
-    if payloads and "disc" in payloads[0]:
-        for ck in payloads[1:]:
-            ck.setdefault("disc", payloads[0]["disc"])
-            ck.setdefault("amp_frame_dim", payloads[0]["amp_frame_dim"])
     return payloads, names
 
 
@@ -179,7 +175,10 @@ class Distiller:
         self.teacher = (
             runners[0] if len(runners) == 1 else PolicyEnsemble(runners, self.teacher_names)
         )
-        self.base = payloads[cfg.init_member]
+        # the student's file: the member's payload, with the teacher's fall detector (the
+        # first member's discriminator) where the member's file stores none
+        disc = {k: payloads[0][k] for k in ("disc", "amp_frame_dim") if k in payloads[0]}
+        self.base = {**disc, **payloads[cfg.init_member]}
         self.student = PolicyRunner.from_payload(self.base, self.teacher_names[cfg.init_member])
         if cfg.fresh_student:
             for m in self.student.actor:
@@ -188,6 +187,7 @@ class Distiller:
         self.optim = torch.optim.Adam(self.student.actor.parameters(), lr=cfg.learning_rate)
         self.iteration = 0
         self.history: list[dict] = []
+        self._chunks: list[tuple[np.ndarray, np.ndarray]] | None = None  # newest last
         self._wall0 = 0.0
         self._t0 = time.time()
 
@@ -239,24 +239,24 @@ class Distiller:
     def _data_files(self) -> list[Path]:
         return sorted(self.data_dir.glob("iter_*.npz"))[: self.iteration]
 
-    def _load_data(self) -> tuple[np.ndarray, np.ndarray]:
-        """The newest ``max_samples`` samples of the iterations done: normalised student inputs
-        and teacher actions (float16 on disk)."""
-        xs, ys, n = [], [], 0
-        for f in reversed(self._data_files()):
-            try:
-                with np.load(f, allow_pickle=False) as z:
-                    x, y = z["x"], z["y"]
-            except (OSError, ValueError, KeyError) as e:
-                raise ValueError(f"{f}: unreadable distillation data ({e})") from e
-            xs.append(x)
-            ys.append(y)
-            n += len(x)
-            if n >= self.cfg.max_samples:
-                break
-        x = np.concatenate(xs[::-1])[-self.cfg.max_samples :]
-        y = np.concatenate(ys[::-1])[-self.cfg.max_samples :]
-        return x, y
+    def _add_data(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Keep one iteration's samples; returns the newest ``max_samples`` of all iterations
+        done: normalised student inputs and teacher actions (float16). The iterations of a
+        resumed run are read from their files once, later ones kept in memory."""
+        if self._chunks is None:
+            self._chunks = []
+            for f in self._data_files()[:-1]:  # the last one is (x, y)
+                try:
+                    with np.load(f, allow_pickle=False) as z:
+                        self._chunks.append((z["x"], z["y"]))
+                except (OSError, ValueError, KeyError) as e:
+                    raise ValueError(f"{f}: unreadable distillation data ({e})") from e
+        self._chunks.append((x, y))
+        while sum(len(cx) for cx, _ in self._chunks[1:]) >= self.cfg.max_samples:
+            self._chunks.pop(0)  # older iterations than the newest max_samples need
+        xa = np.concatenate([cx for cx, _ in self._chunks])[-self.cfg.max_samples :]
+        ya = np.concatenate([cy for _, cy in self._chunks])[-self.cfg.max_samples :]
+        return xa, ya
 
     def _make_env(self):
         from stable_baselines3.common.vec_env import DummyVecEnv
@@ -367,7 +367,7 @@ class Distiller:
                 atomic_write(f, lambda fh, x=x, y=y: np.savez(fh, x=x, y=y))
                 t1 = time.time()
                 self.iteration += 1
-                xa, ya = self._load_data()
+                xa, ya = self._add_data(x, y)
                 stats["fit_mse"] = self.fit(xa, ya)
                 stats.update(iteration=self.iteration, samples=len(xa),
                              collect_s=t1 - t0, fit_s=time.time() - t1)  # fmt: skip

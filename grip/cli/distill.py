@@ -56,7 +56,7 @@ def cmd_distill(args: argparse.Namespace) -> int:
 
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
-    from grip.cli.policy import SHIPPED_POLICY, build_training_reference
+    from grip.cli.policy import SHIPPED_POLICY, build_training_reference, changed_settings
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.train import git_hash
@@ -75,16 +75,14 @@ def cmd_distill(args: argparse.Namespace) -> int:
     prev = out / "config.json"
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
         old = json.loads(prev.read_text())
-        fixed = {k: v for k, v in record["config"].items() if k != "iterations"}
-        # settings added since the run started count as their defaults
-        default = json.loads(json.dumps(dataclasses.asdict(DistillConfig())))
-        was = {k: v for k, v in {**default, **old.get("config", {})}.items() if k != "iterations"}
-        if old.get("teacher") != record["teacher"] or json.loads(json.dumps(fixed)) != was:
-            changed = sorted(k for k in fixed if json.loads(json.dumps(fixed[k])) != was.get(k))
-            what = ", ".join(changed + (["--teacher"] if old.get("teacher") != record["teacher"]
-                                        else []))  # fmt: skip
-            raise CliError(f"{out}: resuming with different settings ({what}); only "
-                           "iterations may change on resume")  # fmt: skip
+        defaults = dataclasses.asdict(DistillConfig())
+        changed = changed_settings(old.get("config", {}), record["config"], defaults,
+                                   ("iterations",))  # fmt: skip
+        if old.get("teacher") != record["teacher"]:
+            changed.append("--teacher")
+        if changed:
+            raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
+                           "only iterations may change on resume")  # fmt: skip
     kin = kin_checkpoint(args.kin)
     ref_path = out / "reference_train.npz"
     build_training_reference(ref_path, args.data, split_paths(args.data, "train"), [kin],

@@ -205,8 +205,10 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
-def changed_settings(old: dict, new: dict, defaults: dict | None = None) -> list[str]:
-    """Dotted keys whose values differ between two config dicts, except :data:`RESUMABLE`.
+def changed_settings(old: dict, new: dict, defaults: dict | None = None,
+                     resumable: tuple[str, ...] = RESUMABLE) -> list[str]:  # fmt: skip
+    """Dotted keys whose values differ between two config dicts, except those starting with one
+    of ``resumable`` (train-policy's :data:`RESUMABLE` by default).
 
     A key missing from ``old`` (a setting added to the project after the run began) takes its
     value from ``defaults``, the current default config, if given: a new setting left at its
@@ -216,7 +218,7 @@ def changed_settings(old: dict, new: dict, defaults: dict | None = None) -> list
         d = _flatten(json.loads(json.dumps(defaults)))
         a = {**{k: v for k, v in d.items() if k not in a}, **a}
     keys = sorted(set(a) | set(b))
-    return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(RESUMABLE)]
+    return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(resumable)]
 
 
 def training_files(files: list[Path], cfg, out: Path) -> list[Path]:

@@ -516,7 +516,10 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert np.abs(a1 - y).max() > 1e-3  # the label is not member 1's own action
     # resume: more iterations continue the run; other settings are refused by name
     assert main([*args, "--set", "iterations=3"]) == 0
-    assert json.loads((out / "checkpoint" / "state.json").read_text())["iteration"] == 3
+    state = json.loads((out / "checkpoint" / "state.json").read_text())
+    assert state["iteration"] == 3
+    assert [h["samples"] for h in state["history"]] == [64, 128, 192]  # the resumed fit read
+    # the earlier iterations' files
     assert len(list((out / "data").glob("iter_*.npz"))) == 3
     capsys.readouterr()
     assert main([*args, "--set", "iterations=3", "--set", "beta_decay=0.9"]) == 2
@@ -540,6 +543,16 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert "none.pt" in capsys.readouterr().err
     assert main([*bad, "--set", "beta0=2"]) == 2
     assert main([*bad, "--set", "action_noise=-1"]) == 2
+    # the data kept: the newest max_samples, across iterations
+    from policies.distill import DistillConfig, Distiller
+
+    keep = Distiller(DistillConfig(decisions_per_iteration=64, max_samples=256), [pols[1]],
+                     tmp_path / "keep", out / "reference_train.npz")  # fmt: skip
+    keep._chunks = []
+    for i in range(4):
+        xa, ya = keep._add_data(np.full((100, 3), i, np.float16), np.full((100, 2), i, np.float16))
+    assert len(xa) == 256 and xa[0, 0] == 1 and xa[-1, 0] == 3 and (ya[:, 0] == xa[:, 0]).all()
+    assert len(keep._chunks) == 3  # iteration 0's samples are no longer needed
     # noise on the played actions and pushes move the rollouts off the teacher's own states
     noisy = tmp_path / "noisy"
     assert main([*args[:8], str(noisy), *TINY_DISTILL, "--set", "init_member=1",
