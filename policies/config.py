@@ -39,6 +39,10 @@ class AmpConfig:
         updates_per_rollout: Discriminator updates after each PPO rollout.
         replay_size: Policy samples kept for the discriminator (oldest replaced first).
         reward_scale: Multiplies the AMP reward before its weight (PHC: 2 with BCE).
+        from_init: With ``train-policy --init``: start from the file's discriminator (true) or
+            from a fresh one (false; the fall detector is then the run's new discriminator).
+            Fine-tunes from the file's find it telling the policy's windows from real ones
+            from the first rollout (accuracy 1.00), which leaves a flat style reward.
     """
 
     window: int = 10
@@ -52,6 +56,7 @@ class AmpConfig:
     updates_per_rollout: int = 8
     replay_size: int = 20000
     reward_scale: float = 1.0
+    from_init: bool = True
 
 
 @dataclass(frozen=True)
@@ -63,7 +68,8 @@ class PPOConfig:
             :data:`GRIP_NET_ARCH`.
         activation: :data:`ACTIVATIONS` (GRIP: SiLU).
         log_std_init: Initial log standard deviation of the Gaussian actions (PHC: -2.9).
-        fixed_std: Keep the standard deviation at its initial value (PHC) instead of learning it.
+        fixed_std: Keep the standard deviation at its initial value (PHC) instead of learning it;
+            a warm start (``--init``) then plays ``log_std_init`` instead of the file's.
         n_envs: Environments; stepped in parallel processes with ``vec_env = "subproc"``.
         vec_env: ``"subproc"`` (one process per environment) or ``"dummy"`` (all in the learner).
         n_steps: Steps per environment per rollout.

@@ -451,9 +451,10 @@ class PolicyTrainer:
 
     def warm_start(self, runner) -> None:
         """Start from an exported policy (:class:`policies.runner.PolicyRunner`): its policy
-        network and log std, its value network when the file has one, its observation
-        normaliser and its discriminator. PPO's optimiser, the return normaliser and the
-        discriminator's optimiser start afresh.
+        network and log std (with ``ppo.fixed_std``: the config's ``log_std_init``), its value
+        network when the file has one, its observation normaliser and its discriminator (a
+        fresh one when ``amp.from_init`` is false). PPO's optimiser, the return normaliser and
+        the discriminator's optimiser start afresh.
 
         Raises:
             ValueError: naming the file, when its networks or observations do not fit this
@@ -488,7 +489,7 @@ class PolicyTrainer:
         load(runner.actor, pol.mlp_extractor.policy_net, pol.action_net, "policy")
         if runner.critic is not None:
             load(runner.critic, pol.mlp_extractor.value_net, pol.value_net, "value")
-        if runner.log_std is not None:
+        if runner.log_std is not None and not self.cfg.ppo.fixed_std:
             with torch.no_grad():
                 pol.log_std.copy_(runner.log_std)
         count = runner.obs_count if runner.obs_count is not None else 1e6
@@ -505,7 +506,7 @@ class PolicyTrainer:
             with torch.no_grad():
                 for net in (pol.mlp_extractor.policy_net, pol.mlp_extractor.value_net):
                     linear_layers(net)[0].weight[:, cols] = 0.0
-        if runner.disc is not None:
+        if runner.disc is not None and self.cfg.amp.from_init:
             try:
                 self.amp.disc.load_state_dict(runner.disc.state_dict())
             except RuntimeError as e:

@@ -504,6 +504,24 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
         np.testing.assert_array_equal(rms.var, src.obs_var[k])
         assert rms.count == src.obs_count
     fresh.venv.close()
+    # amp.from_init = false: the policy and normaliser are the file's, the discriminator is new
+    # ppo.fixed_std: the std is the config's log_std_init, not the file's, and stays fixed
+    cfg = _warm_cfg(0)
+    cfg = dataclasses.replace(cfg, amp=dataclasses.replace(cfg.amp, from_init=False),
+                              ppo=dataclasses.replace(cfg.ppo, fixed_std=True,
+                                                      log_std_init=-3.25))  # fmt: skip
+    own = PolicyTrainer(cfg, tmp_path / "own_disc", SAMPLE_REFERENCE, init=exported)
+    new_disc = {k: v.clone() for k, v in own.amp.disc.state_dict().items()}
+    own.venv = own._build_env(own.cfg.stage2)
+    own.model = own._new_model(own.venv)
+    own.warm_start(src)
+    w = own.amp.disc.head.weight
+    assert torch.equal(w, new_disc["head.weight"]) and not torch.equal(w, src.disc.head.weight)
+    own._apply_fixed_std()
+    log_std = own.model.policy.log_std
+    assert torch.allclose(log_std, torch.full_like(log_std, -3.25)) and not log_std.requires_grad
+    assert not torch.allclose(src.log_std, torch.full_like(src.log_std, -3.25))
+    own.venv.close()
 
     # no warm-up: the policy trains from the exported weights
     (tmp_path / "free").mkdir()
