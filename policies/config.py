@@ -41,8 +41,9 @@ class AmpConfig:
         reward_scale: Multiplies the AMP reward before its weight (PHC: 2 with BCE).
         from_init: With ``train-policy --init``: start from the file's discriminator (true) or
             from a fresh one (false; the fall detector is then the run's new discriminator).
-            Fine-tunes from the file's find it telling the policy's windows from real ones
-            from the first rollout (accuracy 1.00), which leaves a flat style reward.
+            The shipped file's judges PPO's sampled, jittery windows fake from the first
+            rollout (style reward ~0.25); a fresh one pays more (~0.7) but did not train a
+            better policy (README, "What the discriminator sees").
     """
 
     window: int = 10
