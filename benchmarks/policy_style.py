@@ -23,7 +23,6 @@ plays while it trains; 0, the default, = deterministic, as evaluations play).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
 import torch
@@ -34,25 +33,13 @@ from grip.cli.policy import SHIPPED_POLICY
 from grip.core import skeleton as sk
 from policies.amp import RealSampler
 from policies.ensemble import PolicyEnsemble, load_policy
-from policies.train import EnvFactory, load_reference, select_clips
-
-# slices of one AMP frame (envs.amp's layout)
-_H = A.N_HINGES
-GROUPS = {"root height": (0, 1), "root rotation": (1, 7), "root velocity": (7, 10),
-          "root angular velocity": (10, 13), "hinge angles": (13, 13 + _H),
-          "hinge velocities": (13 + _H, 13 + 2 * _H),
-          "key bodies": (13 + 2 * _H, A.FRAME_DIM)}  # fmt: skip
+from policies.train import load_reference, select_clips, stage2_rollout_env
 
 
 def policy_windows(runner, ref_path: str, cats: tuple[str, ...], n_envs: int, steps: int,
                    seed: int) -> np.ndarray:  # fmt: skip
     """``(n_envs * steps, window * FRAME_DIM)`` AMP windows of the policy's decisions."""
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    cfg = dataclasses.replace(runner.env_cfg, reference=ref_path, random_start=True,
-                              clip_index=-1, termination_dist_m=0.0, fall_height_m=0.3,
-                              max_episode_frames=1000)  # fmt: skip
-    venv = DummyVecEnv([EnvFactory(cfg, cats, seed + 1000 * i) for i in range(n_envs)])
+    venv = stage2_rollout_env(runner.env_cfg, ref_path, cats, n_envs, seed)
     out = []
     try:
         obs = venv.reset()
@@ -66,8 +53,7 @@ def policy_windows(runner, ref_path: str, cats: tuple[str, ...], n_envs: int, st
 
 def jitter(windows: np.ndarray, window: int) -> tuple[float, float]:
     """Mean |hinge velocity| and mean |frame-to-frame change of a hinge velocity|, rad/s."""
-    a, b = GROUPS["hinge velocities"]
-    qd = windows.reshape(len(windows), window, A.FRAME_DIM)[:, :, a:b]
+    qd = windows.reshape(len(windows), window, A.FRAME_DIM)[:, :, A.PARTS["hinge_qd"]]
     return float(np.abs(qd).mean()), float(np.abs(np.diff(qd, axis=1)).mean())
 
 
@@ -145,13 +131,12 @@ def main() -> None:
     rw = real.reshape(len(real), window, A.FRAME_DIM)
     fw = fake.reshape(len(fake), window, A.FRAME_DIM)
     print("\n| AMP part | held-out accuracy real vs policy |\n|---|---:|")
-    for name, (a, b) in GROUPS.items():
-        acc = separability(rw[:, :, a:b].reshape(len(rw), -1), fw[:, :, a:b].reshape(len(fw), -1))
+    for name, part in A.PARTS.items():
+        acc = separability(rw[:, :, part].reshape(len(rw), -1), fw[:, :, part].reshape(len(fw), -1))
         print(f"| {name} | {acc:.3f} |")
-    a, b = GROUPS["hinge angles"]
-    xr, xf = rw[:, -1, a:b], fw[:, -1, a:b]
+    xr, xf = rw[:, -1, A.PARTS["hinge_q"]], fw[:, -1, A.PARTS["hinge_q"]]
     d = (xf.mean(0) - xr.mean(0)) / (0.5 * (xr.std(0) + xf.std(0)) + 1e-6)
-    names = [f"{sk.JOINT_NAMES[1 + i // 3]}.{'xyz'[i % 3]}" for i in range(_H)]
+    names = [f"{sk.JOINT_NAMES[1 + i // 3]}.{'xyz'[i % 3]}" for i in range(A.N_HINGES)]
     print("\n| hinge | policy - real, in sd | real mean, rad | policy mean, rad |")
     print("|---|---:|---:|---:|")
     for i in np.argsort(-np.abs(d))[:8]:

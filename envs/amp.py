@@ -31,7 +31,13 @@ KEY_JOINTS: tuple[int, ...] = (20, 21, 7, 8)
 """L_Wrist, R_Wrist, L_Ankle, R_Ankle (PHC's key bodies: hands and feet)."""
 
 N_HINGES = 3 * (sk.N_JOINTS - 1)
-FRAME_DIM = 1 + 6 + 3 + 3 + 2 * N_HINGES + 3 * len(KEY_JOINTS)
+_SIZES = {"root_height": 1, "root_rot": 6, "root_vel": 3, "root_angvel": 3,
+          "hinge_q": N_HINGES, "hinge_qd": N_HINGES, "key_pos": 3 * len(KEY_JOINTS)}
+_ENDS = np.cumsum(list(_SIZES.values()))
+PARTS: dict[str, slice] = {k: slice(int(e) - n, int(e))
+                           for (k, n), e in zip(_SIZES.items(), _ENDS, strict=True)}  # fmt: skip
+"""Where each part of an AMP frame lies (the module docstring's table, in order)."""
+FRAME_DIM = PARTS["key_pos"].stop
 """Length of one AMP frame (163)."""
 
 
@@ -76,15 +82,15 @@ def amp_features(
     h = heading_matrices(root_rot)  # (T, 3, 3); world row vector v -> v @ h
     local_rot = np.swapaxes(h, -1, -2) @ root_rot
     out = np.empty((t, FRAME_DIM))
-    out[:, 0] = root_pos[:, 2]
-    out[:, 1:7] = np.swapaxes(local_rot[..., :, :2], -1, -2).reshape(t, 6)
-    out[:, 7:10] = np.einsum("ti,tij->tj", root_vel, h)
-    out[:, 10:13] = np.einsum("ti,tij->tj", root_angvel, h)
-    a = 13 + N_HINGES
-    out[:, 13:a] = hinge_q
-    out[:, a : a + N_HINGES] = hinge_qd
+    p = PARTS
+    out[:, p["root_height"]] = root_pos[:, 2:3]
+    out[:, p["root_rot"]] = np.swapaxes(local_rot[..., :, :2], -1, -2).reshape(t, 6)
+    out[:, p["root_vel"]] = np.einsum("ti,tij->tj", root_vel, h)
+    out[:, p["root_angvel"]] = np.einsum("ti,tij->tj", root_angvel, h)
+    out[:, p["hinge_q"]] = hinge_q
+    out[:, p["hinge_qd"]] = hinge_qd
     rel = key_pos - root_pos[:, None]
-    out[:, a + N_HINGES :] = np.einsum("tki,tij->tkj", rel, h).reshape(t, -1)
+    out[:, p["key_pos"]] = np.einsum("tki,tij->tkj", rel, h).reshape(t, -1)
     return out
 
 

@@ -66,6 +66,7 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
 _INFO_KEYS = tuple((k, f"reward/{k}") for k in R.TERMS)
 
 _KEY = np.array(A.KEY_JOINTS)
+_AMP_PARTS = tuple(A.PARTS.values())  # (envs.amp.amp_features' layout, in order)
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
 
 
@@ -343,13 +344,14 @@ class GripTrackingEnv(gym.Env):
         ix = sim.index
         h = O.heading_matrix(rot[0])
         f = self._amp_buf
-        f[0] = pvw[0, 0, 2]
-        f[1:7] = (h.T @ rot[0])[:, :2].T.reshape(6)
-        f[7:10] = pvw[1, 0] @ h
-        f[10:13] = pvw[2, 0] @ h
-        f[13 : 13 + A.N_HINGES] = sim.data.qpos[ix.hinge_qpos_adr]
-        f[13 + A.N_HINGES : 13 + 2 * A.N_HINGES] = sim.qvel[ix.hinge_dof_adr]
-        f[13 + 2 * A.N_HINGES :] = ((pvw[0, _KEY] - pvw[0, 0]) @ h).reshape(-1)
+        height, root_rot, root_vel, root_angvel, hinge_q, hinge_qd, key_pos = _AMP_PARTS
+        f[height] = pvw[0, 0, 2]
+        f[root_rot] = (h.T @ rot[0])[:, :2].T.reshape(6)
+        f[root_vel] = pvw[1, 0] @ h
+        f[root_angvel] = pvw[2, 0] @ h
+        f[hinge_q] = sim.data.qpos[ix.hinge_qpos_adr]
+        f[hinge_qd] = sim.qvel[ix.hinge_dof_adr]
+        f[key_pos] = ((pvw[0, _KEY] - pvw[0, 0]) @ h).reshape(-1)
         return f
 
     def _per_clip_arrays(self, clip: ReferenceClip, start: int = 0) -> None:

@@ -20,7 +20,6 @@ iteration (``RUN/checkpoint/``, ``RUN/data/iter_NNN.npz``) and resume.
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import os
@@ -259,20 +258,13 @@ class Distiller:
         return xa, ya
 
     def _make_env(self):
-        from stable_baselines3.common.vec_env import DummyVecEnv
-
-        from policies.train import EnvFactory
+        from policies.train import stage2_rollout_env
 
         c = self.cfg
-        env_cfg = dataclasses.replace(
-            self.teacher.env_cfg, reference=self.reference, random_start=True, clip_index=-1,
-            termination_dist_m=0.0, fall_height_m=c.fall_height_m,
-            max_episode_frames=c.max_episode_frames,
-        )  # fmt: skip
-        seed = c.seed + 7919 * self.iteration
         push = (c.push_force_n, c.push_every_s, c.push_duration_s) if c.push_force_n > 0 else None
-        return DummyVecEnv([EnvFactory(env_cfg, c.categories, seed + 1000 * i, push)
-                            for i in range(c.n_envs)])  # fmt: skip
+        return stage2_rollout_env(self.teacher.env_cfg, self.reference, c.categories, c.n_envs,
+                                  c.seed + 7919 * self.iteration, c.fall_height_m,
+                                  c.max_episode_frames, push)  # fmt: skip
 
     def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
         """One rollout of ``decisions_per_iteration`` decisions with the student acting (the

@@ -146,6 +146,21 @@ def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed:
     return DummyVecEnv(fns)
 
 
+def stage2_rollout_env(env_cfg: TrackingEnvConfig, reference: str, categories: tuple[str, ...],
+                       n_envs: int, seed: int, fall_height_m: float = 0.3,
+                       max_episode_frames: int = 1000,
+                       push: tuple[float, float, float] | None = None) -> DummyVecEnv:  # fmt: skip
+    """In-process environments that play GRIP's stage-2 episodes with an exported policy's
+    settings (``env_cfg``, e.g. ``runner.env_cfg``): random starts on the clips of
+    ``categories``, no distance termination, a pelvis below ``fall_height_m`` ends an episode
+    (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
+    cfg = dataclasses.replace(env_cfg, reference=str(reference), random_start=True,
+                              clip_index=-1, termination_dist_m=0.0, fall_height_m=fall_height_m,
+                              max_episode_frames=max_episode_frames)  # fmt: skip
+    return DummyVecEnv([EnvFactory(cfg, tuple(categories), seed + 1000 * i, push)
+                        for i in range(n_envs)])  # fmt: skip
+
+
 # -------------------------------------------------------------------- normaliser state
 def vecnorm_state(vn: VecNormalize) -> dict[str, np.ndarray]:
     """VecNormalize statistics as plain arrays (saved as npz, not as a pickle)."""
