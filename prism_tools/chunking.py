@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from grip.core.limits import active_limits, check_file_size, safe_json_loads
 from prism_tools.io import atomic_write
 from prism_tools.schema import Recording
 
@@ -249,15 +250,18 @@ def load_split(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     Raises:
         FileNotFoundError: No such file.
-        ValueError: Not valid JSON, ``train``/``test`` missing or not lists of strings, or a
-            chunk in both; the message starts with the path.
+        ValueError: Not valid JSON (or above the input limits of :mod:`grip.core.limits`),
+            ``train``/``test`` missing or not lists of strings, or a chunk in both; the message
+            starts with the path.
     """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such split file")
+    limits = active_limits()
     try:
-        split = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        check_file_size(p, limits)
+        split = safe_json_loads(p.read_text(encoding="utf-8"), limits, "split JSON")
+    except (OSError, ValueError) as e:  # JSON, UTF-8, size/depth/digit limits
         raise ValueError(f"{p}: not a valid split JSON file ({e})") from None
     _check_split(split, str(p))
     return split

@@ -25,7 +25,13 @@ metres with the floor at z = 0, rotation matrices map sensor/segment vectors to 
 The dataclasses are frozen (fields cannot be reassigned; use :func:`dataclasses.replace`), but the
 numpy arrays they hold are ordinary writable arrays and are not copied on construction.
 
-This module imports numpy only.
+Limits (:class:`grip.core.limits.InputLimits`): :func:`validate` refuses a frame rate outside
+``[min_fps, max_fps]``, more than ``max_frames`` frames or ``max_duration_s`` seconds, and checks
+every rotation matrix of every frame; :meth:`Recording.from_prism_dict` also refuses physically
+absurd values (accelerations, insole forces, positions above the ``max_*`` limits) with a message
+saying which unit was probably meant.
+
+This module imports numpy and :mod:`grip.core.limits` only.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from grip.core.limits import InputLimits, LimitExceeded, active_limits
 from prism_tools.errors import RecordingError
 
 __all__ = [
@@ -60,6 +67,7 @@ __all__ = [
     "Slam",
     "SmplParams",
     "SubjectInfo",
+    "check_plausible",
     "detect_force_unit",
     "validate",
 ]
@@ -93,7 +101,8 @@ FORMAT_VERSION = 1
 ROTATION_TOL = 1e-3
 """Largest accepted ``max |R R^T - I|`` for a rotation matrix."""
 
-_MAX_ROTATIONS_CHECKED = 4096
+_ROTATION_CHUNK = 65536
+"""Frames checked per vectorised step of the rotation check (bounds its temporaries)."""
 
 ForceUnit = Literal["auto", "body_weight", "n_per_kg"]
 """Unit of stored insole forces: decided from the data (``"auto"``), body weights or N/kg."""
@@ -510,7 +519,12 @@ class Recording:
 
     @classmethod
     def from_prism_dict(
-        cls, d: Mapping[str, Any], source: str = "", *, force_unit: ForceUnit = "auto"
+        cls,
+        d: Mapping[str, Any],
+        source: str = "",
+        *,
+        force_unit: ForceUnit = "auto",
+        limits: InputLimits | None = None,
     ) -> Recording:
         """Builds and validates a recording from a PRISM dict.
 
@@ -535,14 +549,29 @@ class Recording:
             source: Where ``d`` came from (a file path); prefixes every error message.
             force_unit: ``"auto"`` (decide from the data unless the dict declares the unit),
                 ``"body_weight"`` or ``"n_per_kg"`` (the stored unit, given explicitly).
+            limits: Frame rate, duration and plausibility limits; default
+                :func:`grip.core.limits.active_limits`.
 
         Returns:
             A validated recording with insole forces in body weights.
 
         Raises:
-            RecordingError: A key is missing, has the wrong type, or an array fails
-                :func:`validate`; the message starts with ``source`` and names the key path.
+            RecordingError: A key is missing, has the wrong type, an array fails
+                :func:`validate`, or a value is physically absurd (after the force unit is
+                decided); the message starts with ``source`` and names the key path.
         """
+        limits = limits or active_limits()
+        rec = cls._from_prism_dict(d, source, force_unit, limits)
+        try:
+            check_plausible(rec, limits)
+        except RecordingError as e:
+            raise RecordingError(f"{source}: {e}" if source else str(e)) from None
+        return rec
+
+    @classmethod
+    def _from_prism_dict(
+        cls, d: Mapping[str, Any], source: str, force_unit: ForceUnit, limits: InputLimits
+    ) -> Recording:
         if force_unit not in ("auto", "body_weight", "n_per_kg"):
             raise ValueError(
                 f"force_unit must be 'auto', 'body_weight' or 'n_per_kg', got {force_unit!r}"
@@ -550,7 +579,7 @@ class Recording:
         p = _Parser(source)
         rec, declared = p.recording(d)
         try:
-            validate(rec)
+            validate(rec, limits, plausible=False)
         except RecordingError as e:
             raise p.error(str(e)) from None
         unit = force_unit
@@ -909,19 +938,21 @@ def _check_array(arr: Any, path: str, spec: _ArraySpec, n_frames: int) -> None:
 
 
 def _check_rotations(rot: np.ndarray, path: str) -> None:
-    """Checks that a subsample (at most 4096 frames, first and last included) is orthonormal."""
+    """Checks that every frame's matrix is a rotation (vectorised, in chunks of frames)."""
     n = rot.shape[0]
-    idx = np.unique(np.linspace(0, n - 1, min(n, _MAX_ROTATIONS_CHECKED)).astype(np.int64))
-    sub = rot[idx].astype(np.float64, copy=False)
-    err = np.abs(sub @ np.swapaxes(sub, -1, -2) - np.eye(3)).max(axis=(-2, -1))
-    det = np.linalg.det(sub)
-    bad = np.flatnonzero((err > ROTATION_TOL) | (det <= 0.0))
-    if bad.size:
-        i = int(bad[0])
-        raise RecordingError(
-            f"{path}: not a rotation matrix at frame {int(idx[i])} "
-            f"(max |R R^T - I| = {err[i]:.3g}, det = {det[i]:.3g}, tolerance {ROTATION_TOL:g})"
-        )
+    eye = np.eye(3)
+    for start in range(0, n, _ROTATION_CHUNK):
+        sub = np.asarray(rot[start : start + _ROTATION_CHUNK], dtype=np.float64)
+        err = np.abs(np.einsum("nij,nkj->nik", sub, sub) - eye).max(axis=(-2, -1))
+        det = np.linalg.det(sub)
+        bad = np.flatnonzero((err > ROTATION_TOL) | (det <= 0.0) | ~np.isfinite(err))
+        if bad.size:
+            i = int(bad[0])
+            raise RecordingError(
+                f"{path}: not a rotation matrix at frame {start + i} of {n} ({bad.size} bad "
+                f"frame(s) among frames {start}-{start + len(sub) - 1}; max |R R^T - I| = "
+                f"{err[i]:.3g}, det = {det[i]:.3g}, tolerance {ROTATION_TOL:g})"
+            )
 
 
 def _check_fields(obj: Any, cls: type, path: str, n_frames: int) -> None:
@@ -956,17 +987,23 @@ def _check_number(value: Any, path: str, *, positive: bool = False, none_ok: boo
         )
 
 
-def validate(rec: Recording) -> None:
+def validate(
+    rec: Recording, limits: InputLimits | None = None, *, plausible: bool = True
+) -> None:
     """Checks every array of a recording: shape, dtype kind, finiteness, rotations, and fps.
 
     All per-frame arrays must share ``F = smpl_params.poses.shape[0]``; float arrays must be
-    finite; rotation matrices (checked on an evenly spaced subsample of at most 4096 frames) must
-    satisfy ``max |R R^T - I| <= 1e-3`` with a positive determinant; contacts are bool, object faces
-    and synthesised-frame indices are integers within range; ``fps`` is finite, positive and equal
-    to ``data_info.fps``. Part names must be in :data:`IMU_PARTS` (insoles: :data:`FEET`).
+    finite; rotation matrices (every frame) must satisfy ``max |R R^T - I| <= 1e-3`` with a
+    positive determinant; contacts are bool, object faces and synthesised-frame indices are
+    integers within range; ``fps`` is finite, within ``[limits.min_fps, limits.max_fps]`` and
+    equal to ``data_info.fps``; ``F`` and the duration are within ``limits.max_frames`` and
+    ``limits.max_duration_s``. Part names must be in :data:`IMU_PARTS` (insoles: :data:`FEET`).
+    With ``plausible``, :func:`check_plausible` follows.
 
     Args:
         rec: The recording.
+        limits: The limits; default :func:`grip.core.limits.active_limits`.
+        plausible: Also refuse physically absurd values (:func:`check_plausible`).
 
     Raises:
         RecordingError: On the first problem found, naming its key path, for example
@@ -985,6 +1022,11 @@ def validate(rec: Recording) -> None:
         raise RecordingError(
             f"info.data_info.fps: {rec.data_info.fps} differs from the recording's fps {rec.fps}"
         )
+    limits = limits or active_limits()
+    try:
+        limits.check_fps(float(rec.fps), "info.data_info.fps: frame rate")
+    except LimitExceeded as e:
+        raise RecordingError(str(e)) from None
     if not isinstance(rec.subject, SubjectInfo):
         raise RecordingError(
             f"info.subj_info: expected SubjectInfo, got {type(rec.subject).__name__}"
@@ -1002,6 +1044,12 @@ def validate(rec: Recording) -> None:
         shape = getattr(poses, "shape", type(poses).__name__)
         raise RecordingError(f"smpl_params.poses: expected shape (F, 72) with F >= 1, got {shape}")
     n = int(poses.shape[0])
+    try:
+        limits.check("max_frames", n, "smpl_params.poses: frame count")
+        limits.check("max_duration_s", n / float(rec.fps),
+                     f"duration ({n} frames at {float(rec.fps):g} Hz)", " s")  # fmt: skip
+    except LimitExceeded as e:
+        raise RecordingError(str(e)) from None
     _check_fields(smpl, SmplParams, "smpl_params", n)
     if not isinstance(smpl.gender, str):
         raise RecordingError("smpl_params.gender: expected a str")
@@ -1035,6 +1083,90 @@ def validate(rec: Recording) -> None:
                 )
     if not isinstance(rec.extras, dict) or not all(isinstance(k, str) for k in rec.extras):
         raise RecordingError("extras: expected a dict with str keys")
+    if plausible:
+        check_plausible(rec, limits)
+
+
+def _magnitude_max(arr: np.ndarray) -> tuple[float, float]:
+    """(max, median) of the row norms of a ``(F, k)`` array (0 for an empty one)."""
+    if arr.size == 0:
+        return 0.0, 0.0
+    mag = np.sqrt(np.einsum("fi,fi->f", arr, arr, dtype=np.float64))
+    return float(mag.max()), float(np.median(mag))
+
+
+def _too_big(limits: InputLimits, name: str, value: float, text: str) -> None:
+    if value > getattr(limits, name):
+        raise RecordingError(str(LimitExceeded(name, value, getattr(limits, name), text)))
+
+
+def check_plausible(rec: Recording, limits: InputLimits | None = None) -> None:
+    """Refuses finite but physically absurd values, saying which unit was probably meant.
+
+    Checked: acceleration magnitudes (``imu.*.acc_*``, ``imu_gt.*.acc_world``) against
+    ``limits.max_acc_mps2``, velocities (``imu_gt.*.vel_world``) against ``max_vel_mps``,
+    insole forces in body weights (``insole.*.force``, ``force_world``, ``combined``) against
+    ``max_force_bw``, and positions (``smpl_params.trans``, ``imu_gt.*.pos_world``,
+    ``CoP_world``, ``slam.head_traj``: magnitude and span over the take) against
+    ``max_position_m``. Insole-frame ``CoP``, cell values and gyroscope rates are not checked:
+    PRISM does not document their units.
+
+    Args:
+        rec: A structurally valid recording (:func:`validate`), forces in body weights.
+        limits: The limits; default :func:`grip.core.limits.active_limits`.
+
+    Raises:
+        RecordingError: For example ``"imu.L_Foot.acc_local_raw: acc magnitude 9.81e+03 m/s^2
+            (median 9.81e+03; values look like mm/s^2) is above the limit max_acc_mps2=2000
+            ..."``.
+    """
+    limits = limits or active_limits()
+    accs = [(f"imu.{p}.{k}", getattr(s, k)) for p, s in rec.imu.items()
+            for k in ("acc_world_raw", "acc_world_filt", "acc_local_raw")
+            if getattr(s, k) is not None]  # fmt: skip
+    accs += [(f"imu_gt.{p}.acc_world", s.acc_world) for p, s in rec.imu_gt.items()]
+    for path, arr in accs:
+        mx, med = _magnitude_max(arr)
+        if mx > limits.max_acc_mps2:
+            hint = ("values look like mm/s^2" if med > 100.0 * GRAVITY / 10 else
+                    "a spike: corrupt samples?")  # fmt: skip
+            _too_big(limits, "max_acc_mps2", mx, f"{path}: acc magnitude {mx:.3g} m/s^2 "
+                     f"(median {med:.3g}; {hint}) is above")  # fmt: skip
+    for p, s in rec.imu_gt.items():
+        mx, med = _magnitude_max(s.vel_world)
+        hint = "values look like mm/s" if med > 10.0 else "a spike: corrupt samples?"
+        _too_big(limits, "max_vel_mps", mx, f"imu_gt.{p}.vel_world: speed {mx:.3g} m/s "
+                 f"(median {med:.3g}; {hint}) is above")  # fmt: skip
+    forces = [(f"insole.{p}.{k}", getattr(s, k)) for p, s in rec.insole.items()
+              for k in ("force", "force_world")]  # fmt: skip
+    if rec.insole_combined is not None:
+        forces.append(("insole.combined.force_world", rec.insole_combined.force_world))
+    weight = rec.subject.weight_kg or 70.0
+    for path, arr in forces:
+        mx, _ = _magnitude_max(arr)
+        if mx > limits.max_force_bw:
+            hint = ("values look like newtons, not body weights" if mx < 20 * weight
+                    else "grams or Pa?")  # fmt: skip
+            _too_big(limits, "max_force_bw", mx, f"{path}: insole force {mx:.3g} body weights "
+                     f"(= {mx * weight * GRAVITY:.3g} N for {weight:g} kg; {hint}) is above")
+    positions = [("smpl_params.trans", rec.smpl_params.trans)]
+    positions += [(f"imu_gt.{p}.pos_world", s.pos_world) for p, s in rec.imu_gt.items()]
+    positions += [(f"insole.{p}.CoP_world", s.CoP_world) for p, s in rec.insole.items()]
+    if rec.insole_combined is not None:
+        positions.append(("insole.combined.CoP_world", rec.insole_combined.CoP_world))
+    if rec.slam is not None:
+        positions.append(("slam.head_traj", rec.slam.head_traj))
+    for path, arr in positions:
+        if arr.size == 0:
+            continue
+        span = float(np.ptp(arr, axis=0).max())
+        mx, _ = _magnitude_max(arr)
+        value = span if span > limits.max_position_m else mx
+        if value > limits.max_position_m:
+            hint = "millimetres?" if value < 1000 * limits.max_position_m else "corrupt?"
+            what = (f"spans {span:.4g} m" if value == span
+                    else f"reaches {mx:.4g} m from the origin")  # fmt: skip
+            _too_big(limits, "max_position_m", value, f"{path}: {what} ({hint}), which is above")
 
 
 def _float32_fields(obj: Any, keep: tuple[str, ...] = ()) -> Any:

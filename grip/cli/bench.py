@@ -7,6 +7,8 @@ import os
 import time
 from pathlib import Path
 
+from grip.cli.recordings import add_limit_arguments, limits_from_args
+
 
 def shipped_methods() -> list[str]:
     """Registered methods whose default models exist in this checkout."""
@@ -69,6 +71,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="save every reconstruction (OUT/recons/<method>/<seg>.npz)")  # fmt: skip
     p.add_argument("--retry-failed", action="store_true",
                    help="run segments that failed in an earlier run again")  # fmt: skip
+    add_limit_arguments(p)
     p.set_defaults(func=cmd_bench)
 
 
@@ -76,7 +79,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
-    from grip.cli.recordings import split_paths
+    from grip.cli.recordings import exit_status, skip_file, split_paths
     from grip.eval.bench import (
         BenchError,
         list_segments,
@@ -88,11 +91,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     )
     from grip.eval.methods import MethodOptions, parse_method_names, sensor_set
 
+    limits_from_args(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.segment_frames < 3:
         raise CliError(f"--segment-frames must be >= 3, got {args.segment_frames}")
     sensors: list[str] = []
+    skipped: list[tuple[str, str]] = []  # (file, reason) of unreadable recordings
+    unreadable: list[tuple[str, str]] = []
     try:
         names = parse_method_names(args.methods or ",".join(shipped_methods()))
         if args.sensors is not None:
@@ -107,14 +113,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
         elif args.sweep is not None:
             raise ValueError("--sweep is only used with --sensors")
         segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
-                             args.category)  # fmt: skip
+                             args.category, errors=unreadable)  # fmt: skip
         segs = select_segments(segs, args.segments)
         options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
                                 policy_checkpoint=args.policy,
                                 transpose_checkpoint=args.transpose, pip_checkpoint=args.pip)
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
+        for f, why in unreadable:
+            skip_file(skipped, f, why)
         raise CliError(str(e)) from e
+    for f, why in unreadable:
+        skip_file(skipped, f, why)
     labels = [r.label for r in runs]
     print(f"{len(segs)} segment(s) x {len(runs)} method(s) ({', '.join(labels)}), "
           f"{args.workers} worker(s) -> {args.out}")  # fmt: skip
@@ -143,4 +153,4 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"{failed} segment(s) failed in this run; see {args.out / 'table.md'}")
     print(f"wrote {args.out}/results.json, results.csv, segments.csv, table.md and plots "
           f"in {time.perf_counter() - t0:.0f} s")  # fmt: skip
-    return 0
+    return exit_status(skipped)

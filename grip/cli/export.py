@@ -6,9 +6,10 @@ import argparse
 import math
 import os
 import sys
-import zipfile
 from collections.abc import Iterator
 from pathlib import Path
+
+from grip.cli.recordings import add_limit_arguments, limits_from_args
 
 FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")
 
@@ -65,7 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  png  STEM.png            trajectory, GRF vs insoles, contacts, falls, errors\n"
             "The body is the subject of --gt (its height and mass), overridden by\n"
             "--body-height/--body-mass, else 1.70 m / 70 kg. A format that fails (e.g. mp4\n"
-            "without OpenGL) is reported and the others are still written (exit code 1)."
+            "without OpenGL) or a RECON.npz that cannot be read is reported and the others\n"
+            "are still written (exit code 1); an unreadable --gt ends the command."
         ),
         epilog="example: grip export runs/eval/seq000_grip.npz --out exports --formats bvh,png \\\n"
         "           --gt data/sequences/seq000.npz",
@@ -101,6 +103,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "end; default: the middle frame)")  # fmt: skip
     p.add_argument("--strobe-every", type=int, default=None, metavar="N",
                    help="frames between two strobe poses (default: half a second)")  # fmt: skip
+    add_limit_arguments(p)
     p.set_defaults(func=lambda args: cmd_export(args, p))
 
 
@@ -125,11 +128,13 @@ def _body(args: argparse.Namespace, gt, parser: argparse.ArgumentParser):
 
 
 def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Run ``grip export``. Returns 0, or 1 when some file could not be written."""
+    """Run ``grip export``. Returns 0, or 1 when some file could not be read or written."""
+    limits_from_args(args)
     if "mp4" in args.formats:
         # MuJoCo picks its OpenGL backend when first imported; EGL works headless.
         os.environ.setdefault("MUJOCO_GL", "egl")
     from grip.cli.main import CliError
+    from grip.cli.recordings import skip_file
     from grip.core.reconstruction import Reconstruction, ReconstructionError
     from grip.export import ExportError, check_ground_truth, fk_mismatch_m
 
@@ -145,13 +150,14 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         parser.error(f"argument --strobe-every: must be >= 1, got {args.strobe_every}")
 
     recons = []
+    skipped: list[tuple[str, str]] = []
     for path in args.recons:
         try:
             recons.append((path, Reconstruction.load(path)))
-        except ReconstructionError as e:
-            raise CliError(str(e)) from e
-        except zipfile.BadZipFile as e:  # not caught by Reconstruction.load itself
-            raise CliError(f"{path}: not a readable .npz file ({e})") from e
+        except (ReconstructionError, OSError) as e:  # reported, the others are exported
+            skip_file(skipped, path, e)
+    if not recons:
+        raise CliError(f"none of the {len(args.recons)} reconstruction file(s) could be read")
     stems = [p.stem for p, _ in recons]
     dup = sorted({s for s in stems if stems.count(s) > 1})
     if dup:
@@ -216,11 +222,13 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
                 video_broken = str(e)
                 print(f"grip: error: mp4 of {path} (and of any further reconstruction): {e}",
                       file=sys.stderr)  # fmt: skip
+    if skipped:
+        print(f"grip: {len(skipped)} reconstruction file(s) could not be read and were skipped",
+              file=sys.stderr)  # fmt: skip
     if failures:
         print(f"grip: {failures} export(s) failed; the other files were written",
               file=sys.stderr)  # fmt: skip
-        return 1
-    return 0
+    return 1 if failures or skipped else 0
 
 
 def _export_one(fmt: str, recon, args: argparse.Namespace, stem: str, body, gt, video_cfg,

@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from grip.cli.recordings import add_tta_argument
+from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -275,6 +275,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         help="evaluate every run of a sensor sweep folder ('grip train-kin --sweep') "
         "and print a table like GRIP Table 3 instead",
     )
+    add_limit_arguments(p)
     p.set_defaults(func=cmd_eval)
 
 
@@ -294,6 +295,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     )
     from grip.kinematics.inference import KinematicsEstimator
 
+    limits_from_args(args)
     if args.sweep is not None:
         if args.model is not None:
             raise CliError("give --model or --sweep, not both")
@@ -303,7 +305,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         est = KinematicsEstimator.from_checkpoint(model, tta=args.tta)
     except ValueError as e:
         raise CliError(str(e)) from e
-    recs = _load_split(args.data, args.split)
+    errors: list[tuple[str, str]] = []
+    recs = _load_split(args.data, args.split, errors)
     with tqdm(unit="segment", desc="evaluating") as bar:
         rows = evaluate_recordings(est, recs, args.segment_frames, progress=bar.update,
                                    joints=args.joints)  # fmt: skip
@@ -326,13 +329,21 @@ def cmd_eval(args: argparse.Namespace) -> int:
         atomic_write_text(args.out / "table.md", table + "\n")
         plot_categories(agg, args.out / "categories.png")
         print(f"wrote {args.out / 'table.md'} and {args.out / 'categories.png'}")
-    return 0
+    return _exit_status(errors)
 
 
-def _load_split(data: Path, split: str) -> list:
+def _load_split(data: Path, split: str, errors: list[tuple[str, str]]) -> list:
+    """The recordings of a split; unreadable files are reported, skipped and put in
+    ``errors``."""
     from grip.cli.recordings import load_recordings, split_paths
 
-    return load_recordings(split_paths(data, split))
+    return load_recordings(split_paths(data, split), errors=errors)
+
+
+def _exit_status(errors: list[tuple[str, str]]) -> int:
+    from grip.cli.recordings import exit_status
+
+    return exit_status(errors)
 
 
 def _eval_sweep(args: argparse.Namespace) -> int:
@@ -350,7 +361,8 @@ def _eval_sweep(args: argparse.Namespace) -> int:
     if not runs:
         raise CliError(f"{args.sweep}: no sweep runs (imu<N>_press|nopress/best.pt); train them "
                        "with 'grip train-kin --sweep --out DIR'")  # fmt: skip
-    recs = _load_split(args.data, args.split)
+    errors: list[tuple[str, str]] = []
+    recs = _load_split(args.data, args.split, errors)
     results = []
     for s, ck in tqdm(runs, unit="config", desc="sweep"):
         try:
@@ -375,4 +387,4 @@ def _eval_sweep(args: argparse.Namespace) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(args.out / "sweep.md", table + "\n")
         print(f"wrote {args.out / 'sweep.md'}")
-    return 0
+    return _exit_status(errors)

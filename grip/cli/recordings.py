@@ -1,9 +1,12 @@
-"""Recordings and KinematicsNet checkpoints as the commands take them (errors -> CliError)."""
+"""Recordings and KinematicsNet checkpoints as the commands take them (errors -> CliError),
+and the ``--input-limit NAME=VALUE`` option of the commands that read input files."""
 
 from __future__ import annotations
 
+import argparse
 import fnmatch
 import os
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,6 +25,76 @@ def split_paths(data: Path, split: str) -> list[Path]:
         raise CliError(str(e)) from e
 
 
+LIMIT_HELP = (
+    "raise or lower one limit on input files, NAME=VALUE (VALUE a number or inf; repeatable), "
+    "for genuine long or unusual takes. Also settable for every process as "
+    "GRIP_LIMITS=NAME=VALUE,NAME=VALUE. Limits and defaults: "
+)
+
+LoadErrors = list[tuple[str, str]]
+"""``(file, reason)`` of each input file a command skipped."""
+
+
+def add_limit_arguments(parser: argparse.ArgumentParser) -> None:
+    """Adds the repeatable ``--input-limit NAME=VALUE`` option
+    (:class:`grip.core.limits.InputLimits`)."""
+    from grip.core.limits import limit_help
+
+    parser.add_argument("--input-limit", action="append", default=[], metavar="NAME=VALUE",
+                        dest="input_limits", help=LIMIT_HELP + limit_help())  # fmt: skip
+
+
+def limits_from_args(args: argparse.Namespace):
+    """The limits in force for a command: ``$GRIP_LIMITS`` overridden by its ``--input-limit``
+    options.
+
+    Given options make them the limits of this process and of the worker processes it starts
+    (:func:`grip.core.limits.set_active_limits`), so every loader applies them.
+
+    Returns:
+        The :class:`grip.core.limits.InputLimits`.
+
+    Raises:
+        CliError: An unknown limit name or a bad value (the message lists the names).
+    """
+    from grip.cli.main import CliError
+    from grip.core.limits import active_limits, set_active_limits
+
+    items = getattr(args, "input_limits", None) or []
+    try:
+        limits = active_limits().with_overrides(items)
+    except ValueError as e:
+        raise CliError(f"--input-limit: {e}") from e
+    if items:
+        set_active_limits(limits)
+    return limits
+
+
+def _reason(path: str, err: BaseException) -> str:
+    """The message of ``err`` without a leading ``path:`` (loaders start with it)."""
+    text = str(err)
+    return text[len(path) + 1 :].strip() if text.startswith(f"{path}:") else text
+
+
+def skip_file(errors: LoadErrors, path: str | os.PathLike, err: BaseException | str) -> None:
+    """Records a skipped input file and reports it at once: ``grip: error: FILE: reason``."""
+    path = str(path)
+    reason = err if isinstance(err, str) else _reason(path, err)
+    errors.append((path, reason))
+    print(f"grip: error: {path}: {reason}", file=sys.stderr, flush=True)
+
+
+def exit_status(errors: LoadErrors, n_files: int | None = None) -> int:
+    """A command's exit code after its work: 0, or 1 when input files were skipped (then a
+    closing line on stderr says how many)."""
+    if not errors:
+        return 0
+    of = f" of {n_files}" if n_files is not None else ""
+    print(f"grip: {len(errors)}{of} input file(s) were skipped (unreadable or refused; see the "
+          "errors above); the results cover the others", file=sys.stderr)  # fmt: skip
+    return 1
+
+
 def load_recordings(
     files: Sequence[str | os.PathLike],
     categories: Sequence[str] = (),
@@ -30,6 +103,7 @@ def load_recordings(
     limit: int = 0,
     fill_gaps: int = 0,
     segment_stride: int = 0,
+    errors: LoadErrors | None = None,
 ) -> list:
     """Load recordings, keeping those whose category matches a glob of ``categories`` (all when
     empty); crop each to ``max_frames``, or cut it into ``segment_frames``-frame segments (a
@@ -39,8 +113,14 @@ def load_recordings(
     (:func:`prism_tools.gaps.fill_gaps`, listed in ``extras["filled_gaps"]``); longer ones are
     an error.
 
+    A file that cannot be read (corrupt, hostile, above the input limits): with ``errors=None``
+    the first one ends the command (``CliError``); with an ``errors`` list it is reported on
+    stderr (``grip: error: FILE: reason``), appended to ``errors`` as ``(file, reason)`` and
+    skipped, and the command goes on with the others (finish with :func:`exit_status`).
+
     Raises:
-        CliError: A file cannot be read (the message names it), or nothing is selected.
+        CliError: A file cannot be read and ``errors`` is ``None`` (the message names it), or
+            nothing is selected (with ``errors``: no file was readable).
     """
     from grip.cli.main import CliError
     from prism_tools.chunking import segments
@@ -51,7 +131,10 @@ def load_recordings(
         try:
             rec = load_recording(f, fill_gaps=fill_gaps)
         except (OSError, ValueError) as e:
-            raise CliError(str(e)) from e
+            if errors is None:
+                raise CliError(str(e)) from e
+            skip_file(errors, f, e)
+            continue
         cat = rec.category or "unknown"
         if categories and not any(fnmatch.fnmatch(cat, c) for c in categories):
             continue
@@ -67,7 +150,8 @@ def load_recordings(
             return recs[:limit]
     if not recs:
         what = f" of categories {list(categories)}" if categories else ""
-        raise CliError(f"no recordings{what} selected from {len(files)} file(s)")
+        bad = f" ({len(errors)} unreadable)" if errors else ""
+        raise CliError(f"no recordings{what} selected from {len(files)} file(s){bad}")
     return recs
 
 

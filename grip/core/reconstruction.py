@@ -30,7 +30,6 @@ import dataclasses
 import io
 import json
 import os
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +37,7 @@ import numpy as np
 
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
 from grip.core.metrics import global_to_local_rot
 
 FORMAT = "grip-reconstruction"
@@ -171,21 +171,43 @@ class Reconstruction(PoseTrack):
         atomic_write(path, write)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Reconstruction:
+    def load(cls, path: str | os.PathLike, *, limits: InputLimits | None = None
+             ) -> Reconstruction:  # fmt: skip
         """Read a file written by :meth:`save`; any problem raises
-        :class:`ReconstructionError` naming the file."""
+        :class:`ReconstructionError` naming the file.
+
+        Member sizes are checked from the npy headers before any array is loaded, the JSON
+        metadata's depth and integer digits before it is parsed, the frame rate and duration
+        before the reconstruction is built (``limits``, default
+        :func:`grip.core.limits.active_limits`)."""
         path = Path(path)
+        limits = limits or active_limits()
         try:
+            check_npz(path, limits)
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-            raise ReconstructionError(f"{path}: not a readable .npz file ({e})") from e
+        except LimitExceeded as e:
+            raise ReconstructionError(f"{path}: {e}") from None
+        except Exception as e:  # any failure of zipfile/numpy: a corrupt or hostile file
+            raise ReconstructionError(f"{path}: not a readable .npz file "
+                                      f"({type(e).__name__}: {str(e)[:300]})") from None
         try:
-            meta = json.loads(str(data.pop("__meta__")))
-        except (KeyError, json.JSONDecodeError) as e:
-            raise ReconstructionError(f"{path}: missing or corrupt '__meta__' ({e})") from e
-        if meta.get("format") != FORMAT or meta.get("version") != VERSION:
+            meta = safe_json_loads(str(data.pop("__meta__")), limits, "'__meta__'")
+        except LimitExceeded as e:
+            raise ReconstructionError(f"{path}: {e}") from None
+        except (KeyError, ValueError) as e:
+            raise ReconstructionError(f"{path}: missing or corrupt '__meta__' ({e})") from None
+        if (not isinstance(meta, dict) or meta.get("format") != FORMAT
+                or meta.get("version") != VERSION):  # fmt: skip
             raise ReconstructionError(f"{path}: not a {FORMAT} file of version {VERSION}")
+        try:
+            fps = float(meta["fps"])
+            n = int(np.shape(data.get("joint_pos"))[0]) if np.ndim(data.get("joint_pos")) else 0
+            limits.check_take(n, fps)
+        except LimitExceeded as e:
+            raise ReconstructionError(f"{path}: {e}") from None
+        except (KeyError, TypeError, ValueError) as e:
+            raise ReconstructionError(f"{path}: bad or missing fps in '__meta__' ({e})") from None
         try:
             return cls(name=str(meta["name"]), method=str(meta["method"]),
                        fps=float(meta["fps"]), ms_per_frame=float(meta.get("ms_per_frame", 0)),
@@ -196,3 +218,6 @@ class Reconstruction(PoseTrack):
             raise ReconstructionError(f"{path}: missing key {e}") from e
         except ReconstructionError as e:
             raise ReconstructionError(f"{path}: {e}") from e
+        except Exception as e:  # a value no check foresaw (wrong dtype, notes not a dict, ...)
+            raise ReconstructionError(f"{path}: malformed reconstruction "
+                                      f"({type(e).__name__}: {str(e)[:300]})") from None

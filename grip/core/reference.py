@@ -38,6 +38,7 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics, integrate_root
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
 from grip.core.rotations import (
     angular_velocity,
     angular_velocity_at,
@@ -427,24 +428,37 @@ class ReferenceSet:
         atomic_write(path, write)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> ReferenceSet:
+    def load(cls, path: str | os.PathLike, *, limits: InputLimits | None = None
+             ) -> ReferenceSet:  # fmt: skip
         """Read a file written by :meth:`save`.
 
+        Member sizes are checked from the npy headers before any array is loaded, the JSON
+        metadata's depth and integer digits before it is parsed, each clip's frame rate and
+        duration before it is built (``limits``, default
+        :func:`grip.core.limits.active_limits`).
+
         Raises:
-            ReferenceError: Not a reference file, a missing key, a bad shape or value (the
-                message names the file and the key).
+            ReferenceError: Not a reference file, a missing key, a bad shape or value, a value
+                above ``limits``, a corrupt file (the message names the file and the key).
         """
         path = Path(path)
+        limits = limits or active_limits()
         try:
+            check_npz(path, limits)
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as e:
-            raise ReferenceError(f"{path}: not a readable .npz reference file ({e})") from e
+        except LimitExceeded as e:
+            raise ReferenceError(f"{path}: {e}") from None
+        except Exception as e:  # any failure of zipfile/numpy: a corrupt or hostile file
+            raise ReferenceError(f"{path}: not a readable .npz reference file "
+                                 f"({type(e).__name__}: {str(e)[:300]})") from None
         try:
-            meta = json.loads(str(data["__meta__"]))
-        except (KeyError, json.JSONDecodeError) as e:
-            raise ReferenceError(f"{path}: missing or corrupt '__meta__' ({e})") from e
-        if meta.get("format") != "grip-reference":
+            meta = safe_json_loads(str(data["__meta__"]), limits, "'__meta__'")
+        except LimitExceeded as e:
+            raise ReferenceError(f"{path}: {e}") from None
+        except (KeyError, ValueError) as e:
+            raise ReferenceError(f"{path}: missing or corrupt '__meta__' ({e})") from None
+        if not isinstance(meta, dict) or meta.get("format") != "grip-reference":
             raise ReferenceError(f"{path}: not a grip reference file")
         if meta.get("version") != FORMAT_VERSION:
             raise ReferenceError(f"{path}: format version {meta.get('version')}, this code "
@@ -461,6 +475,8 @@ class ReferenceSet:
                     }
                 body = BodyParams(height_m=float(cm["body"]["height_m"]),
                                   mass_kg=float(cm["body"]["mass_kg"]))  # fmt: skip
+                qpos = data[f"{i}/gt_qpos"]
+                limits.check_take(int(qpos.shape[0]) if qpos.ndim else 0, float(cm["fps"]))
                 clips.append(ReferenceClip(
                     name=str(cm["name"]), category=str(cm["category"]), fps=float(cm["fps"]),
                     body=body, objects=objects, **{k: data[f"{i}/{k}"] for k in PRIMARY},
@@ -470,3 +486,8 @@ class ReferenceSet:
             raise ReferenceError(f"{path}: missing key {e}") from e
         except ReferenceError as e:
             raise ReferenceError(f"{path}: {e}") from e
+        except LimitExceeded as e:
+            raise ReferenceError(f"{path}: {e}") from None
+        except Exception as e:  # a value no check foresaw (wrong type in the metadata, ...)
+            raise ReferenceError(f"{path}: malformed reference file "
+                                 f"({type(e).__name__}: {str(e)[:300]})") from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -31,20 +30,44 @@ def dataset_summary(root: str | os.PathLike, scan_limit: int | None = None) -> d
     Returns:
         A JSON-ready dict: ``recordings``, ``frames``, ``hours``, ``fps``, ``categories``
         (category -> {"recordings", "frames"}), ``splits`` (when known), ``clips_failed``,
-        ``size_bytes`` and ``source`` ("manifest" or "scan").
+        ``size_bytes`` and ``source`` ("manifest" or "scan"); a scan adds ``files`` (files
+        tried) and ``unreadable`` (``{"file", "error"}`` of each file refused: corrupt,
+        hostile or above the input limits of :mod:`grip.core.limits`).
     """
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: no such dataset folder")
     manifest = root / "manifest.json"
     if manifest.exists():
-        return _summary_from_manifest(root, manifest)
+        try:
+            return _summary_from_manifest(root, manifest)
+        except (TypeError, AttributeError, KeyError) as e:  # valid JSON, wrong structure
+            raise ValueError(f"{manifest}: corrupt manifest ({type(e).__name__}: {e})") from None
     return _summary_from_scan(root, scan_limit)
+
+
+def _read_json(path: Path) -> dict:
+    """A JSON object file, size/depth/integer digits bounded (:mod:`grip.core.limits`).
+
+    Raises:
+        ValueError: Unreadable, not JSON, above a limit, or not an object (names the file).
+    """
+    from grip.core.limits import active_limits, check_file_size, safe_json_loads
+
+    limits = active_limits()
+    try:
+        check_file_size(path, limits)
+        data = safe_json_loads(path.read_text(encoding="utf-8"), limits, path.name)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: corrupt or unreadable ({type(e).__name__}: {e})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: corrupt (expected a JSON object, got {type(data).__name__})")
+    return data
 
 
 def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
     try:
-        manifest = json.loads(manifest_path.read_text())
+        manifest = _read_json(manifest_path)
     except ValueError as e:
         raise ValueError(f"{manifest_path}: corrupt manifest ({e})") from e
     cats: dict[str, dict[str, int]] = {}
@@ -83,11 +106,11 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
     split_path = root / "split.json"
     if split_path.exists():
         try:
-            split = json.loads(split_path.read_text())
+            split = _read_json(split_path)
             summary["splits"] = split.get("stats", {})
             for part, clips in split.get("groups", {}).items():
                 summary["splits"].setdefault(part, {})["clips"] = len(clips)
-        except ValueError:
+        except (ValueError, TypeError, AttributeError):
             summary["splits"] = {"error": f"{split_path}: unreadable"}
     return summary
 
@@ -105,8 +128,10 @@ def _summary_from_scan(root: Path, limit: int | None) -> dict:
     for p in files:
         try:
             rec = load_recording(p)
-        except ValueError as e:
-            errors.append({"file": str(p), "error": str(e)})
+        except (OSError, ValueError) as e:  # every loader failure is a RecordingError
+            text = str(e)
+            reason = text[len(str(p)) + 1 :].strip() if text.startswith(f"{p}:") else text
+            errors.append({"file": str(p), "error": reason})
             continue
         cat = rec.category or "unknown"
         entry = cats.setdefault(cat, {"recordings": 0, "frames": 0})
@@ -119,6 +144,7 @@ def _summary_from_scan(root: Path, limit: int | None) -> dict:
     return {
         "source": "scan",
         "root": str(root),
+        "files": len(files),
         "recordings": n,
         "frames": frames,
         "fps": fps,

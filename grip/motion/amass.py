@@ -23,14 +23,14 @@ world-frame rotation away from the upright T-pose.
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from grip.core import skeleton as sk
-from grip.motion.source import MotionImportError, SourceMotion, source_fk
+from grip.core.limits import InputLimits, active_limits, check_npz
+from grip.motion.source import MotionImportError, SourceMotion, clean_import_errors, source_fk
 
 SMPL_JOINT_NAMES: tuple[str, ...] = sk.JOINT_NAMES
 """The 24 SMPL joint names (``Pelvis``, ``L_Hip``, ...), shared with :mod:`grip.core.skeleton`."""
@@ -87,8 +87,13 @@ def _array(path_s: str, npz: np.lib.npyio.NpzFile, key: str) -> np.ndarray:
     return np.asarray(arr, dtype=np.float64)
 
 
+@clean_import_errors
 def load_amass_npz(
-    path: str | Path, *, name: str | None = None, category: str = "unknown"
+    path: str | Path,
+    *,
+    name: str | None = None,
+    category: str = "unknown",
+    limits: InputLimits | None = None,
 ) -> SourceMotion:
     """Read an AMASS-style ``.npz`` into a :class:`SourceMotion` (Z-up, metres, 24 SMPL joints).
 
@@ -96,19 +101,26 @@ def load_amass_npz(
         path: The ``.npz`` file (opened with ``allow_pickle=False``).
         name: Clip id to store; default: the file stem.
         category: Motion category to store.
+        limits: Size and rate limits (:class:`grip.core.limits.InputLimits`): member sizes
+            are checked from the npy headers before anything is loaded, the frame rate, frames
+            and duration before the poses are read; default
+            :func:`grip.core.limits.active_limits`.
 
     Returns:
         The clip with ``rig="smpl"``, ``up_axis=2``, ``unit_m=1``, ``rest_is_tpose=True``,
         ``times_s = k / mocap_framerate``; joint positions from the approximate rest skeleton.
 
     Raises:
-        MotionImportError: Missing keys, wrong shapes, NaN/inf, a non-positive frame rate
-            (the message names the file and the key).
+        MotionImportError: Missing keys, wrong shapes, NaN/inf, a non-positive frame rate,
+            sizes or a rate outside ``limits``, a corrupt file (the message names the file and
+            the key).
     """
     path_s = str(path)
+    limits = limits or active_limits()
     try:
+        members = check_npz(path, limits)
         npz = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+    except (OSError, ValueError) as exc:
         raise MotionImportError(path_s, f"cannot open as .npz ({exc})") from None
     with npz:
         keys = set(npz.files)
@@ -118,9 +130,13 @@ def load_amass_npz(
         rate_key = next((k for k in ("mocap_framerate", "mocap_frame_rate") if k in keys), None)
         if rate_key is None:
             raise MotionImportError(path_s, "missing frame rate", key="mocap_framerate")
+        rate = _array(path_s, npz, rate_key)
+        if rate.size == 1 and np.isfinite(rate).all() and float(rate.reshape(())) > 0:
+            shape = members["poses"][0]
+            limits.check_take(shape[0] if shape else 0, float(rate.reshape(())),
+                              len(SMPL_JOINT_NAMES))  # fmt: skip
         poses = _array(path_s, npz, "poses")
         trans = _array(path_s, npz, "trans")
-        rate = _array(path_s, npz, rate_key)
     if poses.ndim != 2 or poses.shape[1] not in _POSE_WIDTHS:
         raise MotionImportError(
             path_s, f"expected shape (T, 72|156|165), got {poses.shape}", key="poses"

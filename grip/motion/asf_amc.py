@@ -33,7 +33,15 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from grip.motion.source import MotionImportError, SourceMotion, check_finite, identity_rotations
+from grip.core.limits import InputLimits, active_limits
+from grip.motion.source import (
+    MotionImportError,
+    SourceMotion,
+    check_finite,
+    clean_import_errors,
+    identity_rotations,
+    read_text_bounded,
+)
 
 _INCH_M = 0.0254
 _ROT_DOFS = {"rx": "X", "ry": "Y", "rz": "Z"}
@@ -109,13 +117,18 @@ def _strip_comment(line: str) -> str:
     return line if k < 0 else line[:k]
 
 
-def load_asf(path: str | Path, *, unit_m: float | None = None) -> AsfSkeleton:
+@clean_import_errors
+def load_asf(
+    path: str | Path, *, unit_m: float | None = None, limits: InputLimits | None = None
+) -> AsfSkeleton:
     """Parse an Acclaim ASF skeleton.
 
     Args:
         path: The ``.asf`` file.
         unit_m: Metres per length unit; ``None`` derives it from ``:units length`` (0.0254 /
             length; 0.05644 for ``length 0.45``; inches if ``:units`` has no length).
+        limits: Size limits (file size, bones); default
+            :func:`grip.core.limits.active_limits`.
 
     Returns:
         The skeleton, bones in depth-first order of ``:hierarchy``.
@@ -124,10 +137,7 @@ def load_asf(path: str | Path, *, unit_m: float | None = None) -> AsfSkeleton:
         MotionImportError: Missing sections, bad numbers, unknown bones in the hierarchy, cycles.
     """
     path_s = str(path)
-    try:
-        raw_lines = Path(path).read_text(encoding="utf-8-sig", errors="replace").splitlines()
-    except OSError as exc:
-        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
+    raw_lines = read_text_bounded(path, limits or active_limits()).splitlines()
 
     def err(problem: str, line: int | None = None, key: str | None = None) -> MotionImportError:
         return MotionImportError(path_s, problem, line=line, key=key)
@@ -473,6 +483,7 @@ def _read_amc(
     return out, frame_numbers, degrees
 
 
+@clean_import_errors
 def load_amc(
     amc_path: str | Path,
     asf_path: str | Path | None = None,
@@ -480,6 +491,7 @@ def load_amc(
     fps: float | None = None,
     name: str | None = None,
     category: str = "unknown",
+    limits: InputLimits | None = None,
 ) -> SourceMotion:
     """Read an AMC motion with its ASF skeleton into a :class:`SourceMotion`.
 
@@ -489,6 +501,9 @@ def load_amc(
         fps: Frame rate. ``None``: from a ``_<fps>`` name suffix (``_120`` for HDM05), else 120.
         name: Clip id to store; default: the AMC's stem.
         category: Motion category to store.
+        limits: Size and rate limits (:class:`grip.core.limits.InputLimits`): frame rate,
+            frames, duration and frames x joints are checked before the clip's arrays are
+            built; default :func:`grip.core.limits.active_limits`.
 
     Returns:
         The clip in the ASF's world axes (y up for CMU/HDM05), metres; ``rig="asf"``.
@@ -498,17 +513,16 @@ def load_amc(
             number of values (message names file, line and frame).
     """
     amc_s = str(amc_path)
+    limits = limits or active_limits()
     if asf_path is None:
         asf_path = find_asf_for_amc(amc_path)
-    skel = load_asf(asf_path)
+    skel = load_asf(asf_path, limits=limits)
     if fps is None:
         fps = _fps_from_name(Path(amc_path).stem) or DEFAULT_FPS
     if not fps > 0:
         raise MotionImportError(amc_s, f"fps must be > 0, got {fps}")
-    try:
-        lines = Path(amc_path).read_text(encoding="utf-8-sig", errors="replace").splitlines()
-    except OSError as exc:
-        raise MotionImportError(amc_s, f"cannot read file ({exc.strerror or exc})") from exc
+    limits.check_fps(float(fps))
+    lines = read_text_bounded(amc_path, limits).splitlines()
 
     expected = {"root": len(skel.root_order)}
     trans_bones = []
@@ -524,6 +538,9 @@ def load_amc(
     data, frame_numbers, amc_deg = _read_amc(amc_s, lines, expected)
     degrees = skel.angle_deg if amc_deg is None else amc_deg
     n_frames = len(frame_numbers)
+    parent_names = {b.parent for b in skel.bones}
+    n_leaves = sum(b.name not in parent_names for b in skel.bones)
+    limits.check_take(n_frames, float(fps), 1 + len(skel.bones) + n_leaves)
 
     # Root.
     root_vals = data["root"]

@@ -21,10 +21,13 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from grip.core.limits import InputLimits, active_limits
 from grip.motion.source import (
     MotionImportError,
     SourceMotion,
+    clean_import_errors,
     identity_rotations,
+    read_text_bounded,
     rest_fk,
     source_fk,
 )
@@ -216,9 +219,18 @@ def _parse_hierarchy(path: str, lines: list[str], end: int) -> tuple[list[_Joint
 
 
 def _parse_motion(
-    path: str, lines: list[str], motion_line: int, n_channels: int, allow_truncated: bool
+    path: str,
+    lines: list[str],
+    motion_line: int,
+    n_channels: int,
+    allow_truncated: bool,
+    n_joints: int,
+    limits: InputLimits,
 ) -> tuple[np.ndarray, float]:
-    """Parse the MOTION block starting at line index ``motion_line``. Returns (F, C) values, dt."""
+    """Parse the MOTION block starting at line index ``motion_line``. Returns (F, C) values, dt.
+
+    The declared frame count and frame time are checked against ``limits`` (frame rate,
+    frames, duration, frames x joints) before any frame line is parsed."""
     i = motion_line + 1
 
     def header(keyword: str) -> tuple[str, int]:
@@ -247,6 +259,12 @@ def _parse_motion(
         raise MotionImportError(path, f"bad frame time {value!r}", line=tline) from None
     if not np.isfinite(dt) or dt <= 0:
         raise MotionImportError(path, f"frame time must be > 0, got {value!r}", line=tline)
+    limits.check_take(n_frames, 1.0 / dt, n_joints)
+    n_lines = sum(1 for k in range(i, len(lines)) if not lines[k].isspace() and lines[k])
+    if n_lines > n_frames:
+        raise MotionImportError(
+            path, f"'Frames: {n_frames}' but {n_lines} frame lines follow", line=fline - 1
+        )
 
     rows: list[list[str]] = []
     row_lines: list[int] = []
@@ -307,6 +325,7 @@ def _parse_motion(
     return values, dt
 
 
+@clean_import_errors
 def load_bvh(
     path: str | Path,
     *,
@@ -316,6 +335,7 @@ def load_bvh(
     name: str | None = None,
     category: str = "unknown",
     allow_truncated: bool = False,
+    limits: InputLimits | None = None,
 ) -> SourceMotion:
     """Read a BVH file into a :class:`SourceMotion` (Y-up world, metres).
 
@@ -333,25 +353,27 @@ def load_bvh(
         allow_truncated: Accept a file with fewer frame lines than ``Frames:`` declares (and a
             cut-off last line), loading the complete frames with a warning. Off by default: such
             a file raises.
+        limits: Size and rate limits (:class:`grip.core.limits.InputLimits`), checked on the
+            header before any frame is parsed; default :func:`grip.core.limits.active_limits`.
 
     Returns:
         The clip. ``times_s`` is ``k * Frame Time`` (restarting at 0 after a dropped frame),
         ``rest_rot`` is identity, ``rest_pos`` is the OFFSET skeleton with the root at its OFFSET.
 
     Raises:
-        MotionImportError: Unreadable or inconsistent file (the message names file and line).
+        MotionImportError: Unreadable or inconsistent file, or values above ``limits`` (the
+            message names file and line).
     """
     path_s = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig", errors="replace")
-    except OSError as exc:
-        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
+    limits = limits or active_limits()
+    text = read_text_bounded(path, limits)
     lines = text.splitlines()
     motion_line = next((k for k, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
     if motion_line is None:
         raise MotionImportError(path_s, "no MOTION section (file truncated?)", line=len(lines))
     joints, n_channels = _parse_hierarchy(path_s, lines, motion_line)
-    values, dt = _parse_motion(path_s, lines, motion_line, n_channels, allow_truncated)
+    values, dt = _parse_motion(path_s, lines, motion_line, n_channels, allow_truncated,
+                               len(joints), limits)  # fmt: skip
 
     joint_names = tuple(j.name for j in joints)
     parents = np.array([j.parent for j in joints], dtype=np.int64)

@@ -28,10 +28,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, safe_json_loads
 from grip.motion.source import (
     MotionImportError,
     SourceMotion,
+    clean_import_errors,
     identity_rotations,
+    read_text_bounded,
     rest_fk,
     source_fk,
 )
@@ -94,13 +97,15 @@ class DeepMimicSkeleton:
         return 1 + sum(_DOF_SIZE[t] for t in self.types)
 
 
-def _read_json(path: str | os.PathLike) -> object:
-    """Parse a JSON file; failures become :class:`MotionImportError` naming the file."""
+def _read_json(path: str | os.PathLike, limits: InputLimits) -> object:
+    """Parse a JSON file (size, depth and integer digits bounded by ``limits``); failures
+    become :class:`MotionImportError` naming the file."""
     path_s = str(path)
+    text = read_text_bounded(path, limits)
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8-sig"))
-    except OSError as exc:
-        raise MotionImportError(path_s, f"cannot read file ({exc.strerror or exc})") from exc
+        return safe_json_loads(text, limits, "JSON")
+    except LimitExceeded as exc:
+        raise MotionImportError(path_s, str(exc)) from None
     except json.JSONDecodeError as exc:
         raise MotionImportError(path_s, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
 
@@ -147,7 +152,10 @@ def humanoid3d_skeleton() -> DeepMimicSkeleton:
     return _build_skeleton(list(HUMANOID3D_JOINTS), HUMANOID3D_LEAF_BODIES)
 
 
-def load_deepmimic_skeleton(path: str | Path) -> DeepMimicSkeleton:
+@clean_import_errors
+def load_deepmimic_skeleton(
+    path: str | Path, *, limits: InputLimits | None = None
+) -> DeepMimicSkeleton:
     """Read a DeepMimic character file (``{"Skeleton": {"Joints": [...]}, "BodyDefs": [...]}``).
 
     Raises:
@@ -155,7 +163,8 @@ def load_deepmimic_skeleton(path: str | Path) -> DeepMimicSkeleton:
             (not supported), parents out of order.
     """
     path_s = str(path)
-    data = _read_json(path)
+    limits = limits or active_limits()
+    data = _read_json(path, limits)
     try:
         raw_joints = data["Skeleton"]["Joints"]
     except (KeyError, TypeError):
@@ -196,12 +205,13 @@ def load_deepmimic_skeleton(path: str | Path) -> DeepMimicSkeleton:
     return _build_skeleton(joints, bodies)
 
 
-def _load_frames(path_s: str, data: Any, frame_size: int) -> np.ndarray:
+def _load_frames(path_s: str, data: Any, frame_size: int, limits: InputLimits) -> np.ndarray:
     if not isinstance(data, dict) or "Frames" not in data:
         raise MotionImportError(path_s, "no 'Frames' list (not a DeepMimic motion)", key="Frames")
     frames = data["Frames"]
     if not isinstance(frames, list) or not frames:
         raise MotionImportError(path_s, "'Frames' must be a non-empty list", key="Frames")
+    limits.check("max_frames", len(frames), "frame count")
     for k, fr in enumerate(frames):
         if not isinstance(fr, list) or len(fr) != frame_size:
             got = len(fr) if isinstance(fr, list) else type(fr).__name__
@@ -226,12 +236,14 @@ def _load_frames(path_s: str, data: Any, frame_size: int) -> np.ndarray:
     return arr
 
 
+@clean_import_errors
 def load_deepmimic(
     path: str | Path,
     skeleton_path: str | Path | None = None,
     *,
     name: str | None = None,
     category: str = "unknown",
+    limits: InputLimits | None = None,
 ) -> SourceMotion:
     """Read a DeepMimic motion clip into a :class:`SourceMotion` (Y-up, metres).
 
@@ -241,6 +253,9 @@ def load_deepmimic(
             to the clip, or the built-in humanoid3d constants if that file is absent.
         name: Clip id to store; default: the stem without the ``humanoid3d_`` prefix.
         category: Motion category to store.
+        limits: Size and rate limits (:class:`grip.core.limits.InputLimits`): the frame rate
+            (from the median ``dt``), frames, duration and frames x joints are checked before
+            the clip's arrays are built; default :func:`grip.core.limits.active_limits`.
 
     Returns:
         The clip with ``rig="deepmimic"``, ``unit_m=1``, root at the origin in the rest pose, the
@@ -251,19 +266,27 @@ def load_deepmimic(
             non-positive dt before the last frame, zero quaternions.
     """
     path_s = str(path)
+    limits = limits or active_limits()
     if skeleton_path is None:
         default = Path(path).parent / SKELETON_FILE
-        skel = load_deepmimic_skeleton(default) if default.is_file() else humanoid3d_skeleton()
+        skel = (load_deepmimic_skeleton(default, limits=limits) if default.is_file()
+                else humanoid3d_skeleton())  # fmt: skip
     else:
-        skel = load_deepmimic_skeleton(skeleton_path)
-    data = _read_json(path)
-    arr = _load_frames(path_s, data, skel.frame_size)
+        skel = load_deepmimic_skeleton(skeleton_path, limits=limits)
+    data = _read_json(path, limits)
+    arr = _load_frames(path_s, data, skel.frame_size, limits)
     n_frames = arr.shape[0]
     dt = arr[:, 0]
     if n_frames > 1 and np.any(dt[:-1] <= 0):
         k = int(np.flatnonzero(dt[:-1] <= 0)[0])
         raise MotionImportError(path_s, f"frame duration dt must be > 0, got {dt[k]}", frame=k)
     times = np.concatenate([[0.0], np.cumsum(dt[:-1])])
+    n_all = len(skel.names) + len(skel.end_sites)
+    if n_frames > 1:
+        limits.check_take(n_frames, 1.0 / float(np.median(dt[:-1])), n_all)
+        limits.check("max_duration_s", float(times[-1]), "duration (sum of the frames' dt)", " s")
+    else:
+        limits.check("max_joints", n_all, "joint count")
 
     n_joints = len(skel.names)
     local_rot = identity_rotations(n_frames, n_joints)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
 from grip.core.body import BodyModel, BodyParams, build_body
 from grip.core.fk import forward_kinematics
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
 from grip.core.rotations import quat_to_matrix
 
 _FORMAT_VERSION = 1
@@ -113,30 +113,50 @@ class Motion:
         atomic_save_npz(path, arrays)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Motion:
-        """Read a motion written by :meth:`save` (``allow_pickle=False``)."""
+    def load(cls, path: str | os.PathLike, *, limits: InputLimits | None = None) -> Motion:
+        """Read a motion written by :meth:`save` (``allow_pickle=False``).
+
+        Member sizes are checked from the npy headers before anything is loaded, the frame
+        rate and duration before the frames are (``limits``, default
+        :func:`grip.core.limits.active_limits`).
+
+        Raises:
+            MotionError: Anything wrong with the file (the message names it).
+        """
         path = Path(path)
+        limits = limits or active_limits()
         try:
+            members = check_npz(path, limits)
+            missing = [k for k in ("fps", "root_pos", "local_quat", "body", "meta_json")
+                       if k not in members]  # fmt: skip
+            if missing:
+                raise MotionError(f"{path}: missing key(s) {', '.join(missing)}")
             with np.load(path, allow_pickle=False) as z:
-                missing = [k for k in ("fps", "root_pos", "local_quat", "body", "meta_json")
-                           if k not in z.files]  # fmt: skip
-                if missing:
-                    raise MotionError(f"{path}: missing key(s) {', '.join(missing)}")
-                meta = json.loads(str(z["meta_json"]))
+                meta = safe_json_loads(str(z["meta_json"]), limits, "meta_json")
+                if not isinstance(meta, dict):
+                    raise MotionError(f"{path}: meta_json is not a JSON object")
                 fps = float(z["fps"])
+                limits.check_take(members["root_pos"][0][0] if members["root_pos"][0] else 0,
+                                  fps, sk.N_JOINTS)  # fmt: skip
                 root_pos = z["root_pos"]
                 local_quat = z["local_quat"]
                 body = BodyParams.from_array(z["body"])
         except MotionError:
             raise
-        except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError, KeyError) as e:
-            raise MotionError(f"{path}: cannot read motion npz ({e})") from e
+        except LimitExceeded as e:
+            raise MotionError(f"{path}: {e}") from None
+        except Exception as e:  # any failure of zipfile/numpy/json: a corrupt or hostile file
+            raise MotionError(f"{path}: cannot read motion npz ({type(e).__name__}: "
+                              f"{str(e)[:300]})") from None  # fmt: skip
         try:
             return cls(fps=fps, root_pos=root_pos, local_quat=local_quat, body=body,
                        name=meta.get("name", path.stem), category=meta.get("category", "unknown"),
                        meta=meta.get("meta", {}))  # fmt: skip
         except MotionError as e:
             raise MotionError(f"{path}: {e}") from e
+        except Exception as e:  # a value no check foresaw (wrong dtype, meta of a wrong type)
+            raise MotionError(f"{path}: malformed motion ({type(e).__name__}: "
+                              f"{str(e)[:300]})") from None  # fmt: skip
 
 
 def check_motion_arrays(fps: float, root_pos: np.ndarray, local_quat: np.ndarray,

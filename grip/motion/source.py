@@ -11,10 +11,15 @@ Conventions: rotation matrices act on column vectors (``v_world = R @ v_local``)
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
+
+from grip.core.limits import InputLimits, LimitExceeded, check_file_size
 
 SOURCE_FORMATS = ("bvh", "asf_amc", "deepmimic", "amass")
 """Values allowed in :attr:`SourceMotion.fmt`."""
@@ -240,3 +245,47 @@ def check_finite(path: str | Path, what: str, arr: np.ndarray) -> None:
         raise MotionImportError(
             path, f"{int(bad.sum())} non-finite (NaN/inf) value(s) in {what}", frame=frame
         )
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def clean_import_errors(func: _F) -> _F:
+    """Decorates a loader ``func(path, ...)`` so that every failure is a MotionImportError.
+
+    A :class:`~grip.core.limits.LimitExceeded` keeps its message; any other unexpected exception
+    of the parsers (``RecursionError``, ``LookupError``, ``zlib.error``, ...) becomes
+    ``MotionImportError(path, "cannot read (<type>: <message>)")``.
+    """
+
+    @functools.wraps(func)
+    def wrapper(path: Any, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(path, *args, **kwargs)
+        except MotionImportError:
+            raise
+        except LimitExceeded as exc:
+            raise MotionImportError(path, str(exc)) from None
+        except OSError as exc:
+            raise MotionImportError(path, f"cannot read file ({exc.strerror or exc})") from None
+        except Exception as exc:  # a malformed or hostile file: never a traceback
+            text = str(exc)
+            text = text if len(text) <= 300 else text[:300] + "..."
+            raise MotionImportError(path, f"cannot read ({type(exc).__name__}: {text})") from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def read_text_bounded(path: str | Path, limits: InputLimits) -> str:
+    """The text of ``path`` (UTF-8, BOM stripped, bad bytes replaced), size checked first.
+
+    Raises:
+        MotionImportError: The file cannot be read or is above ``limits.max_file_bytes``.
+    """
+    try:
+        check_file_size(path, limits)
+        return Path(path).read_text(encoding="utf-8-sig", errors="replace")
+    except LimitExceeded as exc:
+        raise MotionImportError(path, str(exc)) from None
+    except OSError as exc:
+        raise MotionImportError(path, f"cannot read file ({exc.strerror or exc})") from exc
