@@ -107,6 +107,16 @@ class TrackingEnvConfig:
             this many frames (the environment itself always advances one frame per step; the
             training wrapper :class:`envs.wrappers.ActionRepeat` and the inference loop
             :class:`grip.eval.reconstruct.ClipPlayer` hold it). 1 = a decision every frame.
+        blowup_lin_vel_mps: Pelvis speed above which the state counts as a simulation blow-up,
+            m/s: a sprint is 10, a 10 m free fall ends at 14; the bundled clips under any action
+            (zeros, -1, +1, random, bang-bang) stay below 5.
+        blowup_ang_vel_radps: Angular speed of any joint (hinges and pelvis) above which the state
+            counts as a blow-up, rad/s: the fastest human joint motion (a baseball pitch's shoulder
+            rotation) reaches ~120; the bundled clips under any action stay below 30.
+        blowup_height_m: The state counts as a blow-up when the pelvis is more than this above
+            the highest terrain point, m (a jump lifts the pelvis ~1 m above standing).
+        blowup_depth_m: ... or more than this below the floor (z = 0; the terrain is never
+            lower), m: the body fell through the floor.
         pin_root: Drive the pelvis along the ground-truth root trajectory (position and
             orientation written before every substep): a physics check of the PD tracking, not
             a training mode.
@@ -132,6 +142,10 @@ class TrackingEnvConfig:
     max_episode_frames: int = 0
     min_episode_frames: int = 10
     pin_root: bool = False
+    blowup_lin_vel_mps: float = 50.0
+    blowup_ang_vel_radps: float = 200.0
+    blowup_height_m: float = 4.0
+    blowup_depth_m: float = 1.0
     action_repeat: int = 1
     amp_window: int = 10
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
@@ -150,6 +164,8 @@ class TrackingEnvConfig:
             (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),
             (self.amp_window >= 0, "amp_window must be >= 0 (0 = no AMP observation)"),
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
+            (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
+                 self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),
         )
         for ok, msg in checks:
             if not ok:

@@ -53,7 +53,9 @@ SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_referenc
 _UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
                                        mujoco.mjtWarning.mjWARN_BADQVEL,
                                        mujoco.mjtWarning.mjWARN_BADQACC)])  # fmt: skip
-"""MuJoCo's warnings for a state it could not integrate (it then resets ``MjData`` itself)."""
+"""MuJoCo's warnings for a state it could not integrate (it then resets ``MjData`` itself, which
+also zeroes the counters, and counts the warning: a second blow-up leaves the count at 1)."""
+_W_QPOS, _W_QVEL, _W_QACC = (int(w) for w in _UNSTABLE)
 
 
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
@@ -91,10 +93,15 @@ class _Sim:
     com: np.ndarray  # (3,) subtree COM of the pelvis
     ctrl: np.ndarray
     qvel: np.ndarray
+    qpos: np.ndarray
     act_force: np.ndarray
     warnings: np.ndarray  # live view of MjData.warning.number
     act: slice | np.ndarray  # actuator_ids, as a slice when they are 0..68 in order
     variants: ModelVariants  # the bodies of the clips played on this scene
+    lin: slice  # qvel of the pelvis' linear velocity
+    ang: slice | np.ndarray  # qvel of every angular velocity (pelvis and hinges)
+    root_z: int  # qpos address of the pelvis height
+    z_range: tuple[float, float]  # pelvis heights outside this are a blow-up, m
 
 
 class GripTrackingEnv(gym.Env):
@@ -173,7 +180,6 @@ class GripTrackingEnv(gym.Env):
         self._est_leaf_angvel = np.zeros(0)  # (T, 4, 3)
         self._ref_target = np.zeros(0)  # (T, 69) relative-action reference (+ feed-forward)
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
-        self._n_bad = 0
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
@@ -244,11 +250,16 @@ class GripTrackingEnv(gym.Env):
         rng = model.actuator_ctrlrange[act]
         d = mujoco.MjData(model)
         pelvis = int(index.body_ids[0])
+        rv = index.root_dof_adr
+        ang = np.setdiff1d(np.arange(model.nv), np.arange(rv, rv + 3))
+        top = 0.0 if hf is None else float(hf.heights.max())
         sim = _Sim(model, d, index, hf, rng[:, 0].copy(), rng[:, 1].copy(), pelvis,
                    self._kd_over_kp(model, index), 0.5 * (rng[:, 1] - rng[:, 0]),
-                   d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel,
+                   d.xpos, d.xmat, d.cvel, d.subtree_com[pelvis], d.ctrl, d.qvel, d.qpos,
                    d.actuator_force, d.warning.number, _as_slice(act),
-                   ModelVariants(model, bkey))  # fmt: skip
+                   ModelVariants(model, bkey), slice(rv, rv + 3), _as_slice(ang),
+                   index.root_qpos_adr + 2,
+                   (-self.cfg.blowup_depth_m, top + self.cfg.blowup_height_m))  # fmt: skip
         if len(self._sims) >= 16:  # bounded cache: drop the oldest scene
             self._sims.pop(next(iter(self._sims)))
         self._sims[skey] = sim
@@ -399,7 +410,30 @@ class GripTrackingEnv(gym.Env):
         write_velocity_vector(clip.gt_qvel[t], ix, d.qvel)
         d.ctrl[ix.actuator_ids] = np.clip(q[7:], sim.lo, sim.hi)
         mujoco.mj_forward(m, d)
-        self._n_bad = int(sim.warnings[_UNSTABLE].sum())
+        sim.warnings[_UNSTABLE] = 0
+
+    def _blown_up(self) -> bool:
+        """Whether the state after a step is a simulation blow-up: MuJoCo could not integrate
+        it (its bad-qpos/qvel/qacc warnings, counted since the last check), or it is absurd
+        before MuJoCo's own limit (1e10) is reached: non-finite, the pelvis faster than
+        ``cfg.blowup_lin_vel_mps``, any joint turning faster than ``cfg.blowup_ang_vel_radps``,
+        or the pelvis more than ``cfg.blowup_depth_m`` below the floor or ``cfg.blowup_height_m``
+        above the terrain.
+        Costs ~3 us; runs after every step."""
+        sim, cfg = self._sim, self.cfg
+        w = sim.warnings
+        if w[_W_QPOS] or w[_W_QVEL] or w[_W_QACC]:  # (scalar reads: cheaper than w[_UNSTABLE])
+            w[_UNSTABLE] = 0
+            return True
+        v = sim.qvel
+        lin = v[sim.lin]
+        z = sim.qpos[sim.root_z]
+        lo, hi = sim.z_range
+        # (written so that NaN fails every comparison and counts as a blow-up)
+        ok = (float(lin @ lin) <= cfg.blowup_lin_vel_mps**2
+              and float(np.abs(v[sim.ang]).max()) <= cfg.blowup_ang_vel_radps
+              and lo <= z <= hi)  # fmt: skip
+        return not ok
 
     def _sim_state(self) -> tuple[np.ndarray, np.ndarray]:
         """World state of the 24 bodies: ``pvw (3, J, 3)`` = positions (m), linear (m/s) and
@@ -463,11 +497,9 @@ class GripTrackingEnv(gym.Env):
                 mujoco.mj_step1(m, d)
         self._t = t
         self._steps += 1
-        # After a state it cannot integrate (bad qpos, qvel or qacc) MuJoCo resets MjData and
-        # counts a warning: that count is the blow-up test.
-        n_bad = int(sim.warnings[_UNSTABLE].sum())
-        if n_bad > self._n_bad:
-            self._n_bad = n_bad
+        # A blow-up (MuJoCo's warnings, or an absurd state, see _blown_up) ends the episode; the
+        # state stays as it is until a reset or teleport (its observation is the last good one)
+        if self._blown_up():
             self.blowups += 1
             info = {f"reward/{k}": 0.0 for k in R.TERMS}
             info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=np.inf,
@@ -527,11 +559,13 @@ class GripTrackingEnv(gym.Env):
             raise ValueError(f"push force must be 3 finite values, got {force!r}")
         self._sim.data.xfrc_applied[self._sim.pelvis_body, :3] = f
 
-    def teleport(self, qpos76: np.ndarray, qvel75: np.ndarray | None = None):
+    def teleport(self, qpos76: np.ndarray, qvel75: np.ndarray | None = None,
+                 frame: int | None = None):  # fmt: skip
         """Put the humanoid in a new state at the current frame and keep playing the clip
         (GRIP's fall recovery): ``qpos76`` is a pose vector (:func:`grip.core.reference.
         pose_vector`), ``qvel75`` a velocity vector (zeros if ``None``). The body is lifted so
         that its lowest geom touches the ground, the AMP window restarts from the new state.
+        ``frame``: move to this frame of the clip first (a stream resuming after a gap).
 
         Returns:
             ``(obs, info)`` of the new state, as :meth:`reset` does.
@@ -544,6 +578,10 @@ class GripTrackingEnv(gym.Env):
         if q.shape != (76,) or v.shape != (75,) or not finite:
             raise ValueError(f"teleport needs finite (76,) qpos and (75,) qvel, got {q.shape}, "
                              f"{v.shape}")  # fmt: skip
+        if frame is not None:
+            if not 0 <= frame < self._clip.n_frames:
+                raise ValueError(f"teleport: frame {frame} outside 0..{self._clip.n_frames - 1}")
+            self._t = int(frame)
         q = q.copy()
         q[7:] = np.clip(q[7:], sim.lo, sim.hi)
         write_pose_vector(q, ix, d.qpos)
@@ -556,7 +594,7 @@ class GripTrackingEnv(gym.Env):
         d.qpos[r + 2] -= gap
         mujoco.mj_forward(m, d)
         self._root_offset = d.qpos[r : r + 3] - self._clip.est_root_pos[self._t]
-        self._n_bad = int(sim.warnings[_UNSTABLE].sum())
+        sim.warnings[_UNSTABLE] = 0
         pvw, rot = self._sim_state()
         self._root_hist.clear()
         self._root_hist.append(pvw[0, 0, :2].copy())

@@ -24,6 +24,10 @@ success_rate      %      segments without a detected fall; NaN for methods that 
 ms_per_frame      ms     wall time of ``reconstruct`` per frame, measured by the runner
 ================  =====  ==========================================================================
 
+``results.json`` also counts ``blowups``: simulation blow-ups over the segments (a method's
+``Reconstruction.notes["blowups"]``; GRIP recovers each like a fall, so its frames are never
+in the metrics; 0 for methods without a simulation); each segment's row carries its own.
+
 Output folder (``OUT``)::
 
     segments/<label>/method.json        the method's name and options (checked on resume)
@@ -99,7 +103,7 @@ METRIC_KEYS: tuple[str, ...] = (
     "MPJPE_mm", "PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2", "FS_mps", "FP_mm",
     "vGRF_N", "success_rate", "ms_per_frame",
 )  # fmt: skip
-RESULT_KEYS: tuple[str, ...] = (*METRIC_KEYS, "segments")
+RESULT_KEYS: tuple[str, ...] = (*METRIC_KEYS, "segments", "blowups")
 """Keys of each method's entry in ``results.json`` (plus ``failed``: segments that raised)."""
 PER_JOINT_KEYS: tuple[str, ...] = ("MPJPE_mm", "PEL_MPJPE_mm", "MPJRE_deg")
 
@@ -212,7 +216,8 @@ class Segment:
 
 
 def list_segments(
-    files: Sequence[str | os.PathLike], segment_frames: int = 500, categories: Sequence[str] = ()
+    files: Sequence[str | os.PathLike], segment_frames: int = 500, categories: Sequence[str] = (),
+    errors: list[tuple[str, str]] | None = None,
 ) -> list[Segment]:
     """Consecutive ``segment_frames``-frame segments of recording files (tails left out).
 
@@ -220,9 +225,12 @@ def list_segments(
         files: Recording files (a dataset split).
         segment_frames: Segment length, frames.
         categories: Keep recordings whose category matches one of these globs (all if empty).
+        errors: If given, a file that cannot be read is skipped and ``(file, reason)`` appended
+            here instead of raising.
 
     Raises:
-        BenchError: A file cannot be read (the message names it), or no segment results.
+        BenchError: A file cannot be read and ``errors`` is ``None`` (the message names it), or
+            no segment results.
     """
     from prism_tools.chunking import segments
     from prism_tools.io import load_recording
@@ -235,7 +243,11 @@ def list_segments(
         try:
             rec = load_recording(path)
         except (OSError, ValueError) as e:
-            raise BenchError(f"{path}: {e}" if str(path) not in str(e) else str(e)) from e
+            if errors is None:
+                raise BenchError(f"{path}: {e}" if str(path) not in str(e) else str(e)) from e
+            text = str(e)
+            errors.append((str(path), text.removeprefix(f"{path}:").strip()))
+            continue
         cat = rec.category or "unknown"
         if categories and not any(fnmatch.fnmatch(cat, c) for c in categories):
             continue
@@ -402,6 +414,7 @@ def evaluate_segment(
     metrics["ms_per_frame"] = 1000.0 * wall_s / rec.n_frames
     row = {**_base_row(label, seg), "status": "ok", "frames": recon.n_frames,
            "can_fall": bool(method.can_fall), "falls": int(recon.falls.shape[0]),
+           "blowups": int(recon.notes.get("blowups", 0)),
            "metrics": metrics, "per_joint": per_joint,
            "method_ms_per_frame": float(recon.ms_per_frame), "notes": recon.notes}  # fmt: skip
     return row, recon
@@ -707,6 +720,7 @@ def aggregate(rows: Sequence[dict], labels: Sequence[str]) -> dict[str, dict]:
         s = M.summarize([r["metrics"] for r in ok]) if ok else {}
         res: dict = {k: float(s.get(k, float("nan"))) for k in METRIC_KEYS}
         res["segments"] = len(ok)
+        res["blowups"] = int(sum(r.get("blowups", 0) for r in ok))
         res["failed"] = len(mine) - len(ok)
         pj = M.summarize([r["per_joint"] for r in ok if r["per_joint"]]) if ok else {}
         res["per_joint"] = {k: np.asarray(v) for k, v in pj.items()}
@@ -792,11 +806,13 @@ def write_outputs(
                            ["method", *RESULT_KEYS, "failed"]))  # fmt: skip
     seg_rows = [{**{k: r[k] for k in ("method", "segment", "category", "start", "stop",
                                       "status")},
-                 "frames": r.get("frames"), "falls": r.get("falls"), "error": r.get("error"),
+                 "frames": r.get("frames"), "falls": r.get("falls"),
+                 "blowups": r.get("blowups"), "error": r.get("error"),
                  **_jsonable(r["metrics"])} for r in rows]  # fmt: skip
     atomic_write_text(out_dir / "segments.csv",
                       _csv(seg_rows, ["method", "segment", "category", "start", "stop", "status",
-                                      "frames", "falls", *METRIC_KEYS, "error"]))  # fmt: skip
+                                      "frames", "falls", "blowups", *METRIC_KEYS,
+                                      "error"]))  # fmt: skip
     n_frames = sorted({s.n_frames for s in segments})
     parts = [f"# {title}" if title else "# Benchmark",
              f"{len(segments)} segment(s) of {', '.join(map(str, n_frames))} frames, each started "
@@ -805,6 +821,10 @@ def write_outputs(
              "ms/frame: wall time of one segment's reconstruction per frame, measured with "
              "the run's worker count (other processes share the cores).", "",
              "## MPJPE (mm) per category", "", _category_table(rows, labels)]  # fmt: skip
+    blown = {label: s["blowups"] for label, s in summary.items() if s["blowups"]}
+    if blown:
+        parts[5:5] = ["Simulation blow-ups (each recovered like a fall, its frames replaced): "
+                      + ", ".join(f"{k} {v}" for k, v in blown.items()), ""]  # fmt: skip
     if any(r.options.sensors for r in runs):
         parts += ["", "## Sensor configurations (GRIP Table 3 layout)", "",
                   _sweep_table(summary, [r for r in runs if r.options.sensors])]  # fmt: skip

@@ -18,6 +18,10 @@ kinematics only. ``pelvis_min_m`` is each segment's lowest pelvis height, and
 ``success_rate_height`` the success rate by pelvis height alone (below 0.30 m at any frame is a
 failure, whatever the discriminator says): a lenient discriminator cannot hide a fall, and
 policies with different discriminators compare on one criterion.
+
+``blowups``: simulation blow-ups (:meth:`envs.tracking_env.GripTrackingEnv.step`), per segment
+and summed in the summary. A blow-up ends its segment as a failure (``fell``) before the
+blown-up frame: no frame of a blown-up state enters the metrics.
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ def segment_row(recon, clip, rec) -> dict:
     row["fell"] = recon.fell
     row["pelvis_min_m"] = float(recon.root_pos[:, 2].min())
     row["frames"] = t
+    row["blowups"] = int(recon.notes.get("blowups", 0))
     return row
 
 
@@ -113,6 +118,7 @@ def _summary(rows: list[dict]) -> dict[str, float]:
                                                  for r in rows])  # fmt: skip
     out["segments"] = len(rows)
     out["frames"] = int(frames.sum())
+    out["blowups"] = int(sum(r.get("blowups", 0) for r in rows))
     return out
 
 
@@ -156,6 +162,10 @@ def markdown_table(summary: dict) -> str:
             cells.append(f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if c in _TWO_DIGITS
                          else f"{v:.3f}" if c == "FS_mps" else f"{v:.1f}")  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    n = summary["overall"].get("blowups", 0)
+    if n:
+        lines.append(f"\n{n} simulation blow-up(s): each ended its segment as a failure "
+                     "before the blown-up frame")  # fmt: skip
     return "\n".join(lines)
 
 
@@ -165,7 +175,7 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    keys = ["name", "category", "fell", "pelvis_min_m", "frames", *_MEAN_KEYS]
+    keys = ["name", "category", "fell", "pelvis_min_m", "frames", "blowups", *_MEAN_KEYS]
     if rows and "replay" in rows[0]:  # grip eval-policy --repeats: which replay a row is of
         keys.insert(1, "replay")
     buf = io.StringIO()

@@ -9,7 +9,10 @@ contact states.
 
 Fall recovery (GRIP Sec. 3.4, BASELINES_AND_METRICS 5.4): a fall is the pelvis below
 ``fall_height_m`` (0.30 m) while the AMP discriminator's probability that the recent motion is
-human is below ``fall_probability`` (0.7), or a simulation blow-up. The history buffer holds the
+human is below ``fall_probability`` (0.7), or a simulation blow-up (:meth:`envs.tracking_env.
+GripTrackingEnv.step`: MuJoCo's bad-state warnings, or a non-finite or absurd state: the pelvis
+faster than 50 m/s, a joint faster than 200 rad/s, the pelvis 4 m above the terrain or below the
+floor). The history buffer holds the
 last ``history_frames`` (N = 30) KinematicsNet outputs. On a fall at frame t the simulated root is
 put at its position of frame t - N plus the estimated pelvis velocity integrated over the N
 frames, the joints at the FA estimate of frame t (velocities: the estimated pelvis velocity,
@@ -17,6 +20,12 @@ joints at rest), the body lowered or lifted onto the ground, and the simulation 
 frames t - N .. t are replaced by the buffered kinematic estimate on the same integrated root;
 their forces and torques are NaN and their contacts False. Each event is reported as
 ``[t - N, t]`` in :attr:`grip.core.reconstruction.Reconstruction.falls`.
+
+Blow-ups: the frame of a blown-up state never enters the output; it is recovered like a fall
+(history buffer included) and the recording goes on to its last frame. With recovery off a
+blow-up still restores the humanoid at the kinematic estimate of that frame (there is no state
+to stay in), or, in evaluation (``stop_at_fall``), ends the episode before that frame as a
+failure. ``Reconstruction.notes`` counts them: ``"blowups"`` and ``"blowup_frames"``.
 """
 
 from __future__ import annotations
@@ -119,12 +128,12 @@ class ClipPlayer:
         self._ix = sim.index
         self._feet = FootContacts(sim.model, self._ix)
         self.trace = _Trace(frames_hint or self.clip.n_frames)
-        self._blowups0 = env.blowups
         self._floor = 0  # frames before this were replaced by a recovery: the buffer starts after
         self._down = False  # (recovery off) the humanoid is down: one fall until it is up
         self.t = self.last = 0
         self.done = False
         self.falls = []
+        self.blowup_frames: list[int] = []
         self._action: np.ndarray | None = None
         self._held = 0  # frames the current action has been played (env_cfg.action_repeat)
         self._record(0)
@@ -132,7 +141,7 @@ class ClipPlayer:
     @property
     def blowups(self) -> int:
         """Simulation blow-ups since :meth:`start`."""
-        return self.env.blowups - self._blowups0
+        return len(self.blowup_frames)
 
     def _record(self, t: int) -> None:
         d, ix, tr = self.env.data, self._ix, self.trace
@@ -145,7 +154,7 @@ class ClipPlayer:
 
     def advance(self) -> bool:
         """One control step with fall detection and recovery; returns whether the clip is over
-        (its last frame, a fall with ``stop_at_fall``, or a blow-up without recovery)."""
+        (its last frame, or a fall or blow-up with ``stop_at_fall`` and recovery off)."""
         env, rec = self.env, self.recovery
         if self._action is None or self._held >= self.runner.env_cfg.action_repeat:
             self._action, self._held = self.runner.act(self.obs), 0
@@ -153,14 +162,13 @@ class ClipPlayer:
         obs, _, terminated, truncated, info = env.step(self._action)
         self.obs = obs
         t = self.t = info["frame"]
-        unstable = bool(info.get("sim_unstable"))
-        if not unstable:
-            self._record(t)
-        self.last = t if not unstable or rec.enabled else t - 1
-        low = unstable or info["root_height_m"] < rec.fall_height_m
+        if info.get("sim_unstable"):
+            return self._blown_up(t)
+        self._record(t)
+        self.last = t
+        low = info["root_height_m"] < rec.fall_height_m
         fell = low and (
-            unstable
-            or self.runner.disc is None
+            self.runner.disc is None
             or self.runner.fall_probability(info["amp_obs"])[0] < rec.fall_probability
         )
         end = False
@@ -175,10 +183,44 @@ class ClipPlayer:
             end = self.stop_at_fall
         if not rec.enabled:
             self._down = low
-        end = end or (unstable and not rec.enabled)  # MuJoCo reset the state: nothing follows
         end = end or t >= self.clip.n_frames - 1 or terminated or truncated
         self.done = end
         return end
+
+    def resume(self, t: int) -> None:
+        """Put the humanoid at the kinematic estimate of frame ``t`` (its root: where the last
+        frame played left it) and play on from there: a stream after a gap it did not fill."""
+        clip, tr = self.clip, self.trace
+        pos, rot = kinematic_frames(clip, tr.pos[self.last, 0], t, t)
+        qvel = np.zeros(75)
+        qvel[:3] = clip.est_vel[t, -1]
+        self.obs, _ = self.env.teleport(pose_vector(global_to_local_rot(rot[-1]), pos[-1, 0]),
+                                        qvel, frame=t)  # fmt: skip
+        self.t = self.last = self._floor = t
+        self._action, self._held, self._down = None, 0, False
+        self.done = t >= clip.n_frames - 1
+        self._record(t)
+
+    def _blown_up(self, t: int) -> bool:
+        """The step to ``t`` blew up (the env's ``sim_unstable``): frame ``t`` is not recorded;
+        recover (with recovery off: frame ``t`` only) or, evaluating, end before ``t``."""
+        rec = self.recovery
+        self.blowup_frames.append(t)
+        if self.stop_at_fall and not rec.enabled:  # evaluation: a failure, the frames before
+            if not self._down:
+                self.falls.append((t, t))
+            self.last = t - 1
+            self.done = True
+            return True
+        s = max(self._floor, t - rec.history_frames, 0) if rec.enabled else t
+        self.obs = _recover(self.env, self.clip, self.trace, s, t, s_valid=s < t)
+        self._action = None
+        self.falls.append((s, t))
+        self._floor = t + 1
+        self._down = False
+        self.last = t
+        self.done = t >= self.clip.n_frames - 1
+        return self.done
 
     def reconstruction(self, ms_per_frame: float = float("nan")) -> Reconstruction:
         """The frames played so far (method ``"grip"``)."""
@@ -191,7 +233,8 @@ class ClipPlayer:
             contacts=tr.contacts[sl].copy(),
             falls=np.minimum(np.array(self.falls, dtype=np.int64).reshape(-1, 2), last),
             ms_per_frame=ms_per_frame,
-            notes={"blowups": self.blowups, "recovery": self.recovery.enabled},
+            notes={"blowups": self.blowups, "blowup_frames": list(self.blowup_frames),
+                   "recovery": self.recovery.enabled},
         )  # fmt: skip
 
 
@@ -239,9 +282,16 @@ def kinematic_frames(clip: ReferenceClip, root0: np.ndarray, s: int, t: int):
     return rel + root[:, None], clip.est_rot[s : t + 1]
 
 
-def _recover(env: GripTrackingEnv, clip: ReferenceClip, tr: _Trace, s: int, t: int):
-    """Reset the humanoid after a fall at ``t`` (history starts at ``s``); fill ``s..t``."""
-    pos, rot = kinematic_frames(clip, tr.pos[s, 0], s, t)
+def _recover(env: GripTrackingEnv, clip: ReferenceClip, tr: _Trace, s: int, t: int,
+             s_valid: bool = True):  # fmt: skip
+    """Reset the humanoid after a fall at ``t`` (history starts at ``s``); fill ``s..t``.
+
+    ``s_valid``: frame ``s`` holds a pose to start the root from; ``False`` (a blow-up at ``s``
+    = ``t``, whose frame was never recorded): start from frame ``s - 1`` plus the estimated
+    root displacement."""
+    root0 = tr.pos[s, 0] if s_valid else (tr.pos[s - 1, 0] + clip.est_root_pos[s]
+                                          - clip.est_root_pos[s - 1])  # fmt: skip
+    pos, rot = kinematic_frames(clip, root0, s, t)
     tr.pos[s : t + 1], tr.rot[s : t + 1] = pos, rot
     tr.grf[s : t + 1] = tr.cop[s : t + 1] = tr.torques[s : t + 1] = np.nan
     tr.contacts[s : t + 1] = False

@@ -163,6 +163,37 @@ def calibration_orientations(rec, cfg: FeatureConfig = FeatureConfig()) -> np.nd
     return out
 
 
+def sensor_frame_arrays(
+    frame: SensorFrame, cfg: FeatureConfig, name: str, index: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A frame's sensors as float64 arrays, checked: ``acc (S, 3)``, ``ori (S, 3, 3)`` and the
+    ``(10,)`` insole values (``None`` when ``cfg`` reads no insoles).
+
+    Raises:
+        ValueError: A wrong shape, a missing insole or a non-finite value, naming the recording
+            ``name`` and frame ``index``.
+    """
+    s = len(cfg.sites)
+    acc = np.asarray(frame.acc, dtype=np.float64)
+    ori = np.asarray(frame.ori, dtype=np.float64)
+    where = f"{name}: frame {index}"
+    if acc.shape != (s, 3) or ori.shape != (s, 3, 3):
+        raise ValueError(f"{where}: expected acc ({s}, 3) and ori ({s}, 3, 3) for sites "
+                         f"{cfg.sites}, got {acc.shape} and {ori.shape}")  # fmt: skip
+    ok = np.isfinite(acc).all() and np.isfinite(ori).all()
+    ins = None
+    if cfg.insoles:
+        if frame.insole is None:
+            raise ValueError(f"{where}: the features need the 10 insole values, got None")
+        ins = np.asarray(frame.insole, dtype=np.float64).reshape(-1)
+        if ins.shape != (10,):
+            raise ValueError(f"{where}: insole must have 10 values, got {ins.shape}")
+        ok = ok and np.isfinite(ins).all()
+    if not ok:
+        raise ValueError(f"{name}: non-finite sensor values at frame {index}")
+    return acc, ori, ins
+
+
 class FeatureStream:
     """:func:`input_features` one frame at a time, with the same values.
 
@@ -205,23 +236,10 @@ class FeatureStream:
             ValueError: A wrong shape or a non-finite value (naming the frame).
         """
         cfg, s = self.cfg, len(self.cfg.sites)
-        acc = np.asarray(frame.acc, dtype=np.float64)
-        ori = np.asarray(frame.ori, dtype=np.float64)
-        where = f"{self.name}: frame {self._n}"
-        if acc.shape != (s, 3) or ori.shape != (s, 3, 3):
-            raise ValueError(f"{where}: expected acc ({s}, 3) and ori ({s}, 3, 3) for sites "
-                             f"{cfg.sites}, got {acc.shape} and {ori.shape}")  # fmt: skip
-        parts = [(acc / cfg.acc_scale).reshape(-1)]
-        if cfg.insoles:
-            if frame.insole is None:
-                raise ValueError(f"{where}: the features need the 10 insole values, got None")
-            ins = np.asarray(frame.insole, dtype=np.float64).reshape(-1)
-            if ins.shape != (10,):
-                raise ValueError(f"{where}: insole must have 10 values, got {ins.shape}")
-            parts.append(ins)
-        rest = np.concatenate(parts)
-        if not (np.isfinite(rest).all() and np.isfinite(ori).all()):
-            raise ValueError(f"{self.name}: non-finite sensor values at frame {self._n}")
+        acc, ori, ins = sensor_frame_arrays(frame, cfg, self.name, self._n)
+        rest = (acc / cfg.acc_scale).reshape(-1)
+        if ins is not None:
+            rest = np.concatenate([rest, ins])
         if self._offset is None:
             self._offset = np.broadcast_to(np.eye(3), (s, 3, 3)).copy()
             if self._calib is not None:

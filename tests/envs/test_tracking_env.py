@@ -168,6 +168,39 @@ def test_a_blow_up_ends_the_episode_cleanly_and_is_counted(reference) -> None:
     assert not info["sim_unstable"] and info["blowups"] == 1
 
 
+def test_every_blow_up_is_detected_also_without_a_reset(reference) -> None:
+    # MuJoCo's reset zeroes its warning counters and counts the new warning: the count stays 1
+    # from one blow-up to the next, so a count that must grow missed the second one
+    env = _env(reference)
+    env.reset(seed=0)
+    for n in (1, 2, 3):
+        env.data.qvel[:] = 1e12
+        _, _, term, _, info = env.step(np.zeros(69, np.float32))
+        assert term and info["sim_unstable"] and info["blowups"] == n
+
+
+@pytest.mark.parametrize("what", ["pelvis_speed", "joint_speed", "below_floor", "nan"])
+def test_an_absurd_state_is_a_blow_up_before_mujoco_notices(reference, what) -> None:
+    # states MuJoCo integrates without a warning (its limit is 1e10) but no body can be in
+    env = _env(reference, random_start=False)
+    env.reset(seed=0)
+    d, ix = env.data, env._sim.index
+    if what == "pelvis_speed":
+        d.qvel[ix.root_dof_adr + 2] = 1e3  # 10 m up in one step
+    elif what == "joint_speed":
+        d.qvel[ix.hinge_dof_adr[5]] = 1e4
+    elif what == "below_floor":
+        d.qpos[ix.root_qpos_adr + 2] = -3.0
+    else:
+        d.qvel[ix.hinge_dof_adr[5]] = np.nan
+    _, r, term, _, info = env.step(np.zeros(69, np.float32))
+    assert term and info["sim_unstable"] and info["blowups"] == 1 and r == 0.0
+    # ordinary motion (the reset above, a step from it) is never one
+    env.reset(seed=0)
+    for _ in range(20):
+        assert not env.step(np.ones(69, np.float32))[4]["sim_unstable"]
+
+
 def test_stairs_show_up_in_the_height_map(reference) -> None:
     from grip.core.body import CANONICAL_TO_WORLD
     from grip.core.rotations import matrix_to_quat

@@ -69,13 +69,14 @@ class Oracle:
     supports_sensors = False
 
     def __init__(self, shift=(0.0, 0.0, 0.0), fail_on=(), calls=None, can_fall=True,
-                 fall=False, grf_offset_n=0.0) -> None:  # fmt: skip
+                 fall=False, grf_offset_n=0.0, blowups=0) -> None:  # fmt: skip
         self.shift = np.asarray(shift, dtype=float)
         self.fail_on = set(fail_on)
         self.calls = calls if calls is not None else []
         self.can_fall = can_fall
         self.fall = fall
         self.grf_offset_n = grf_offset_n
+        self.blowups = blowups  # reported in the notes, as GRIP's simulation does
 
     def reconstruct(self, rec) -> Reconstruction:
         self.calls.append(rec.name)
@@ -87,7 +88,8 @@ class Oracle:
         falls = np.array([[rec.n_frames - 5, rec.n_frames - 2]]) if self.fall else None
         return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
                               joint_pos=gt.joint_pos + self.shift, global_rot=gt.global_rot,
-                              grf=grf, **({"falls": falls} if self.fall else {}))  # fmt: skip
+                              grf=grf, notes={"blowups": self.blowups},
+                              **({"falls": falls} if self.fall else {}))  # fmt: skip
 
 
 def _run(label: str, factory) -> B.MethodRun:
@@ -458,3 +460,16 @@ def test_shipped_baselines_start_at_the_true_first_frame(name) -> None:
         assert recon.notes["qp_failures"] < FRAMES // 10
     m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
     assert m["MPJRE_deg"] < 60
+
+
+def test_blow_ups_are_counted_per_segment_and_in_the_results(segments, tmp_path) -> None:
+    oracle = Oracle(blowups=2)
+    runs = [_run("oracle", lambda o: oracle)]
+    out = tmp_path / "bench"
+    rows = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    assert [r["blowups"] for r in rows] == [2] * len(segments)
+    B.write_outputs(out, rows, runs, segments, "test", plots=False)
+    results = json.loads((out / "results.json").read_text())
+    assert results["oracle"]["blowups"] == 2 * len(segments)
+    assert "Simulation blow-ups" in (out / "table.md").read_text()
+    assert "blowups" in (out / "segments.csv").read_text().splitlines()[0]

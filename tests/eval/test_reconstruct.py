@@ -156,3 +156,49 @@ def test_the_action_is_held_for_the_policys_action_repeat(env) -> None:
         frames = clip.n_frames - 1
         assert runner.calls == -(-frames // repeat)  # one decision per `repeat` frames
         assert recon.n_frames == clip.n_frames  # and still one output per frame
+
+
+class _BlowingRunner(_Runner):
+    """Zero actions; before the steps to ``frames`` it writes ``qvel`` into the simulation: 1e3
+    (an absurd state MuJoCo integrates without a warning: the body is km away within a few
+    frames) or 1e12 (MuJoCo gives up and resets the state itself)."""
+
+    def __init__(self, env: GripTrackingEnv, frames: tuple[int, ...], qvel: float) -> None:
+        super().__init__(0.0, prob=None)
+        self.env, self.frames, self.qvel = env, frames, qvel
+
+    def act(self, obs: dict) -> np.ndarray:
+        if self.env.frame + 1 in self.frames:
+            self.env.data.qvel[:] = self.qvel
+        return np.zeros(69)
+
+
+@pytest.mark.parametrize("qvel", [1e3, 1e12])
+@pytest.mark.parametrize("enabled", [True, False])
+def test_a_blow_up_is_recovered_and_never_ends_the_recording(env, qvel, enabled) -> None:
+    frames = (60, 61, 150)  # 61: a second blow-up right after the first one's recovery
+    runner = _BlowingRunner(env, frames, qvel)
+    recon, info = simulate_clip(env, runner, 0, RecoveryConfig(history_frames=20,
+                                                               enabled=enabled))  # fmt: skip
+    clip = env.reference.clip(0)
+    assert recon.n_frames == clip.n_frames  # every input frame has an output frame
+    assert info["blowups"] == recon.notes["blowups"] == 3
+    assert recon.notes["blowup_frames"] == list(frames)
+    assert {int(t) for t in recon.falls[:, 1]} >= set(frames)
+    # no frame of a blown-up state in the output: every joint stays near the motion
+    assert np.isfinite(recon.joint_pos).all()
+    assert np.linalg.norm(recon.joint_pos - clip.gt_pos, axis=-1).max() < 3.0
+    # the blown-up frames are the kinematic estimate (continuing the frame before)
+    for t in frames:
+        assert np.isnan(recon.torques[t]).all()
+        step = np.linalg.norm(recon.joint_pos[t, 0] - recon.joint_pos[t - 1, 0])
+        assert step < 0.1
+
+
+def test_evaluation_ends_a_segment_before_its_blow_up(env) -> None:
+    runner = _BlowingRunner(env, (60,), 1e3)
+    recon, info = simulate_clip(env, runner, 0, RecoveryConfig(enabled=False),
+                                stop_at_fall=True)  # fmt: skip
+    assert recon.n_frames == 60 and recon.fell and info["blowups"] == 1
+    assert recon.falls.tolist() == [[59, 59]]
+    assert recon.joint_pos[:, 0, 2].max() < 1.5  # the frame that flew off is not in it

@@ -122,3 +122,182 @@ def test_bad_input_is_named(rec) -> None:
         stream.finish()
     with pytest.raises(ValueError, match="no frame simulated"):
         stream.reconstruction()
+
+
+# ------------------------------------------------------------------ time: indices and gaps
+def _stream(rec, runner=None, **kw) -> GripStream:
+    cfg = FeatureConfig()
+    return GripStream(runner or _Runner(0.0), _Oracle(rec, cfg), rec.slice_frames(0, 2),
+                      RecoveryConfig(history_frames=20), capacity=64, **kw)  # fmt: skip
+
+
+def _push_all(stream: GripStream, frames: dict, **how) -> dict[int, object]:
+    """Push ``{index: frame}`` in order (``how``: "index" or "timestamp_s"); the outputs by the
+    input index; then finish."""
+    outs = {}
+    for i, f in frames.items():
+        key = how.get("key")
+        kw = {} if key is None else {key: i if key == "index" else 1000.0 + i / 100 + 0.002}
+        outs[i] = stream.push(f, **kw)
+    for o in stream.finish():
+        outs[o.frame + LATENCY_FRAMES] = o
+    return outs
+
+
+def _numbered(outs: dict) -> None:
+    for i, o in outs.items():
+        assert o is None or o.frame == i - LATENCY_FRAMES, (i, o.frame)
+
+
+@pytest.fixture(scope="module")
+def full(rec):
+    """The stream of every frame, for comparisons."""
+    stream = _stream(rec)
+    _run(stream, list(sensor_frames(rec, FeatureConfig())))
+    return stream.reconstruction()
+
+
+def test_a_refused_frame_keeps_the_numbers_of_the_next_ones(rec, full) -> None:
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    stream = _stream(rec)
+    outs = {}
+    for i, f in enumerate(frames):
+        if i == 50:  # a sensor dropout: refused, and the next frame is still frame 51
+            with pytest.raises(ValueError, match="non-finite sensor values at frame 50"):
+                stream.push(SensorFrame(np.full_like(f.acc, np.nan), f.ori, f.insole))
+            continue
+        outs[i] = stream.push(f)
+    for o in stream.finish():
+        outs[o.frame + LATENCY_FRAMES] = o
+    _numbered(outs)
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and live.notes["stream_filled"] == [[50, 50]]
+    assert [(e.kind, e.first, e.last) for e in stream.events] == [("filled", 50, 50)]
+    # the oracle estimate does not read the sensors: the filled frame is simulated as before
+    np.testing.assert_allclose(live.joint_pos, full.joint_pos, atol=1e-9)
+
+
+@pytest.mark.parametrize("key", ["index", "timestamp_s"])
+def test_duplicate_and_earlier_frames_are_refused_and_change_nothing(rec, full, key) -> None:
+    frames = dict(enumerate(sensor_frames(rec, FeatureConfig())))
+    stream = _stream(rec)
+    at = (lambda i: {key: i}) if key == "index" else (lambda i: {key: 1000.0 + i / 100})
+    for i in range(40):
+        stream.push(frames[i], **at(i))
+    with pytest.raises(ValueError, match=r"frame 39.* already pushed"):
+        stream.push(frames[39], **at(39))
+    with pytest.raises(ValueError, match=r"frame 12.* earlier than frame 39"):
+        stream.push(frames[12], **at(12))
+    outs = _push_all(stream, {i: frames[i] for i in range(40, rec.n_frames)}, key=key)
+    _numbered(outs)
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and stream.events == []
+    np.testing.assert_allclose(live.joint_pos, full.joint_pos, atol=1e-9)
+    with pytest.raises(ValueError, match="not both"):
+        _stream(rec).push(frames[0], index=0, timestamp_s=0.0)
+
+
+@pytest.mark.parametrize("key", ["index", "timestamp_s"])
+def test_a_short_gap_is_interpolated_and_simulated(rec, full, key) -> None:
+    frames = {i: f for i, f in enumerate(sensor_frames(rec, FeatureConfig()))
+              if not 70 <= i <= 74}  # fmt: skip
+    stream = _stream(rec)
+    outs = _push_all(stream, frames, key=key)
+    _numbered(outs)
+    assert outs[75].frame == 73  # the newest frame, after the five filled ones
+    assert [o.frame for o in (stream.frame(t) for t in range(70, 74))] == [70, 71, 72, 73]
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and live.notes["stream_filled"] == [[70, 74]]
+    np.testing.assert_allclose(live.joint_pos, full.joint_pos, atol=1e-9)
+
+
+def test_the_interpolated_sensors_lie_between_their_neighbours(rec) -> None:
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    seen = []
+    stream = _stream(rec)
+    push = stream._features.push
+    stream._features.push = lambda f: (seen.append(f), push(f))[1]
+    for i in (0, 1, 2, 6):
+        stream.push(frames[i], index=i)
+    a, b = frames[2], frames[6]
+    for k, f in enumerate(seen[3:6], start=1):  # frames 3, 4, 5
+        np.testing.assert_allclose(f.acc, a.acc + k / 4 * (b.acc - a.acc), atol=1e-12)
+        np.testing.assert_allclose(f.insole, a.insole + k / 4 * (b.insole - a.insole))
+        np.testing.assert_allclose(f.ori @ np.swapaxes(f.ori, -1, -2), np.broadcast_to(
+            np.eye(3), f.ori.shape), atol=1e-9)  # rotations  # fmt: skip
+
+
+class _IndexedOracle(_Oracle):
+    """The ground truth of the frame whose accelerations the row carries (a stream does not
+    step the estimator over a gap it does not fill, so counting steps loses the frame)."""
+
+    def stream(self, calibration):
+        t, cfg = self._t, self.cfg.features
+        acc = np.stack([f.acc.reshape(-1) for f in sensor_frames(self._rec, cfg)])
+        s = len(cfg.sites)
+
+        def step(row):  # a row starts with (acc / acc_scale, gyr, ori) of each site
+            a = row[: 15 * s].reshape(s, 15)[:, :3].reshape(-1)
+            k = int(np.argmin(np.abs(acc / cfg.acc_scale - a).sum(axis=1)))
+            return {"fp": t.joint_pos[k], "fa": matrix_to_6d(t.global_rot[k]), "lv": t.velocity[k]}
+
+        return type("S", (), {"step": staticmethod(step)})()
+
+
+def test_a_long_gap_is_reported_and_the_stream_resumes_after_it(rec, full) -> None:
+    frames = {i: f for i, f in enumerate(sensor_frames(rec, FeatureConfig()))
+              if not 60 <= i <= 99}  # fmt: skip
+    stream = _stream(rec)
+    oracle = _IndexedOracle(rec, FeatureConfig())
+    oracle._rec = rec
+    stream._kin = oracle.stream(None)
+    outs = _push_all(stream, frames, key="index")
+    _numbered(outs)
+    assert outs[100] is None and outs[101] is None  # the pipeline restarts...
+    assert outs[102].frame == 100  # ... and gives frame t - 2 again
+    assert [(e.kind, e.first, e.last) for e in stream.events] == [("gap", 60, 99)]
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and live.notes["stream_gap"] == [[60, 99]]
+    # before the gap: as without it; in it: the last pose held, no forces; after it: standing
+    np.testing.assert_allclose(live.joint_pos[:58], full.joint_pos[:58], atol=1e-9)
+    np.testing.assert_allclose(live.joint_pos[60:100], np.broadcast_to(
+        live.joint_pos[59], (40, 24, 3)))  # fmt: skip
+    assert np.isnan(live.torques[60:100]).all() and np.isfinite(live.torques[100:]).all()
+    # it restarts at the estimate (the oracle's: the truth) and follows it as before the gap
+    pose = live.joint_pos[100] - live.joint_pos[100, :1]
+    assert np.linalg.norm(pose - targets(rec).joint_pos[100], axis=-1).mean() < 0.02
+    assert live.joint_pos[100:110, 0, 2].min() > 0.6  # standing
+
+
+def test_a_gap_before_the_calibration_frames_is_refused(rec) -> None:
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    stream = _stream(rec)
+    stream.push(frames[0], index=0)
+    with pytest.raises(ValueError, match="starts with frames 0 and 1"):
+        stream.push(frames[3], index=3)
+
+
+class _BlowingRunner(_Runner):
+    """Zero actions; before the step to ``frame`` the stream's simulation gets ``qvel``."""
+
+    def __init__(self, frame: int, qvel: float) -> None:
+        super().__init__(0.0)
+        self.disc, self.frame, self.qvel, self.stream = None, frame, qvel, None
+
+    def act(self, obs: dict) -> np.ndarray:
+        env = self.stream.env
+        if env.frame + 1 == self.frame:
+            env.data.qvel[:] = self.qvel
+        return np.zeros(69)
+
+
+@pytest.mark.parametrize("qvel", [1e3, 1e12])
+def test_a_blow_up_is_recovered_and_the_stream_goes_on(rec, qvel) -> None:
+    runner = _BlowingRunner(60, qvel)
+    stream = runner.stream = _stream(rec, runner)
+    outs = _run(stream, list(sensor_frames(rec, FeatureConfig())))  # every frame comes out
+    assert outs[60].blowup and outs[60].fall[1] == 60
+    assert [(e.kind, e.last) for e in stream.events] == [("blowup", 60)]
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and live.notes["blowups"] == 1
+    assert np.linalg.norm(live.joint_pos - targets(rec).root_pos[:, None], axis=-1).max() < 3
