@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+from grip.cli.recordings import add_limit_arguments, limits_from_args
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -27,7 +29,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Import motion clips (BVH, ASF/AMC, DeepMimic JSON, AMASS npz), retarget them onto\n"
             "the body model at 100 Hz, synthesise the 8 IMUs and both insoles by physics, add\n"
             "sensor noise, chunk into <=1000-frame sequences and write a train/test split.\n"
-            "Parallel, resumable (finished clips are skipped), every file written atomically."
+            "Parallel, resumable (finished clips are skipped), every file written atomically.\n"
+            "The settings are recorded in OUT/settings.json before the first clip; a rerun with\n"
+            "other options is refused. A motion file that cannot be read or imported is named\n"
+            "(SKIPPED/FAILED, and in manifest.json), the others are built, and the exit status\n"
+            "is 1."
         ),
         epilog="example: grip data build --out data/prism_synth --workers 2\n"
         "         grip data build --out data/small --motions ~/mocap/bvh --limit 20",
@@ -56,6 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--seed", type=int, default=0, help="base seed of noise and subjects")
     b.add_argument("--test-fraction", type=float, default=0.2,
                    help="share of clips in the test split (default 0.2)")  # fmt: skip
+    add_limit_arguments(b)
     b.set_defaults(func=cmd_build)
 
     i = dsub.add_parser(
@@ -69,6 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     i.add_argument("dir", type=Path, help="dataset folder")
     i.add_argument("--json", type=Path, default=None, metavar="PATH",
                    help="also write the summary as JSON")  # fmt: skip
+    add_limit_arguments(i)
     i.set_defaults(func=cmd_info)
 
     pl = dsub.add_parser(
@@ -81,6 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     pl.add_argument("file", type=Path, help="recording (.pkl or .npz)")
     pl.add_argument("--out", required=True, type=Path, help="output PNG")
+    add_limit_arguments(pl)
     pl.set_defaults(func=cmd_plot)
 
     r = dsub.add_parser(
@@ -109,19 +118,33 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--limit", type=int, default=None, help="at most this many recordings")
     r.add_argument("--max-frames", type=int, default=None,
                    help="crop each recording to its first N frames")  # fmt: skip
+    add_limit_arguments(r)
     r.set_defaults(func=cmd_reference)
 
 
 def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, str]]:
     """``(path, clip_id, category)`` of the clips under ``roots`` (``limit``: evenly spread)."""
-    from grip.cli.main import CliError
-    from grip.motion.catalog import find_clips
+    return scan_motions(roots, limit)[0]
 
-    clips = []
+
+def scan_motions(roots: list[Path], limit: int | None
+                 ) -> tuple[list[tuple[str, str, str]], list[tuple[str, str]]]:  # fmt: skip
+    """The clips under ``roots`` as :func:`select_clips` gives them, and the files skipped.
+
+    Returns:
+        ``(clips, skipped)``: ``(path, clip_id, category)`` triples (``limit``: evenly spread)
+        and ``(path, reason)`` of every candidate file the search could not read.
+    """
+    from grip.cli.main import CliError
+    from grip.motion.catalog import scan_clips
+
+    clips, skipped = [], []
     for root in roots:
         if not root.is_dir():
             raise CliError(f"--motions {root}: not a folder")
-        clips += [(str(c.path), c.clip_id, c.category) for c in find_clips(root)]
+        refs, bad = scan_clips(root)
+        clips += [(str(c.path), c.clip_id, c.category) for c in refs]
+        skipped += [(str(b.path), b.reason) for b in bad]
     if not clips:
         raise CliError(f"no supported clips (bvh, amc, DeepMimic json, npz) under {roots}")
     if limit is not None and limit < len(clips):
@@ -131,7 +154,7 @@ def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, s
             {round(k) for k in [i * (len(clips) - 1) / max(limit - 1, 1) for i in range(limit)]}
         )
         clips = [clips[k] for k in idx]
-    return clips
+    return clips, skipped
 
 
 def cmd_build(args: argparse.Namespace) -> int:
@@ -142,6 +165,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     from grip.dataset.build import BuildConfig, build_dataset
     from grip.dataset.info import dataset_summary, format_summary
 
+    limits_from_args(args)
     roots = args.motions
     if roots is None:
         d = default_motions_dir()
@@ -156,40 +180,57 @@ def cmd_build(args: argparse.Namespace) -> int:
     cfg = BuildConfig(noise_variants=args.noise_variants, clean_variant=args.clean,
                       vary_body=not args.fixed_body, height_m=args.height, mass_kg=args.mass,
                       test_fraction=args.test_fraction, seed=args.seed)  # fmt: skip
-    clips = select_clips(roots, args.limit)
+    clips, skipped = scan_motions(roots, args.limit)
     t0 = time.perf_counter()
     with tqdm(total=len(clips), desc="clips", unit="clip") as bar:
         try:
             results = build_dataset(clips, args.out, cfg, workers=args.workers,
-                                    progress=bar.update)  # fmt: skip
-        except ValueError as e:
+                                    progress=bar.update, skipped_files=skipped)  # fmt: skip
+        except (ValueError, OSError) as e:
             raise CliError(str(e)) from e
     dt = time.perf_counter() - t0
     built = [r for r in results if r.status == "done"]
     failed = [r for r in results if r.status != "done"]
+    short = [r for r in built if not r.sequences]
     frames = sum(sum(r.sequence_frames) for r in built)
     print(format_summary(dataset_summary(args.out)))
     print(f"\nbuilt {len(built)}/{len(results)} clips in {dt:.1f} s "
           f"({frames / max(dt, 1e-9):.0f} recording frames/s incl. resumed clips)")  # fmt: skip
+    if short:
+        print(f"{len(short)} built clip(s) gave no sequence (shorter than "
+              f"{cfg.min_chunk_frames} frames at 100 Hz; 'note' in manifest.json)")  # fmt: skip
+    if skipped:
+        print(f"{len(skipped)} file(s) under --motions could not be read and were skipped "
+              "(manifest.json 'skipped_files'):", file=sys.stderr)  # fmt: skip
+    for f, why in skipped:
+        print(f"SKIPPED {f}: {why}", file=sys.stderr)
     for r in failed:
         print(f"FAILED {r.clip_id}: {r.error}", file=sys.stderr)
-    return 1 if failed else 0
+    if failed or skipped:
+        print(f"grip: error: {len(failed)} clip(s) failed, {len(skipped)} file(s) skipped; "
+              "the others were built", file=sys.stderr)  # fmt: skip
+    return 1 if failed or skipped else 0
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     from grip.cli.main import CliError
+    from grip.cli.recordings import exit_status, skip_file
     from grip.core.atomic import atomic_write_text
     from grip.dataset.info import dataset_summary, format_summary
 
+    limits_from_args(args)
     try:
         summary = dataset_summary(args.dir)
-    except (FileNotFoundError, ValueError) as e:
+    except (OSError, ValueError) as e:
         raise CliError(str(e)) from e
     print(format_summary(summary))
     if args.json:
         atomic_write_text(args.json, json.dumps(summary, indent=1))
         print(f"\nwrote {args.json}")
-    return 0
+    errors: list[tuple[str, str]] = []
+    for bad in summary.get("unreadable", []):
+        skip_file(errors, bad["file"], bad["error"])
+    return exit_status(errors, summary.get("files"))
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
@@ -197,6 +238,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     from grip.dataset.plot import plot_recording
     from prism_tools.io import load_recording
 
+    limits_from_args(args)
     try:
         rec = load_recording(args.file)
     except (OSError, ValueError) as e:
@@ -210,15 +252,17 @@ def cmd_reference(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
-    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
+    from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set
 
+    limits_from_args(args)
     if bool(args.files) == (args.data is not None):
         raise CliError("give recording files or --data DIR (one of them)")
     files = split_paths(args.data, args.split) if args.data is not None else list(args.files)
+    errors: list[tuple[str, str]] = []
     recs = load_recordings(files, args.category, max_frames=args.max_frames or 0,
-                           limit=args.limit or 0)  # fmt: skip
+                           limit=args.limit or 0, errors=errors)  # fmt: skip
     kin = kin_checkpoint(args.kin)
     try:
         est = KinematicsEstimator.from_checkpoint(kin)
@@ -230,4 +274,4 @@ def cmd_reference(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}: {len(ref)} clips, {ref.total_frames} frames, "
           f"sensor features {ref.sensor_dim} ({', '.join(ref.sensor_sites)}"
           f"{' + insoles' if ref.insoles else ''})")  # fmt: skip
-    return 0
+    return exit_status(errors, len(files))

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import sys
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 
@@ -20,7 +23,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "GRIP's history buffer, and write per recording OUT/<name>.npz (joint positions and\n"
             "rotations, root trajectory, per-foot GRF and CoP, joint torques, contacts, fall\n"
             "events; keys in grip/core/reconstruction.py) plus the exports of --formats, and\n"
-            "OUT/summary.json. Recordings already reconstructed in OUT are skipped (resume).\n"
+            "OUT/summary.json. <name> is the input's path below the inputs' common folder\n"
+            "('/' as '__', no suffix): the file name for files of one folder; two inputs never\n"
+            "share one (a clash gets the suffix appended, then -2, -3, ...).\n"
+            "Recordings already reconstructed in OUT are skipped (resume); a resume with other\n"
+            "settings (--max-frames, --no-recovery, --history, --fill-gaps, the models' contents)\n"
+            "is refused, --overwrite redoes them.\n"
             "The recording's first frame is the calibration pose the humanoid starts from.\n"
             "Sensor dropouts (NaN runs) up to --fill-gaps frames are interpolated; a recording\n"
             "with longer ones, or without a sensor the models read (an IMU site, an insole),\n"
@@ -50,6 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
                         "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
+    from grip.cli.recordings import add_limit_arguments
+
+    add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
 
 
@@ -57,6 +68,69 @@ def safe_name(name: str) -> str:
     """A file name for a recording name (path separators and odd characters replaced)."""
     keep = "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name.replace("/", "__"))
     return keep.strip(".") or "recording"
+
+
+def output_stems(files: Sequence[Path], reserved: Mapping[str, str] | None = None
+                 ) -> dict[Path, str]:  # fmt: skip
+    """The output file stem of each input, unique among the inputs and the outputs kept.
+
+    The stem is the input's path relative to the inputs' common folder, without its suffix and
+    with ``/`` as ``__`` (``safe_name``): files of one folder keep their own names. Inputs whose
+    stems clash (``take.pkl`` and ``take.npz``, or two paths ``safe_name`` maps alike) get their
+    suffix appended (``take_pkl``, ``take_npz``), and a stem still taken (by another input or
+    by ``reserved``) gets ``-2``, ``-3``, ... in input order. Decided before any work starts, so
+    the names do not depend on ``--workers``.
+
+    Args:
+        files: The inputs, resolved and without duplicates, in command-line order.
+        reserved: ``{stem: file}`` of outputs already in the folder (from ``summary.json``);
+            an input listed there keeps its stem, no other input gets it.
+
+    Returns:
+        ``{file: stem}`` for every input.
+    """
+    reserved = dict(reserved or {})
+    kept = {Path(f): stem for stem, f in reserved.items()}
+    if not files:
+        return {}
+    root = Path(os.path.commonpath([str(f.parent) for f in files]))
+    rel = {f: f.relative_to(root) for f in files}
+    base = {f: safe_name(r.with_suffix("").as_posix()) for f, r in rel.items()}
+    clash = {b for b in base.values() if list(base.values()).count(b) > 1}
+    base = {f: safe_name(f"{rel[f].with_suffix('').as_posix()}_{f.suffix.lstrip('.')}")
+            if b in clash else b for f, b in base.items()}  # fmt: skip
+    used = set(reserved)
+    stems: dict[Path, str] = {}
+    for f in files:  # inputs with an output already keep its name
+        if f in kept:
+            stems[f] = kept[f]
+    for f in files:
+        if f in stems:
+            continue
+        stem, k = base[f], 1
+        while stem in used:
+            k += 1
+            stem = f"{base[f]}-{k}"
+        used.add(stem)
+        stems[f] = stem
+    return stems
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's contents (hex), to tell whether a model changed between runs."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _row_formats(row: Mapping) -> set[str]:
+    """Formats a summary row was made with (older summaries: from its files and failures)."""
+    if "formats" in row:
+        return set(row["formats"])
+    got = {Path(w).suffix.lstrip(".") for w in row.get("written", [])}
+    return got | set(row.get("failed", {}))
 
 
 def policy_checkpoint(path: Path | None) -> Path:
@@ -79,7 +153,7 @@ def _work(job: tuple) -> list[dict]:
     """One worker: reconstruct a share of the recordings and write their files. A recording
     that cannot be read or does not carry the sensors the models need gives a row with an
     ``"error"`` (the others go on)."""
-    files, out, policy, kin, recovery, max_frames, formats, fill_gaps = job
+    files, out, policy, kin, recovery, max_frames, formats, fill_gaps = job  # files: (f, stem)
     import torch
 
     torch.set_num_threads(1)
@@ -93,7 +167,7 @@ def _work(job: tuple) -> list[dict]:
         _LOADED.clear()
         g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
     rows = []
-    for f in files:
+    for f, stem in files:
         try:
             (rec,) = load_recordings([f], max_frames=max_frames, fill_gaps=fill_gaps)
             (recon,) = g.reconstruct([rec])
@@ -108,25 +182,27 @@ def _work(job: tuple) -> list[dict]:
                         "its estimates)")  # fmt: skip
             rows.append({"file": str(f), "error": msg})
             continue
-        dst = Path(out) / f"{safe_name(rec.name)}.npz"
+        dst = Path(out) / f"{stem}.npz"
         recon.save(dst)
-        files, failed = _exports(recon, rec, Path(out), formats)
-        rows.append({"file": str(f), "name": rec.name, "frames": recon.n_frames,
+        written, failed = _exports(recon, rec, Path(out), formats, stem)
+        rows.append({"file": str(f), "name": rec.name, "stem": stem, "formats": formats,
+                     "frames": recon.n_frames,
                      "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
-                     "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *files],
+                     "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *written],
                      "failed": failed,
                      "filled_gaps": rec.extras.get("filled_gaps", [])})  # fmt: skip
     return rows
 
 
-def _exports(recon, rec, out: Path, formats: list[str]) -> tuple[list[str], dict[str, str]]:
+def _exports(recon, rec, out: Path, formats: list[str],
+             stem: str) -> tuple[list[str], dict[str, str]]:  # fmt: skip
     """Write the non-npz formats; a format that cannot be written is reported, not fatal."""
     extra = [f for f in formats if f != "npz"]
     if not extra:
         return [], {}
     from grip.export import export_reconstruction
 
-    written, failed = export_reconstruction(recon, out, extra, stem=safe_name(rec.name),
+    written, failed = export_reconstruction(recon, out, extra, stem=stem,
                                             recording=rec)  # fmt: skip
     return [str(p) for p in written], failed
 
@@ -140,10 +216,17 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.main import CliError
-    from grip.cli.recordings import kin_checkpoint
+    from grip.cli.recordings import kin_checkpoint, limits_from_args
     from grip.core.atomic import atomic_write_text
+    from grip.core.runs import (
+        SettingsMismatch,
+        exit_with_parent,
+        remove_stale_temps,
+        require_same_settings,
+    )
     from grip.eval.reconstruct import RecoveryConfig
 
+    limits_from_args(args)  # also for the worker processes ($GRIP_LIMITS)
     formats = [f.strip() for f in args.formats.split(",") if f.strip()]
     unknown = sorted(set(formats) - {"npz", "bvh", "glb", "mp4", "png"})
     if unknown:
@@ -157,34 +240,67 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise CliError("--fill-gaps must be >= 0")
     policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
     recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history)
+    settings = {"max_frames": args.max_frames, "recovery": recovery.enabled,
+                "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
+                "policy_sha256": file_digest(policy), "kin_sha256": file_digest(kin)}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "summary.json"
-    done: dict[str, dict] = {}
+    old: dict = {}
     if summary_path.is_file() and not args.overwrite:
         try:
-            done = {r["file"]: r for r in json.loads(summary_path.read_text())["recordings"]}
+            old = json.loads(summary_path.read_text())
+            rows = [r for r in old["recordings"]
+                    if isinstance(r, dict) and r.get("written") and r.get("file")]  # fmt: skip
         except (ValueError, KeyError, TypeError):
-            done = {}
-    todo = [str(f) for f in args.recordings
-            if str(f) not in done or not all(Path(w).is_file() for w in done[str(f)]["written"])]
-    print(f"{len(args.recordings)} recording(s), {len(args.recordings) - len(todo)} already done")
+            old, rows = {}, []
+        if rows:  # finished outputs: a resume must bring their settings
+            hint = "use another --out, the same options, or --overwrite to redo them"
+            try:
+                if isinstance(old.get("settings"), dict):
+                    require_same_settings(old["settings"], settings, summary_path, hint)
+                else:  # a summary of an older version: the settings it recorded
+                    require_same_settings(old, settings, summary_path, hint, common_only=True)
+            except SettingsMismatch as e:
+                raise CliError(str(e)) from e
+        npz = Counter(r["written"][0] for r in rows)  # rows sharing a file (older versions)
+        old = {str(Path(r["file"]).resolve()): r for r in rows if npz[r["written"][0]] == 1}
+    remove_stale_temps(args.out, recursive=False)  # of a killed run's unfinished writes
+    inputs = list(dict.fromkeys(Path(f).resolve() for f in args.recordings))
+    given = {Path(f).resolve(): str(f) for f in reversed(args.recordings)}  # first spelling
+    reserved = {r.get("stem") or Path(r["written"][0]).stem: f for f, r in old.items()}
+    stems = output_stems(inputs, reserved)
+    done = dict(old)
+
+    def finished(f: Path) -> bool:
+        r = done.get(str(f))
+        return (r is not None and set(formats) <= _row_formats(r)
+                and all(Path(w).is_file() for w in r["written"]))  # fmt: skip
+
+    todo = [f for f in inputs if not finished(f)]
+    print(f"{len(inputs)} recording(s), {len(inputs) - len(todo)} already done")
+
+    errors: dict[str, str] = {}
 
     def save() -> None:
         rows = list(done.values())
         meta = {"policy": str(policy), "kin": str(kin), "recovery": recovery.enabled,
-                "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps}
+                "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
+                "max_frames": args.max_frames, "settings": settings,
+                "falls": sum(len(r["falls"]) for r in rows),
+                "blowups": sum(int(r.get("blowups", 0)) for r in rows)}  # fmt: skip
         atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
                                                     "errors": errors}, indent=1))  # fmt: skip
 
-    errors: dict[str, str] = {}
-    jobs = [([f], str(args.out), str(policy), str(kin), recovery, args.max_frames, formats,
-             args.fill_gaps) for f in todo]  # fmt: skip
+    jobs = [([(given[f], stems[f])], str(args.out), str(policy), str(kin), recovery,
+             args.max_frames, formats, args.fill_gaps) for f in todo]  # fmt: skip
+    parallel = args.workers > 1 and len(todo) > 1
     with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
-        if args.workers == 1 or len(todo) <= 1:
+        if not parallel:
             results = map(_work, jobs)
         else:
             ctx = get_context("forkserver" if os.name == "posix" else "spawn")
-            pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx)
+            pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx,
+                                       initializer=exit_with_parent)  # fmt: skip
             results = pool.map(_work, jobs)
         try:
             for rows in results:
@@ -192,20 +308,22 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                     if "error" in r:
                         errors[r["file"]] = r["error"]
                         continue
-                    done[r["file"]] = r
+                    done[str(Path(r["file"]).resolve())] = r
                     bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
                 save()
                 bar.update(1)
         except (OSError, ValueError) as e:
             raise CliError(str(e)) from e
         finally:
-            if args.workers > 1 and len(todo) > 1:
+            if parallel:
                 pool.shutdown(cancel_futures=True)
-    rows = [done[str(f)] for f in args.recordings if str(f) in done]
+    rows = [done[str(f)] for f in inputs if str(f) in done]
     falls = sum(len(r["falls"]) for r in rows)
+    blowups = sum(int(r.get("blowups", 0)) for r in rows)
     frames = sum(r["frames"] for r in rows)
     print(f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
-          f"event(s){' recovered' if recovery.enabled else ''}; summary {summary_path}")
+          f"event(s){' recovered' if recovery.enabled else ''}, {blowups} blow-up(s) recovered; "
+          f"summary {summary_path}")  # fmt: skip
     failed = [(r["name"], fmt, msg) for r in rows for fmt, msg in r.get("failed", {}).items()]
     for name, fmt, msg in failed:
         print(f"grip: error: {fmt} of {name}: {msg}", file=sys.stderr)

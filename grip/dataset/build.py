@@ -3,14 +3,19 @@
 Layout of a dataset folder::
 
     DIR/
-      manifest.json              build settings and one entry per clip (status, frames, files)
+      settings.json              build settings, written before the first clip (resume check)
+      manifest.json              build settings, one entry per clip (status, frames, files),
+                                 the files under --motions that could not be read (skipped_files)
       split.json                 train/test lists of sequence ids + statistics (PRISM's shape)
       motions/<clip>.npz         retargeted ground-truth motion (grip.motion.Motion)
       sequences/<clip>_v<k>_seq<nnn>.npz   PRISM-format recordings, <= 1000 frames each
       done/<clip>.json           written last per clip: the clip is finished (resume marker)
 
 Every file is written atomically, a clip is complete only when its ``done`` marker exists, and a
-re-run skips complete clips, so an interrupted build resumes where it stopped.
+re-run skips complete clips, so an interrupted build resumes where it stopped. The settings are
+recorded in ``settings.json`` before the first clip is written, and a re-run with other settings
+is refused, so even a build killed before its manifest never mixes two settings. Temporary files
+of a killed build are removed when it resumes, and its worker processes end with it.
 """
 
 from __future__ import annotations
@@ -22,15 +27,24 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from grip.core.atomic import atomic_write_text
+from grip.core.runs import (
+    exit_with_parent,
+    record_settings,
+    remove_stale_temps,
+    require_same_settings,
+)
 
 MANIFEST = "manifest.json"
 SPLIT = "split.json"
+SETTINGS = "settings.json"
+_RESUME_HINT = "use another --out or the same options"
 
 
 @dataclass(frozen=True)
@@ -80,7 +94,8 @@ class ClipResult:
     seconds: float = 0.0
     synth_frames: int = 0  # frames synthesised over all variants (before chunking)
     zmp_outside_frames: int = 0  # of those, frames whose ZMP lies > 3 cm outside the insole cells
-    error: str = ""
+    error: str = ""  # why it failed; always names the source file
+    note: str = ""  # e.g. why a finished clip gave no sequence
 
 
 def clip_seed(clip_id: str, base: int) -> int:
@@ -149,14 +164,23 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
                 res.sequence_frames.append(int(chunk.n_frames))
             res.frames = int(motion.n_frames)
         res.status = "done"
-    except Exception as e:  # one bad clip must not stop the build
-        res.error = f"{type(e).__name__}: {e}"
+        if not res.sequences:
+            res.note = (f"no sequence: {res.frames} frames at 100 Hz, fewer than the "
+                        f"{cfg.min_chunk_frames} a sequence needs")  # fmt: skip
+    except Exception as e:  # one bad clip must not stop the build (MemoryError, RecursionError..)
+        res.error = _error_text(clip_path, e)
         if os.environ.get("GRIP_DEBUG"):
             res.error += "\n" + traceback.format_exc()
     res.seconds = time.perf_counter() - t0
     if res.status == "done":
         atomic_write_text(out / "done" / f"{name}.json", json.dumps(asdict(res), indent=1))
     return res
+
+
+def _error_text(clip_path: str, e: BaseException) -> str:
+    """``"<file>: <Type>: <message>"``, the file named once even where the message names it."""
+    msg = f"{type(e).__name__}: {e}"
+    return msg if clip_path in msg else f"{clip_path}: {msg}"
 
 
 def _load_done(out: Path) -> dict[str, ClipResult]:
@@ -194,18 +218,26 @@ def build_dataset(
     cfg: BuildConfig = BuildConfig(),
     workers: int = 0,
     progress: Callable[[int], object] | None = None,
+    skipped_files: Sequence[tuple[str, str]] = (),
 ) -> list[ClipResult]:
     """Build (or resume) a dataset.
 
     Args:
         clips: ``(path, clip_id, category)`` triples.
         out_dir: Dataset folder; created if missing.
-        cfg: Build settings. Resuming with different settings than the manifest is refused.
-        workers: Worker processes (0 = one per core).
+        cfg: Build settings, recorded in ``settings.json`` before the first clip. Resuming with
+            different settings than that file (or the manifest) holds is refused.
+        workers: Worker processes (0 = one per core). They end when this process ends.
         progress: Optional callback ``progress(n)`` after each finished clip (tqdm.update).
+        skipped_files: ``(path, reason)`` of files the clip search could not read; listed in
+            the manifest as ``skipped_files``.
 
     Returns:
         One :class:`ClipResult` per clip (resumed clips come back as ``done``).
+
+    Raises:
+        ValueError: Other settings than the folder's (a
+            :class:`grip.core.runs.SettingsMismatch`), or a corrupt manifest/settings file.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -213,15 +245,15 @@ def build_dataset(
     if manifest_path.exists():
         try:
             old = json.loads(manifest_path.read_text())
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
         except ValueError as e:
             raise ValueError(
                 f"{manifest_path}: corrupt manifest ({e}); remove it to rebuild"
             ) from e
-        if old.get("config") != asdict(cfg):
-            raise ValueError(
-                f"{manifest_path}: this folder was built with different settings "
-                f"({old.get('config')}); use another --out or the same options"
-            )
+        require_same_settings(old.get("config") or {}, asdict(cfg), manifest_path, _RESUME_HINT)
+    record_settings(out / SETTINGS, asdict(cfg), _RESUME_HINT)
+    remove_stale_temps(out)  # of a killed build: atomic writes that never finished
     clips = list(clips)
     done = _load_done(out)
     todo = [c for c in clips if c[1] not in done]
@@ -236,11 +268,18 @@ def build_dataset(
                 if progress is not None:
                     progress(1)
         else:
-            with ProcessPoolExecutor(max_workers=n_workers) as pool:
-                futs = {pool.submit(process_clip, p, cid, cat, str(out), cfg): cid
+            with ProcessPoolExecutor(max_workers=n_workers, initializer=exit_with_parent) as pool:
+                futs = {pool.submit(process_clip, p, cid, cat, str(out), cfg): (p, cid, cat)
                         for p, cid, cat in todo}  # fmt: skip
                 for fut in as_completed(futs):
-                    results[futs[fut]] = fut.result()
+                    path, cid, cat = futs[fut]
+                    try:
+                        results[cid] = fut.result()
+                    except (BrokenProcessPool, OSError, MemoryError) as e:  # a worker died
+                        results[cid] = ClipResult(
+                            cid, "failed", cat, path,
+                            error=f"{path}: worker process died ({type(e).__name__}: {e}); "
+                            "run the build again to retry the clips it did not finish")  # fmt: skip
                     if progress is not None:
                         progress(1)
     ordered = [results[c[1]] for c in clips]
@@ -248,6 +287,7 @@ def build_dataset(
         "format": "grip-prism-dataset/1",
         "config": asdict(cfg),
         "clips": [asdict(r) for r in ordered],
+        "skipped_files": [{"file": str(f), "reason": why} for f, why in skipped_files],
     }
     atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
     from prism_tools.chunking import save_split

@@ -17,6 +17,11 @@ prefix is dropped). Categories come from:
   in the clip's folder and upwards), ``dataset-N_`` prefix removed (``"walk-back"``);
 * DeepMimic names: the first word of the name (``getup_faceup`` -> ``"getup"``);
 * otherwise ``"unknown"``.
+
+Files that look like clips but cannot be examined (an ``.npz`` that is not a readable zip, a
+``.txt``/``.json`` starting with ``{`` that is not valid UTF-8 JSON, an unreadable ``clips.csv``
+or ``content_label.txt``) are never fatal here: :func:`scan_clips` returns them with the reason
+(:class:`SkippedFile`), and :func:`find_clips` leaves them out.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from __future__ import annotations
 import csv
 import json
 import re
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,6 +46,27 @@ _DEEPMIMIC_PREFIX = "humanoid3d_"
 _BANDAI_PREFIX = re.compile(r"^dataset-\d+_")
 #: Read at most this much of a .txt/.json to decide whether it is a DeepMimic clip.
 _MAX_JSON_BYTES = 64 * 1024 * 1024
+#: What examining a file may raise (beyond the importers' own errors): a hostile file must be
+#: reported, never end the search.
+_READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, RecursionError, LookupError,
+                MemoryError, OverflowError, csv.Error)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SkippedFile:
+    """A file that looked like a clip (or clip metadata) but could not be examined.
+
+    Attributes:
+        path: The file.
+        reason: Why, e.g. ``"not a readable npz (BadZipFile: File is not a zip file)"``.
+    """
+
+    path: Path
+    reason: str
+
+
+def _why(e: BaseException) -> str:
+    return f"{type(e).__name__}: {str(e)[:200]}"
 
 
 @dataclass(frozen=True)
@@ -82,8 +109,9 @@ def _dataset_root(path: Path, stop: Path | None) -> Path | None:
 class _CsvIndex:
     """Cached ``clips.csv`` look-ups: (resolved file path) -> row."""
 
-    def __init__(self) -> None:
+    def __init__(self, problems: list[SkippedFile] | None = None) -> None:
         self._tables: dict[Path, dict[Path, dict[str, str]]] = {}
+        self._problems = problems if problems is not None else []
 
     def row(self, clip: Path, stop: Path | None) -> tuple[Path, dict[str, str]] | None:
         for folder in clip.parents:
@@ -100,10 +128,15 @@ class _CsvIndex:
     def _load(self, csv_path: Path) -> dict[Path, dict[str, str]]:
         if csv_path not in self._tables:
             table: dict[Path, dict[str, str]] = {}
-            with csv_path.open(newline="", encoding="utf-8-sig") as fh:
-                for row in csv.DictReader(fh):
-                    if row.get("file"):
-                        table[(csv_path.parent / row["file"]).resolve()] = row
+            try:
+                with csv_path.open(newline="", encoding="utf-8-sig") as fh:
+                    for row in csv.DictReader(fh):
+                        if isinstance(row.get("file"), str) and row["file"]:
+                            table[(csv_path.parent / row["file"]).resolve()] = row
+            except _READ_ERRORS as e:  # categories (and ASF paths) of its clips stay unknown
+                table = {}
+                self._problems.append(SkippedFile(csv_path, f"not read, its clips get no "
+                                                            f"category from it ({_why(e)})"))
             self._tables[csv_path] = table
         return self._tables[csv_path]
 
@@ -114,12 +147,16 @@ def _bandai_category(clip: Path, stop: Path | None) -> str | None:
         return None
     try:
         content = json.loads(sidecar.read_text(encoding="utf-8-sig"))["content"]
-    except (OSError, ValueError, KeyError, TypeError):
+    except (*_READ_ERRORS, KeyError, TypeError):
         return None
     for folder in [clip.parent, *clip.parent.parents]:
         labels = folder / "cfg" / "content_label.txt"
         if labels.is_file():
-            names = [ln.strip() for ln in labels.read_text(encoding="utf-8-sig").splitlines()]
+            try:
+                text = labels.read_text(encoding="utf-8-sig")
+            except _READ_ERRORS:
+                return None
+            names = [ln.strip() for ln in text.splitlines()]
             names = [n for n in names if n]
             if isinstance(content, int) and 0 <= content < len(names):
                 return _BANDAI_PREFIX.sub("", names[content]).lower()
@@ -129,19 +166,27 @@ def _bandai_category(clip: Path, stop: Path | None) -> str | None:
     return None
 
 
+class _NotExamined(Exception):
+    """A candidate clip file could not be examined; the message says why."""
+
+
 def _is_deepmimic_clip(path: Path) -> bool:
     if path.name == SKELETON_FILE:
         return False
     try:
-        if path.stat().st_size > _MAX_JSON_BYTES:
-            return False
         with path.open("rb") as fh:
             head = fh.read(256).removeprefix(b"\xef\xbb\xbf").lstrip()
-        if not head.startswith(b"{"):
-            return False
+    except OSError as e:
+        raise _NotExamined(f"not readable ({_why(e)})") from e
+    if not head.startswith(b"{"):
+        return False  # a licence, a README, a label list: not JSON, not a clip
+    try:
+        size = path.stat().st_size
+        if size > _MAX_JSON_BYTES:
+            raise _NotExamined(f"JSON of {size} bytes, more than the {_MAX_JSON_BYTES} read")
         data = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, ValueError):
-        return False
+    except _READ_ERRORS as e:
+        raise _NotExamined(f"not valid UTF-8 JSON ({_why(e)})") from e
     return isinstance(data, dict) and "Frames" in data
 
 
@@ -149,11 +194,17 @@ def _is_amass_npz(path: Path) -> bool:
     try:
         with np.load(path, allow_pickle=False) as npz:
             return {"poses", "trans"} <= set(npz.files)
-    except (OSError, ValueError):
-        return False
+    except _READ_ERRORS as e:
+        raise _NotExamined(f"not a readable npz ({_why(e)})") from e
 
 
 def _detect_format(path: Path) -> str | None:
+    """The clip format of ``path``, or ``None`` when it is not a clip.
+
+    Raises:
+        _NotExamined: A candidate (``.npz``, or ``.txt``/``.json`` starting with ``{``) that
+            cannot be read.
+    """
     suffix = path.suffix.lower()
     if suffix == ".bvh":
         return "bvh"
@@ -199,7 +250,8 @@ def find_clips(root: str | Path) -> list[ClipRef]:
     """Every supported motion clip under ``root``, sorted by clip id.
 
     Hidden files and folders are skipped. Where two files would get the same id, the ids of both
-    use their path relative to the top folder (without suffix) instead of the stem.
+    use their path relative to the top folder (without suffix) instead of the stem. Files that
+    cannot be examined are left out; :func:`scan_clips` also says which and why.
 
     Args:
         root: Folder to search recursively.
@@ -210,20 +262,44 @@ def find_clips(root: str | Path) -> list[ClipRef]:
     Raises:
         FileNotFoundError: ``root`` is not a folder.
     """
+    return scan_clips(root)[0]
+
+
+def scan_clips(root: str | Path) -> tuple[list[ClipRef], list[SkippedFile]]:
+    """Like :func:`find_clips`, and also the files it had to skip, with the reason.
+
+    Args:
+        root: Folder to search recursively.
+
+    Returns:
+        ``(clips, skipped)``: the clips sorted by clip id, and the candidate clip files or clip
+        metadata (``clips.csv``) that could not be read, sorted by path.
+
+    Raises:
+        FileNotFoundError: ``root`` is not a folder.
+    """
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: not a folder")
-    csvs = _CsvIndex()
+    skipped: list[SkippedFile] = []
+    csvs = _CsvIndex(skipped)
     refs: list[ClipRef] = []
     for path in sorted(root.rglob("*")):
         rel = path.relative_to(root)
         if any(part.startswith(".") for part in rel.parts) or not path.is_file():
             continue
-        fmt = _detect_format(path)
+        try:
+            fmt = _detect_format(path)
+        except _NotExamined as e:
+            skipped.append(SkippedFile(path, str(e)))
+            continue
         if fmt is None:
             continue
         top = rel.parts[0] if len(rel.parts) > 1 else root.name
-        refs.append(_make_ref(path, fmt, top, root, csvs))
+        try:
+            refs.append(_make_ref(path, fmt, top, root, csvs))
+        except _READ_ERRORS as e:
+            skipped.append(SkippedFile(path, f"not examined ({_why(e)})"))
     counts: dict[str, int] = {}
     for ref in refs:
         counts[ref.clip_id] = counts.get(ref.clip_id, 0) + 1
@@ -237,7 +313,8 @@ def find_clips(root: str | Path) -> list[ClipRef]:
                 ref = ClipRef(new_id, ref.path, ref.fmt, ref.category, ref.asf_path)
             fixed.append(ref)
         refs = fixed
-    return sorted(refs, key=lambda r: (r.clip_id, str(r.path)))
+    refs = sorted(refs, key=lambda r: (r.clip_id, str(r.path)))
+    return refs, sorted(skipped, key=lambda s: str(s.path))
 
 
 def clip_ref(path: str | Path) -> ClipRef:
@@ -252,7 +329,10 @@ def clip_ref(path: str | Path) -> ClipRef:
     path = Path(path)
     if not path.is_file():
         raise MotionImportError(path, "no such file")
-    fmt = _detect_format(path)
+    try:
+        fmt = _detect_format(path)
+    except _NotExamined as e:
+        raise MotionImportError(path, str(e)) from e
     if fmt is None:
         raise MotionImportError(
             path, "not a supported clip (.bvh, .amc, DeepMimic JSON with 'Frames', AMASS .npz)"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,3 +65,64 @@ def test_bad_recordings_are_reported_and_the_others_reconstructed(files, tmp_pat
     assert main(["reconstruct", str(files["gap"]), "--out", str(tmp_path / "o2"),
                  "--fill-gaps", "0"]) == 1  # fmt: skip
     assert "first at frame 10" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def takes(tmp_path_factory):
+    """One short recording saved under PRISM-like paths that share a ``subjNNN/takeNNN`` tail
+    (and so a recording name) in two folders, and once more as a pickle beside one of them."""
+    from prism_tools.io import save_recording
+
+    d = tmp_path_factory.mktemp("takes")
+    rec = load_recording(SAMPLE).slice_frames(0, 20)
+    paths = [d / "a" / "subj001" / "take001.npz", d / "b" / "subj001" / "take001.npz",
+             d / "a" / "subj001" / "take001.pkl"]  # fmt: skip
+    for p in paths:
+        save_recording(rec, p)
+    return paths
+
+
+def test_outputs_of_different_inputs_never_share_a_name(takes, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["reconstruct", *map(str, takes), "--out", str(out), "--formats", "npz,bvh"]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    stems = [r["stem"] for r in summary["recordings"]]
+    assert stems == ["a__subj001__take001_npz", "b__subj001__take001", "a__subj001__take001_pkl"]
+    assert sorted(p.name for p in out.glob("*.npz")) == sorted(f"{s}.npz" for s in stems)
+    assert sorted(p.name for p in out.glob("*.bvh")) == sorted(f"{s}.bvh" for s in stems)
+    assert "wrote 3 reconstruction(s)" in printed and "0 blow-up(s) recovered" in printed
+    assert summary["blowups"] == sum(r["blowups"] for r in summary["recordings"]) == 0
+    # a single input keeps its file name; a later input with that name gets another one
+    one = tmp_path / "one"
+    assert main(["reconstruct", str(takes[0]), "--out", str(one)]) == 0
+    assert main(["reconstruct", str(takes[1]), "--out", str(one)]) == 0
+    summary = json.loads((one / "summary.json").read_text())
+    assert [r["stem"] for r in summary["recordings"]] == ["take001", "take001-2"]
+    assert sorted(p.name for p in one.glob("*.npz")) == ["take001-2.npz", "take001.npz"]
+
+
+def test_resume_with_other_settings_is_refused(takes, tmp_path, capsys):
+    out = tmp_path / "out"
+    base = ["reconstruct", str(takes[0]), "--out", str(out), "--max-frames", "15"]
+    assert main(base) == 0
+    before = (out / "take001.npz").stat().st_mtime_ns
+    for extra in (["--max-frames", "12"], ["--history", "20"], ["--no-recovery"],
+                  ["--fill-gaps", "3"]):  # fmt: skip
+        assert main([*base, *extra]) == 2
+        err = capsys.readouterr().err
+        assert "different settings" in err and "--overwrite" in err
+    # the same model file elsewhere is the same model; a changed one is not
+    policy = tmp_path / "policy.pt"
+    policy.write_bytes(Path("grip/assets/policy_default.pt").read_bytes())
+    assert main([*base, "--policy", str(policy)]) == 0
+    assert "1 already done" in capsys.readouterr().out
+    with open(policy, "ab") as f:
+        f.write(b"\0")
+    assert main([*base, "--policy", str(policy)]) == 2
+    assert "policy_sha256" in capsys.readouterr().err
+    assert (out / "take001.npz").stat().st_mtime_ns == before
+    # --overwrite redoes them with the new settings
+    assert main([*base[:-1], "12", "--overwrite"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["max_frames"] == 12 and summary["recordings"][0]["frames"] == 12

@@ -1,0 +1,158 @@
+"""Helpers for resumable, parallel runs (stdlib only): settings that a resume must match,
+worker processes that end with their parent, and temporary files a killed run left behind.
+
+``grip data build`` and ``grip reconstruct`` both resume into an output folder. Each records the
+settings its outputs were made with and refuses to go on with other ones
+(:func:`require_same_settings`, :func:`record_settings`), so a folder never mixes outputs of two
+settings. Their worker pools start every worker with :func:`exit_with_parent`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import re
+import signal
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from grip.core.atomic import atomic_write_text
+
+#: How often a worker checks that its parent still lives, s.
+PARENT_POLL_S = 0.5
+#: ``prctl`` option: signal sent to this process when its parent dies (Linux).
+_PR_SET_PDEATHSIG = 1
+#: Temporary files of :func:`grip.core.atomic.atomic_write`: ``.<name>.<8 random chars>.tmp``.
+_TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+class SettingsMismatch(ValueError):
+    """A resume was asked with other settings than the outputs already there were made with."""
+
+
+def _normalised(settings: Mapping[str, Any]) -> dict[str, Any]:
+    """``settings`` as JSON gives it back (tuples as lists, keys as strings)."""
+    return json.loads(json.dumps(dict(settings)))
+
+
+def settings_diff(old: Mapping[str, Any], new: Mapping[str, Any],
+                  common_only: bool = False) -> list[str]:  # fmt: skip
+    """``"key: old -> new"`` for every setting that differs.
+
+    Args:
+        old: Settings recorded with the existing outputs.
+        new: Settings of this run.
+        common_only: Compare only keys both hold (outputs of an older version that recorded
+            fewer settings).
+
+    Returns:
+        One line per differing key, sorted by key; empty when the settings agree.
+    """
+    old, new = _normalised(old), _normalised(new)
+    keys = set(old) & set(new) if common_only else set(old) | set(new)
+    missing = "(not set)"
+    return [f"{k}: {old.get(k, missing)} -> {new.get(k, missing)}"
+            for k in sorted(keys) if old.get(k, missing) != new.get(k, missing)]  # fmt: skip
+
+
+def require_same_settings(old: Mapping[str, Any], new: Mapping[str, Any], where: str | Path,
+                          hint: str, common_only: bool = False) -> None:  # fmt: skip
+    """Refuse to resume with settings other than the recorded ones.
+
+    Args:
+        old: Settings recorded with the existing outputs.
+        new: Settings of this run.
+        where: The file that recorded ``old`` (named in the message).
+        hint: What the user can do instead, e.g. ``"use another --out or the same options"``.
+        common_only: See :func:`settings_diff`.
+
+    Raises:
+        SettingsMismatch: Naming ``where`` and every differing setting.
+    """
+    diff = settings_diff(old, new, common_only)
+    if diff:
+        raise SettingsMismatch(f"{where}: this folder was made with different settings "
+                               f"({'; '.join(diff)}); {hint}")  # fmt: skip
+
+
+def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str) -> None:
+    """Record a run's settings before its first output, or check them against the record.
+
+    The first run writes ``path`` atomically; every later run (a resume, perhaps of a killed run
+    that never wrote its summary) must bring the same settings.
+
+    Args:
+        path: The settings file (JSON).
+        settings: JSON-serialisable settings of this run.
+        hint: See :func:`require_same_settings`.
+
+    Raises:
+        SettingsMismatch: ``path`` holds other settings.
+        ValueError: ``path`` is not readable JSON (the message says to remove it).
+    """
+    path = Path(path)
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: corrupt settings file ({e}); remove it to start "
+                             "over, or use another --out") from e  # fmt: skip
+        require_same_settings(old, settings, path, hint)
+        return
+    atomic_write_text(path, json.dumps(_normalised(settings), indent=1, sort_keys=True))
+
+
+def remove_stale_temps(folder: str | Path, recursive: bool = True) -> list[Path]:
+    """Delete the temporary files an interrupted atomic write left in ``folder``.
+
+    Only names of the form :func:`grip.core.atomic.atomic_write` uses are touched. Call it only
+    while no other process writes into ``folder``.
+
+    Returns:
+        The files removed.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    removed = []
+    for p in folder.rglob(".*.tmp") if recursive else folder.glob(".*.tmp"):
+        if _TEMP_NAME.match(p.name) and p.is_file():
+            with contextlib.suppress(OSError):
+                p.unlink()
+                removed.append(p)
+    return removed
+
+
+def exit_with_parent() -> None:
+    """Initializer of a worker process: end it as soon as its parent process ends.
+
+    A pool's workers otherwise outlive a parent killed with SIGKILL (they wait on a queue
+    whose write end they hold themselves). On Linux the kernel sends SIGKILL on the parent's
+    death (``prctl(PR_SET_PDEATHSIG)``); everywhere, a daemon thread checks every
+    :data:`PARENT_POLL_S` seconds whether the parent process changed and exits if so.
+    Pass it as ``initializer=`` of :class:`concurrent.futures.ProcessPoolExecutor`.
+    """
+    parent = os.getppid()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before the above took effect
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                     name="exit-with-parent").start()  # fmt: skip
+
+
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(PARENT_POLL_S)
+        if os.getppid() != parent:
+            os._exit(1)
