@@ -1,8 +1,9 @@
 """The trained controller for inference: a plain torch MLP, its observation normaliser and the
 AMP discriminator, in one small file (no stable-baselines3 pickle at load time).
 
-``export_policy(run_dir, out)`` writes it from a training run's checkpoint;
-``PolicyRunner.load(path)`` reads it with ``torch.load(weights_only=True)``.
+``export_policy(run_dir, out)`` writes it from a training run's checkpoint, read without
+unpickling anything (:mod:`policies.checkpoint`); ``PolicyRunner.load(path)`` reads it with
+``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from envs.amp import FRAME_DIM
 from envs.config import TrackingEnvConfig
 from grip.config import apply_dict
 from grip.core.atomic import atomic_write
+from grip.core.limits import read_json_file
 from grip.core.loaderrors import describe_load_error
 from policies.amp import Discriminator
 from policies.config import PolicyRunConfig
@@ -50,15 +52,27 @@ def linear_layers(body: nn.Sequential, head: nn.Linear | None = None) -> list[nn
     return [m for m in body if isinstance(m, nn.Linear)] + ([head] if head is not None else [])
 
 
-def _copy_mlp(body: nn.Sequential, head: nn.Linear,
-              activation: str) -> tuple[list[int], nn.Sequential]:  # fmt: skip
-    """A plain MLP (:func:`_mlp`) with the weights of an SB3 network body and its output layer;
-    returns its layer sizes and the MLP."""
-    linears = linear_layers(body, head)
-    sizes = [linears[0].in_features] + [m.out_features for m in linears]
-    mlp = _mlp(sizes, activation)
-    for dst, src in zip(linear_layers(mlp), linears, strict=True):
-        dst.load_state_dict(src.state_dict())
+def _mlp_from_state(state: dict, body: str, head: str, activation: str,
+                    path: Path) -> tuple[list[int], nn.Sequential]:  # fmt: skip
+    """A plain MLP (:func:`_mlp`) with the weights of an SB3 network body and its output layer,
+    taken from a policy state dict (keys ``{body}{i}.weight``, ``{head}weight``, ...); returns
+    its layer sizes and the MLP.
+
+    Raises:
+        ValueError: naming ``path``, when the layers are missing or do not chain.
+    """
+    try:
+        idx = sorted(int(k[len(body) :].split(".")[0]) for k in state
+                     if k.startswith(body) and k.endswith(".weight"))  # fmt: skip
+        names = [f"{body}{i}." for i in idx] + [head]
+        weights = [state[n + "weight"] for n in names]
+        sizes = [int(weights[0].shape[1])] + [int(w.shape[0]) for w in weights]
+        mlp = _mlp(sizes, activation)
+        for dst, n in zip(linear_layers(mlp), names, strict=True):
+            dst.load_state_dict({"weight": state[n + "weight"], "bias": state[n + "bias"]})
+    except (KeyError, IndexError, RuntimeError, ValueError) as e:
+        raise ValueError(f"{path}: no {body.rstrip('.')} -> {head.rstrip('.')} network in its "
+                         f"policy state ({str(e)[:200]})") from e  # fmt: skip
     return sizes, mlp
 
 
@@ -223,9 +237,17 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     float32 scale per weight row) overrides ``half`` and applies to the policy, value and
     discriminator networks alike. Normaliser statistics and the log std stay as they are.
     ``info`` (JSON) is kept in the file; the run's held-out sequences (``RUN/holdout.json``)
-    join it as ``info["holdout"]``, for ``grip eval-policy --split holdout``.
+    join it as ``info["holdout"]``, for ``grip eval-policy --split holdout``. The networks come
+    from the state dicts of ``checkpoint/model.zip``, never from its pickled entries
+    (:func:`policies.checkpoint.read_ppo_zip`), built as the run's config says.
+
+    Raises:
+        FileNotFoundError: ``run_dir`` is no train-policy run folder.
+        ValueError: naming the file, for a corrupt or hostile checkpoint file (nothing in it
+            runs) or one that does not fit the others.
     """
-    from stable_baselines3 import PPO
+    from grip.kinematics.train import pack_weights
+    from policies.checkpoint import read_ppo_zip, read_vecnorm
 
     run_dir = Path(run_dir)
     ck_dir = run_dir / "checkpoint"
@@ -233,35 +255,51 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     if not (ck_dir / "model.zip").is_file() or not cfg_path.is_file():
         raise FileNotFoundError(f"{run_dir}: no checkpoint/model.zip and config.json (a "
                                 "train-policy run folder expected)")  # fmt: skip
-    cfg_d = json.loads(cfg_path.read_text())["config"]
-    cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
-    model = PPO.load(ck_dir / "model.zip", device="cpu")
-    pol = model.policy
-    sizes, actor = _copy_mlp(pol.mlp_extractor.policy_net, pol.action_net, cfg.ppo.activation)
-    critic_sizes, critic = _copy_mlp(pol.mlp_extractor.value_net, pol.value_net,
-                                     cfg.ppo.activation)  # fmt: skip
-    from grip.kinematics.train import pack_weights
-
+    cfg_d = read_json_file(cfg_path, "train-policy run config").get("config")
+    if not isinstance(cfg_d, dict):
+        raise ValueError(f"{cfg_path}: not a train-policy run config (no 'config' object)")
+    try:
+        cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
+    except (TypeError, KeyError, AttributeError) as e:
+        raise ValueError(f"{cfg_path}: not a train-policy run config ({e})") from e
+    ppo = read_ppo_zip(ck_dir / "model.zip")  # (never unpickled: policies.checkpoint)
+    act, zpath = cfg.ppo.activation, ppo.path
+    sizes, actor = _mlp_from_state(ppo.policy, "mlp_extractor.policy_net.", "action_net.", act,
+                                   zpath)  # fmt: skip
+    critic_sizes, critic = _mlp_from_state(ppo.policy, "mlp_extractor.value_net.",
+                                           "value_net.", act, zpath)  # fmt: skip
+    if "log_std" not in ppo.policy:
+        raise ValueError(f"{zpath}: no log_std in its policy state")
     precision = precision or ("fp16" if half else "fp32")
     info = dict(info or {})
     holdout = run_dir / "holdout.json"  # grip train-policy's held-out clips (holdout_fraction)
     if holdout.is_file():
-        try:
-            info["holdout"] = list(json.loads(holdout.read_text())["sequences"])
-        except (ValueError, KeyError, TypeError) as e:
-            raise ValueError(f"{holdout}: not a held-out sequence list ({e})") from e
-    with np.load(ck_dir / "vecnorm.npz", allow_pickle=False) as z:
-        norm = dict(z)
-    keys = list(model.observation_space.spaces.keys())
+        seqs = read_json_file(holdout, "held-out sequence list").get("sequences")
+        if not isinstance(seqs, list) or not all(isinstance(q, str) for q in seqs):
+            raise ValueError(f"{holdout}: not a held-out sequence list (no 'sequences' names)")
+        info["holdout"] = seqs
+    norm_path = ck_dir / "vecnorm.npz"
+    norm = read_vecnorm(norm_path)
+    # the observation parts in the order of the network's input (the order they were saved in)
+    keys = [k[len("obs/") : -len("/mean")] for k in norm
+            if k.startswith("obs/") and k.endswith("/mean")]  # fmt: skip
+    try:
+        obs_mean = {k: torch.as_tensor(norm[f"obs/{k}/mean"]) for k in keys}
+        obs_var = {k: torch.as_tensor(norm[f"obs/{k}/var"]) for k in keys}
+        count = float(norm[f"obs/{keys[0]}/count"])
+    except (KeyError, IndexError, TypeError, ValueError) as e:
+        raise ValueError(f"{norm_path}: incomplete observation statistics ({e})") from e
+    width = sum(m.numel() for m in obs_mean.values())
+    if width != sizes[0] or width != critic_sizes[0]:
+        raise ValueError(f"{norm_path}: observations of {width} values, but the networks of "
+                         f"{zpath} take {sizes[0]}")  # fmt: skip
     amp_ck = load_weights(ck_dir / "amp.pt", "discriminator checkpoint")
     payload = {
         "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
         "actor_sizes": sizes, "actor": pack_weights(actor.state_dict(), precision),
         "obs_keys": keys,
-        "obs_mean": {k: torch.as_tensor(norm[f"obs/{k}/mean"]) for k in keys},
-        "obs_var": {k: torch.as_tensor(norm[f"obs/{k}/var"]) for k in keys},
-        "obs_count": float(norm[f"obs/{keys[0]}/count"]),
-        "log_std": pol.log_std.detach().clone(),
+        "obs_mean": obs_mean, "obs_var": obs_var, "obs_count": count,
+        "log_std": ppo.policy["log_std"].detach().clone(),
         "critic_sizes": critic_sizes,
         "critic": pack_weights(critic.state_dict(), precision),
         "clip_obs": cfg.ppo.clip_obs, "amp_frame_dim": FRAME_DIM,

@@ -11,7 +11,9 @@ A run folder holds::
 
 Running the same command again resumes from ``checkpoint/`` (stage, steps, optimiser,
 normaliser and discriminator); the replay buffer of policy samples is not saved (it refills
-within a few rollouts).
+within a few rollouts). ``model.zip`` is written by stable-baselines3 but never loaded by it:
+a resumed run builds its PPO from the config and takes the zip's state dicts and step counters
+(:mod:`policies.checkpoint`), so nothing pickled in the folder runs.
 """
 
 from __future__ import annotations
@@ -44,8 +46,10 @@ from envs import amp as A
 from envs import observations as O
 from envs.config import TrackingEnvConfig
 from grip.core import skeleton as sk
+from grip.core.limits import read_json_file
 from grip.core.reference import ReferenceSet
 from policies.amp import AmpTrainer, RealSampler
+from policies.checkpoint import read_ppo_zip, read_vecnorm
 from policies.config import PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers, load_weights
@@ -398,10 +402,7 @@ class PolicyTrainer:
         p = self.ckpt_dir / "state.json"
         if not p.is_file():
             return None
-        try:
-            return json.loads(p.read_text())
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{p}: unreadable training state ({e})") from e
+        return read_json_file(p, "training state")
 
     # -------------------------------------------------------------- model
     def _policy_kwargs(self) -> dict:
@@ -434,6 +435,26 @@ class PolicyTrainer:
         return PPO("MultiInputPolicy", venv, gamma=p.gamma, policy_kwargs=self._policy_kwargs(),
                    tensorboard_log=str(self.run_dir / "tb"), seed=self.cfg.seed,
                    device=p.device, verbose=0, **self._ppo_settings())  # fmt: skip
+
+    def _restore_model(self) -> None:
+        """The model and normaliser of ``checkpoint/``, for a resumed run: a PPO built from the
+        config (:meth:`_new_model`) that takes the checkpoint's network weights, optimiser state
+        and step counters; nothing pickled in ``model.zip`` is loaded
+        (:func:`policies.checkpoint.read_ppo_zip`).
+
+        Raises:
+            ValueError: naming the file, for a corrupt or hostile checkpoint file or one that
+                does not fit the run's settings.
+        """
+        ck = read_ppo_zip(self.ckpt_dir / "model.zip")
+        norm_path = self.ckpt_dir / "vecnorm.npz"
+        norm = read_vecnorm(norm_path)
+        try:
+            load_vecnorm_state(self.venv, norm)
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"{norm_path}: does not fit this run's observations ({e})") from e
+        self.model = self._new_model(self.venv)
+        ck.restore(self.model)
 
     def _apply_fixed_std(self) -> None:
         if self.cfg.ppo.fixed_std:
@@ -597,10 +618,7 @@ class PolicyTrainer:
             self.venv.close()
         self.venv = self._build_env(stage)
         if state is not None and (self.ckpt_dir / "model.zip").is_file():
-            with np.load(self.ckpt_dir / "vecnorm.npz", allow_pickle=False) as z:
-                load_vecnorm_state(self.venv, dict(z))
-            self.model = PPO.load(self.ckpt_dir / "model.zip", env=self.venv,
-                                  device=self.cfg.ppo.device, **self._ppo_settings())  # fmt: skip
+            self._restore_model()
         elif self.model is None:
             self.model = self._new_model(self.venv)
             if self._init_runner is not None:

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from grip.cli.recordings import add_tta_argument
+from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
 
 SHIPPED_POLICY = "grip/assets/policy_default.pt"
 HOLDOUT_FILE = "holdout.json"
@@ -117,6 +117,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
+    add_limit_arguments(e)
     e.set_defaults(func=cmd_eval)
 
     x = sub.add_parser(
@@ -292,6 +293,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from grip.cli.paths import load_run_config
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
+    from grip.core.limits import read_json_file
     from grip.kinematics.train import git_hash
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer, run_config_dict
@@ -310,8 +312,12 @@ def cmd_train(args: argparse.Namespace) -> int:
                              cfg.mirror_references)  # fmt: skip
     prev = out / "config.json"
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
-        changed = changed_settings(json.loads(prev.read_text())["config"], run_config_dict(cfg),
-                                   run_config_dict(PolicyRunConfig()))  # fmt: skip
+        try:
+            prev_cfg = read_json_file(prev, "train-policy run config")["config"]
+            changed = changed_settings(prev_cfg, run_config_dict(cfg),
+                                       run_config_dict(PolicyRunConfig()))  # fmt: skip
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            raise CliError(f"{prev}: not a train-policy run config ({str(e)[:300]})") from e
         if changed:
             raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
                            f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip
@@ -324,7 +330,11 @@ def cmd_train(args: argparse.Namespace) -> int:
                "data": str(args.data.resolve()),
                "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
     # what the run started from: this call's --init, or on resume what config.json recorded
-    began = json.loads(prev.read_text()) if resuming and prev.is_file() else {}
+    try:
+        began = read_json_file(prev, "train-policy run config") if resuming and prev.is_file() \
+            else {}
+    except ValueError as e:
+        raise CliError(str(e)) from e
     if init is not None:
         began = {"init": str(init.resolve()), "init_member": args.init_member}
     payload.update({k: began[k] for k in ("init", "init_member") if began.get(k) is not None})
@@ -341,8 +351,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         trainer.train()
-    except ValueError as e:  # a warm-start file that does not fit the run's settings
-        raise CliError(str(e)) from e
+    except (ValueError, FileNotFoundError) as e:  # a warm-start file that does not fit the
+        raise CliError(str(e)) from e  # run's settings, or a refused or missing checkpoint file
     dt = time.perf_counter() - t0
     print(f"trained to {trainer.total_done()} steps ({trainer.wall_s():.0f} s of training in all; "
           f"this call {dt:.0f} s)")  # fmt: skip
@@ -358,14 +368,16 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from grip.cli.main import CliError
+    from grip.core.limits import read_json_file
     from policies.runner import export_policy
 
     try:
-        state = json.loads((args.run / "checkpoint" / "state.json").read_text())
-        hist = state.get("history") or [{}]
+        state = read_json_file(args.run / "checkpoint" / "state.json", "training state")
+        hist = state.get("history")
+        last = hist[-1] if isinstance(hist, list) and hist and isinstance(hist[-1], dict) else {}
         size = export_policy(args.run, args.out,
                              precision="fp32" if args.fp32 else args.precision,
-                             info={"timesteps": hist[-1].get("timesteps"),
+                             info={"timesteps": last.get("timesteps"),
                                    "wall_s": state.get("wall_s")})  # fmt: skip
     except (FileNotFoundError, ValueError, OSError) as e:
         raise CliError(str(e)) from e
@@ -414,11 +426,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT
-    from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
+    from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
     from policies.ensemble import PolicyEnsemble
 
+    limits_from_args(args)
     pols = args.policy or [REPO_ROOT / SHIPPED_POLICY]
     for p in pols:
         if not Path(p).is_file():
@@ -456,9 +469,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
                            f"sequences held out of {pol}'s training (other data?)")  # fmt: skip
     else:
         files = split_paths(args.data, args.split)
+    skipped: list[tuple[str, str]] = []  # unreadable files: reported, skipped, exit code 1
     recs = load_recordings(files, args.category,
                            args.segment_frames, limit=args.segments,
-                           segment_stride=args.stride)  # fmt: skip
+                           segment_stride=args.stride, errors=skipped)  # fmt: skip
     passes: list[list[dict]] = []
     with tqdm(total=len(recs) * args.repeats, unit="seg", desc="episodes") as bar:
         for i in range(args.repeats):
@@ -488,4 +502,4 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
         atomic_write_text(args.json, json.dumps(summary["overall"], indent=1))
         print(f"wrote {args.json}")
-    return 0
+    return exit_status(skipped, len(files))

@@ -96,7 +96,7 @@ def test_info_scans_a_folder_of_prism_pickles(tmp_path: Path) -> None:
         save_recording(make_recording(n, seed=n), tmp_path / subj / f"{take}.pkl")
     (tmp_path / "subj002" / "take009.pkl").write_bytes(b"\x80\x04 not a pickle")
     js = tmp_path / "info.json"
-    assert main(["data", "info", str(tmp_path), "--json", str(js)]) == 0
+    assert main(["data", "info", str(tmp_path), "--json", str(js)]) == 1  # a file skipped
     info = json.loads(js.read_text())
     assert info["source"] == "scan" and info["recordings"] == 2 and info["frames"] == 200
     assert len(info["unreadable"]) == 1 and "take009.pkl" in info["unreadable"][0]["file"]
@@ -244,18 +244,12 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
     assert "bad.npz" in capsys.readouterr().err
 
 
-TINY_POLICY = ["--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo.batch_size=64",
-               "--set", "ppo.n_epochs=1", "--set", "ppo.net_arch=[16]", "--set", "amp.hidden=[16]",
-               "--set", "amp.window=2", "--set", "amp.batch_size=16",
-               "--set", "amp.replay_size=256", "--set", "stage1.timesteps=64",
-               "--set", "stage1.categories=[]", "--set", "stage2.categories=[]",
-               "--set", "stage2.timesteps=64"]  # fmt: skip
-"""A policy run of a few seconds (``grip train-policy`` settings)."""
 
 
-def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys) -> None:
+def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys,
+                                             tiny_policy_settings) -> None:  # fmt: skip
     run = tmp_path / "policy"
-    args = ["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY]
+    args = ["train-policy", "--data", str(built), "--out", str(run), *tiny_policy_settings]
     assert main(args) == 0
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["config"]["ppo"]["net_arch"] == [16] and "git" in cfg and "kin" in cfg
@@ -365,7 +359,7 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
 
 
 def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
-    built: Path, tmp_path: Path, capsys
+    built: Path, tmp_path: Path, capsys, tiny_policy_settings
 ) -> None:
     data = tmp_path / "data"  # the fixture's dataset with all three clips in training
     shutil.copytree(built, data)
@@ -373,7 +367,7 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
     split["train"], split["test"] = sorted(split["train"] + split["test"]), []
     (data / "split.json").write_text(json.dumps(split))
     run = tmp_path / "held"
-    args = ["train-policy", "--data", str(data), "--out", str(run), *TINY_POLICY,
+    args = ["train-policy", "--data", str(data), "--out", str(run), *tiny_policy_settings,
             "--set", "holdout_fraction=0.5"]  # fmt: skip
     assert main(args) == 0
     held = json.loads((run / "holdout.json").read_text())["sequences"]
@@ -389,18 +383,19 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
     assert json.loads(js.read_text())["segments"] >= 1
     # a policy trained on every clip has no validation split: a clear error
     assert main(["train-policy", "--data", str(data), "--out", str(tmp_path / "all"),
-                 *TINY_POLICY]) == 0  # fmt: skip
+                 *tiny_policy_settings]) == 0  # fmt: skip
     assert main(["eval-policy", "--policy", str(tmp_path / "all" / "policy.pt"), "--data",
                  str(data), "--split", "holdout"]) == 2  # fmt: skip
     assert "no clips were held out" in capsys.readouterr().err
     assert main([*args, "--set", "holdout_fraction=1.5"]) == 2  # out of range: refused
     everything = ["train-policy", "--data", str(data), "--out", str(tmp_path / "none"),
-                  *TINY_POLICY, "--set", "holdout_fraction=0.99"]  # fmt: skip
+                  *tiny_policy_settings, "--set", "holdout_fraction=0.99"]  # fmt: skip
     assert main(everything) == 2 and "nothing to train on" in capsys.readouterr().err
 
 
-def test_time_reversed_motions_join_the_policy_references(built: Path, tmp_path: Path,
-                                                          capsys) -> None:  # fmt: skip
+def test_time_reversed_motions_join_the_policy_references(
+    built: Path, tmp_path: Path, capsys, tiny_policy_settings
+) -> None:
     import numpy as np
 
     from grip.dataset.augment import time_reversed_recordings
@@ -443,7 +438,7 @@ def test_time_reversed_motions_join_the_policy_references(built: Path, tmp_path:
         time_reversed_recordings(tmp_path, split["train"], ["*"])
     # grip train-policy: the reversed recordings join the references once (and their mirrors)
     run = tmp_path / "rev"
-    args = ["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY,
+    args = ["train-policy", "--data", str(built), "--out", str(run), *tiny_policy_settings,
             "--set", f'reverse_categories=["{clip["category"]}"]']  # fmt: skip
     assert main(args) == 0
     names = [c.name for c in ReferenceSet.load(run / "reference_train.npz").clips]
@@ -465,7 +460,7 @@ TINY_DISTILL = ["--set", "iterations=2", "--set", "decisions_per_iteration=64",
 
 
 def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
-    built: Path, tmp_path: Path, capsys
+    built: Path, tmp_path: Path, capsys, tiny_policy_settings
 ) -> None:
     import numpy as np
     import torch
@@ -475,8 +470,8 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     pols = []
     for seed in (0, 1):  # two tiny policies that act differently: the teacher is their mean
         run = tmp_path / f"p{seed}"
-        assert main(["train-policy", "--data", str(built), "--out", str(run), *TINY_POLICY,
-                     "--set", f"seed={seed}"]) == 0  # fmt: skip
+        assert main(["train-policy", "--data", str(built), "--out", str(run),
+                     *tiny_policy_settings, "--set", f"seed={seed}"]) == 0  # fmt: skip
         pols.append(run / "policy.pt")
     # member 0 pushes every action by +0.4: the mean action is member 1's + 0.2
     from grip.kinematics.train import pack_weights

@@ -302,7 +302,7 @@ def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     runner = PolicyRunner.load(out)
     env = GripTrackingEnv(runner.env_cfg)
     obs, info = env.reset(seed=3)
-    model = PPO.load(path / "checkpoint" / "model.zip", device="cpu")
+    model = PPO.load(path / "checkpoint" / "model.zip", device="cpu")  # (trusted: the oracle)
     with np.load(path / "checkpoint" / "vecnorm.npz") as z:
         norm = dict(z)
     nobs = {k: np.clip((v - norm[f"obs/{k}/mean"]) / np.sqrt(norm[f"obs/{k}/var"] + 1e-8),
