@@ -25,8 +25,7 @@ import torch
 
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
-from grip.cli.paths import REPO_ROOT
-from grip.cli.policy import SHIPPED_POLICY
+from grip.assets import SHIPPED_POLICY
 from policies.ensemble import load_policy
 from policies.train import load_reference, select_clips
 
@@ -37,7 +36,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reference", required=True,
                     help="reference set (grip train-policy writes RUN/reference_train.npz)")
-    ap.add_argument("--policy", default=str(REPO_ROOT / SHIPPED_POLICY))
+    ap.add_argument("--policy", default=str(SHIPPED_POLICY))
     ap.add_argument("--episodes", type=int, default=120)
     ap.add_argument("--category", action="append", default=None,
                     help="glob on the motion category (repeatable; default walk*, run*, dash*)")

@@ -21,7 +21,7 @@ import argparse
 
 import numpy as np
 
-from grip.cli.paths import REPO_ROOT
+from grip.assets import SHIPPED_POLICY
 from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
 from grip.kinematics.inference import KinematicsEstimator
 from policies.ensemble import PolicyEnsemble
@@ -94,7 +94,7 @@ def main() -> None:
                     help="policy or ensemble file (repeatable; default: the shipped one)")
     ap.add_argument("--option", default="", help="trace: extra MuJoCo <option> attributes")
     args = ap.parse_args()
-    runner = PolicyEnsemble.load(args.policy or [REPO_ROOT / "grip/assets/policy_default.pt"])
+    runner = PolicyEnsemble.load(args.policy or [SHIPPED_POLICY])
     est = KinematicsEstimator.from_checkpoint(kin_checkpoint(None))
     (_trace if args.mode == "trace" else _reversed)(args, runner, est)
 

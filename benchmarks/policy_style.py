@@ -28,8 +28,7 @@ import numpy as np
 import torch
 
 from envs import amp as A
-from grip.cli.paths import REPO_ROOT
-from grip.cli.policy import SHIPPED_POLICY
+from grip.assets import SHIPPED_POLICY
 from grip.core import skeleton as sk
 from policies.amp import RealSampler
 from policies.ensemble import PolicyEnsemble, load_policy
@@ -98,7 +97,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=100)
     args = ap.parse_args()
     torch.set_num_threads(1)
-    runner = PolicyEnsemble.load(args.policy or [REPO_ROOT / SHIPPED_POLICY])
+    runner = PolicyEnsemble.load(args.policy or [SHIPPED_POLICY])
     if args.noise > 0:
         runner.use_action_noise(args.noise, seed=args.seed)
     judge = load_policy(args.judge) if args.judge else runner

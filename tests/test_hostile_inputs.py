@@ -431,11 +431,10 @@ def test_eval_kin_skips_a_bad_file_and_exits_1(tmp_path, capsys) -> None:
 
 
 def test_eval_policy_skips_a_bad_file_and_exits_1(tmp_path, capsys) -> None:
+    from grip.assets import SHIPPED_POLICY
     from grip.cli.main import main
-    from grip.cli.paths import REPO_ROOT
-    from grip.cli.policy import SHIPPED_POLICY
 
-    if not (REPO_ROOT / SHIPPED_POLICY).is_file():
+    if not (SHIPPED_POLICY).is_file():
         pytest.skip("no shipped policy")
     d, bad = _split_dataset(tmp_path)
     assert main(["eval-policy", "--data", str(d), "--segment-frames", "40", "--segments", "1"]) == 1

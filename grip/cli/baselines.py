@@ -59,8 +59,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
+    from grip.cli.errors import CliError
     from grip.cli.kinematics import fit_run
-    from grip.cli.main import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
     from grip.kinematics.baselines import (
         BaselineTrainer,

@@ -12,12 +12,11 @@ from grip.cli.recordings import add_limit_arguments, limits_from_args
 
 def shipped_methods() -> list[str]:
     """Registered methods whose default models exist in this checkout."""
-    from grip.cli.paths import REPO_ROOT
-    from grip.cli.policy import SHIPPED_POLICY
-    from grip.eval.methods import METHODS, SHIPPED_BASELINES
+    from grip.assets import SHIPPED_BASELINES, SHIPPED_POLICY
+    from grip.eval.methods import METHODS
 
     files = {**SHIPPED_BASELINES, "grip": SHIPPED_POLICY}
-    return [n for n in METHODS if n not in files or (REPO_ROOT / files[n]).is_file()]
+    return [n for n in METHODS if n not in files or Path(files[n]).is_file()]
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,7 +77,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, skip_file, split_paths
     from grip.eval.bench import (
         BenchError,

@@ -85,7 +85,7 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
 def cmd_bench_env(args: argparse.Namespace) -> int:
     import json
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.core.atomic import atomic_write_text
     from grip.core.reference import ReferenceError
 

@@ -135,7 +135,7 @@ def scan_motions(roots: list[Path], limit: int | None
         ``(clips, skipped)``: ``(path, clip_id, category)`` triples (``limit``: evenly spread)
         and ``(path, reason)`` of every candidate file the search could not read.
     """
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.motion.catalog import scan_clips
 
     clips, skipped = [], []
@@ -160,7 +160,7 @@ def scan_motions(roots: list[Path], limit: int | None
 def cmd_build(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.paths import default_motions_dir
     from grip.dataset.build import BuildConfig, build_dataset
     from grip.dataset.info import dataset_summary, format_summary
@@ -213,7 +213,7 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, skip_file
     from grip.core.atomic import atomic_write_text
     from grip.dataset.info import dataset_summary, format_summary
@@ -234,7 +234,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.dataset.plot import plot_recording
     from prism_tools.io import load_recording
 
@@ -251,7 +251,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def cmd_reference(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set

@@ -36,7 +36,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-SAMPLE_RECORDING = "grip/assets/sample_recording.npz"
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -61,8 +60,8 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     # machine with a busy core, costs a lot: the demo took 18.6 s with torch's default two
     # threads and 8.0 s with one while a training held the other core (README, "The demo").
     torch.set_num_threads(1)
-    from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
+    from grip.assets import SAMPLE_RECORDING
+    from grip.cli.errors import CliError
     from grip.cli.reconstruct import policy_checkpoint, safe_name
     from grip.core.atomic import atomic_write_text
     from grip.eval import bench as B
@@ -70,7 +69,7 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     from grip.export import export_reconstruction
     from prism_tools.io import load_recording
 
-    src = args.recording or REPO_ROOT / SAMPLE_RECORDING
+    src = args.recording or SAMPLE_RECORDING
     try:
         rec = load_recording(src)
     except (OSError, ValueError) as e:
@@ -152,7 +151,7 @@ def dataset_demo(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.cli.data import select_clips
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.paths import default_motions_dir
     from grip.dataset.build import BuildConfig, build_dataset
     from grip.dataset.info import dataset_summary, format_summary

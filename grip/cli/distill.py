@@ -54,9 +54,10 @@ def cmd_distill(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.assets import SHIPPED_POLICY
+    from grip.cli.errors import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
-    from grip.cli.policy import SHIPPED_POLICY, build_training_reference, changed_settings
+    from grip.cli.policy import build_training_reference, changed_settings
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.train import git_hash
@@ -64,7 +65,7 @@ def cmd_distill(args: argparse.Namespace) -> int:
 
     cfg = load_run_config(args.config or REPO_ROOT / DEFAULT_CONFIG, "distill", DistillConfig(),
                           args.set)  # fmt: skip
-    teachers = args.teacher or [REPO_ROOT / SHIPPED_POLICY]
+    teachers = args.teacher or [SHIPPED_POLICY]
     for t in teachers:
         if not Path(t).is_file():
             raise CliError(f"{t}: no such policy file")

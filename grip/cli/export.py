@@ -133,7 +133,7 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     if "mp4" in args.formats:
         # MuJoCo picks its OpenGL backend when first imported; EGL works headless.
         os.environ.setdefault("MUJOCO_GL", "egl")
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import skip_file
     from grip.core.reconstruction import Reconstruction, ReconstructionError
     from grip.export import ExportError, check_ground_truth, fk_mismatch_m

@@ -106,7 +106,7 @@ def add_export_parser(
 def cmd_export(args: argparse.Namespace) -> int:
     import importlib
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
 
     module, func = args.exporter.split(":")
     export = getattr(importlib.import_module(module), func)
@@ -121,7 +121,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.paths import load_run_config
     from grip.kinematics.train import KinematicsRunConfig
 
@@ -152,7 +152,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.kinematics.dataset import holdout_split, load_split_sequences, split_files
     from grip.kinematics.train import Trainer
 
@@ -201,7 +201,7 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.kinematics.train import write_run_config
 
     last = out / "last.pt"
@@ -284,7 +284,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.evaluate import (
@@ -351,7 +351,7 @@ def _eval_sweep(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.evaluate import aggregate, evaluate_recordings
     from grip.kinematics.inference import KinematicsEstimator

@@ -24,10 +24,7 @@ from grip.cli import (
     policy,
 )
 from grip.cli import reconstruct as reconstruct_cmd
-
-
-class CliError(Exception):
-    """A user-facing error: printed as ``grip: error: ...`` with exit code 2, no traceback."""
+from grip.cli.errors import CliError
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+from grip.assets import REPO_ROOT
 
 
 def default_motions_dir() -> Path | None:
@@ -24,8 +24,8 @@ def default_motions_dir() -> Path | None:
 def load_run_config(path: Path | None, kind: str, default, overrides):
     """Settings of a run: ``default`` updated by the TOML at ``path`` (else
     ``configs/<kind>/default.toml`` when it exists) and ``--set`` overrides; errors become
-    :class:`grip.cli.main.CliError`."""
-    from grip.cli.main import CliError
+    :class:`grip.cli.errors.CliError`."""
+    from grip.cli.errors import CliError
     from grip.config import ConfigError, load_config
 
     if path is None:

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
 
-SHIPPED_POLICY = "grip/assets/policy_default.pt"
 HOLDOUT_FILE = "holdout.json"
 """Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
 
@@ -226,7 +225,7 @@ def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
     """The training split's recording files less the clips that ``cfg.holdout_fraction`` holds
     out, whose sequence names go to ``out/holdout.json`` (every call: the draw depends only on
     the names, the fraction and the seed)."""
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.core.atomic import atomic_write_text
     from grip.kinematics.dataset import holdout_names
 
@@ -252,7 +251,7 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     unless it exists. Shared by ``grip train-policy`` and ``grip distill-policy``."""
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import load_recordings
 
     if ref_path.is_file():
@@ -289,7 +288,7 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.paths import load_run_config
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
@@ -367,7 +366,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.core.limits import read_json_file
     from policies.runner import export_policy
 
@@ -386,7 +385,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_average(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from policies.average import average_policies
 
     try:
@@ -398,7 +397,7 @@ def cmd_average(args: argparse.Namespace) -> int:
 
 
 def cmd_ensemble(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from policies.ensemble import write_ensemble
 
     try:
@@ -410,7 +409,7 @@ def cmd_ensemble(args: argparse.Namespace) -> int:
 
 
 def cmd_member(args: argparse.Namespace) -> int:
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from policies.ensemble import write_member
 
     try:
@@ -424,15 +423,15 @@ def cmd_member(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
+    from grip.assets import SHIPPED_POLICY
+    from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
     from policies.ensemble import PolicyEnsemble
 
     limits_from_args(args)
-    pols = args.policy or [REPO_ROOT / SHIPPED_POLICY]
+    pols = args.policy or [SHIPPED_POLICY]
     for p in pols:
         if not Path(p).is_file():
             raise CliError(f"{p}: no such policy file (train one with 'grip train-policy')")

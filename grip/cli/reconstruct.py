@@ -135,11 +135,10 @@ def _row_formats(row: Mapping) -> set[str]:
 
 def policy_checkpoint(path: Path | None) -> Path:
     """``path`` or the shipped policy, which must exist."""
-    from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
-    from grip.cli.policy import SHIPPED_POLICY
+    from grip.assets import SHIPPED_POLICY
+    from grip.cli.errors import CliError
 
-    p = path or REPO_ROOT / SHIPPED_POLICY
+    p = path or SHIPPED_POLICY
     if not Path(p).is_file():
         hint = "" if path else " (no policy ships yet: pass --policy RUN/policy.pt)"
         raise CliError(f"policy checkpoint {p} not found{hint}")
@@ -157,7 +156,7 @@ def _work(job: tuple) -> list[dict]:
     import torch
 
     torch.set_num_threads(1)
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import load_recordings
     from grip.eval.reconstruct import GripReconstructor
 
@@ -215,7 +214,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint, limits_from_args
     from grip.core.atomic import atomic_write_text
     from grip.core.runs import (

@@ -10,13 +10,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-SHIPPED_KIN = "grip/assets/kinematics_default.pt"
-"""The KinematicsNet checkpoint every command uses by default (relative to the repository)."""
-
 
 def split_paths(data: Path, split: str) -> list[Path]:
     """The recording files of a dataset split."""
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.kinematics.dataset import split_files
 
     try:
@@ -57,7 +54,7 @@ def limits_from_args(args: argparse.Namespace):
     Raises:
         CliError: An unknown limit name or a bad value (the message lists the names).
     """
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.core.limits import active_limits, set_active_limits
 
     items = getattr(args, "input_limits", None) or []
@@ -122,7 +119,7 @@ def load_recordings(
         CliError: A file cannot be read and ``errors`` is ``None`` (the message names it), or
             nothing is selected (with ``errors``: no file was readable).
     """
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from prism_tools.chunking import segments
     from prism_tools.io import load_recording
 
@@ -157,10 +154,10 @@ def load_recordings(
 
 def kin_checkpoint(path: Path | None, flag: str = "--kin") -> Path:
     """``path`` or the shipped KinematicsNet checkpoint, which must exist."""
-    from grip.cli.main import CliError
-    from grip.cli.paths import REPO_ROOT
+    from grip.assets import SHIPPED_KIN
+    from grip.cli.errors import CliError
 
-    kin = Path(path) if path is not None else REPO_ROOT / SHIPPED_KIN
+    kin = Path(path) if path is not None else SHIPPED_KIN
     if not kin.is_file():
         raise CliError(f"{kin}: no such KinematicsNet checkpoint (train one with 'grip train-kin' "
                        f"and pass {flag} RUN/best.pt)")  # fmt: skip
@@ -190,7 +187,7 @@ def reversed_training_recordings(data: Path, files: Sequence[Path | str],
     select nothing."""
     from tqdm import tqdm
 
-    from grip.cli.main import CliError
+    from grip.cli.errors import CliError
     from grip.dataset.augment import reversed_clip_ids, time_reversed_recordings
 
     stems = [Path(f).stem for f in files]

@@ -100,10 +100,9 @@ class UnknownMethodError(ValueError):
 
 # ------------------------------------------------------------------------- kinematics only
 def _shipped_kin_checkpoint() -> Path:
-    from grip.cli.paths import REPO_ROOT
-    from grip.cli.recordings import SHIPPED_KIN
+    from grip.assets import SHIPPED_KIN
 
-    return REPO_ROOT / SHIPPED_KIN
+    return SHIPPED_KIN
 
 
 def sensor_set(name: str):
@@ -223,11 +222,10 @@ class Grip:
 
 def grip_method(options: MethodOptions) -> Grip:
     """Factory of :class:`Grip` (policy: ``options.policy_checkpoint`` or the shipped one)."""
-    from grip.cli.paths import REPO_ROOT
-    from grip.cli.policy import SHIPPED_POLICY
+    from grip.assets import SHIPPED_POLICY
     from grip.eval.reconstruct import GripReconstructor
 
-    policy = Path(options.policy_checkpoint or REPO_ROOT / SHIPPED_POLICY)
+    policy = Path(options.policy_checkpoint or SHIPPED_POLICY)
     kin = Path(options.kin_checkpoint or _shipped_kin_checkpoint())
     for what, p in (("policy", policy), ("KinematicsNet", kin)):
         if not p.is_file():
@@ -296,15 +294,13 @@ def kinematics_pip_method(options: MethodOptions) -> KinematicsPip:
 
 
 # ------------------------------------------------------------------- PIP and TransPose
-SHIPPED_BASELINES = {"transpose": "grip/assets/transpose4.pt", "pip": "grip/assets/pip4.pt"}
-"""Where the trained baseline networks ship (``grip baseline-export``)."""
 
 
 def _baseline_estimator(name: str, path: Path | None):
-    from grip.cli.paths import REPO_ROOT
+    from grip.assets import SHIPPED_BASELINES
     from grip.kinematics.baselines import BaselineEstimator
 
-    p = Path(path or REPO_ROOT / SHIPPED_BASELINES[name])
+    p = Path(path or SHIPPED_BASELINES[name])
     if not p.is_file():
         raise ValueError(f"{p}: no {name} checkpoint; train one with 'grip train-baseline {name} "
                          f"--data DIR --out RUN' and pass RUN/best.pt")  # fmt: skip

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from grip.assets import SHIPPED_KIN
 from grip.cli.main import main
-from grip.cli.paths import REPO_ROOT
 from grip.core.reference import ReferenceSet
 
 MOTIONS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "motions"
@@ -317,7 +317,7 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert main(["policy-member", str(ens), "2", "--out", str(tmp_path / "m2.pt")]) == 2
     assert "no member 2" in capsys.readouterr().err and not (tmp_path / "m2.pt").exists()
     # two KinematicsNets: the references hold every training recording once per estimator
-    kin = str(REPO_ROOT / "grip/assets/kinematics_default.pt")
+    kin = str(SHIPPED_KIN)
     two = tmp_path / "policy_two_kin"
     argv = [*args[:3], "--out", str(two), *args[5:], "--kin", kin, "--kin", kin,
             "--set", "mirror_references=true"]  # fmt: skip

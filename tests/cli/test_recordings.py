@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from grip.cli.main import CliError
+from grip.cli.errors import CliError
 from grip.cli.recordings import kin_checkpoint, load_recordings
 from prism_tools.io import save_recording
 from prism_tools.synthetic import make_recording

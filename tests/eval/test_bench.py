@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grip.assets import SAMPLE_RECORDING, SHIPPED_KIN
 from grip.cli.main import main
-from grip.cli.paths import REPO_ROOT
-from grip.cli.recordings import SHIPPED_KIN
 from grip.core import metrics as M
 from grip.core.reconstruction import Reconstruction
 from grip.eval import bench as B
@@ -357,7 +356,7 @@ def test_kinematics_method_starts_at_the_true_root(seg_rec) -> None:
 
 
 def test_kinematics_sensor_checkpoints_come_from_the_sweep_folder(tmp_path) -> None:
-    shipped = REPO_ROOT / SHIPPED_KIN  # trained on feet + wrists + insoles = imu4_press
+    shipped = SHIPPED_KIN  # trained on feet + wrists + insoles = imu4_press
     for name in ("imu4_press", "imu2_press"):
         (tmp_path / name).mkdir()
         shutil.copy(shipped, tmp_path / name / "best.pt")
@@ -449,7 +448,7 @@ def test_shipped_baselines_start_at_the_true_first_frame(name) -> None:
     at its first frame (PIP: pose and root; TransPose: the root)."""
     from prism_tools.io import load_recording
 
-    rec = load_recording(REPO_ROOT / "grip/assets/sample_recording.npz").slice_frames(0, FRAMES)
+    rec = load_recording(SAMPLE_RECORDING).slice_frames(0, FRAMES)
     method = make_method(name, MethodOptions())
     recon = method.reconstruct(rec)
     gt = B.ground_truth(rec)
