@@ -1103,8 +1103,11 @@ def _too_big(limits: InputLimits, name: str, value: float, text: str) -> None:
 def check_plausible(rec: Recording, limits: InputLimits | None = None) -> None:
     """Refuses finite but physically absurd values, saying which unit was probably meant.
 
-    Checked: acceleration magnitudes (``imu.*.acc_*``, ``imu_gt.*.acc_world``) against
-    ``limits.max_acc_mps2``, velocities (``imu_gt.*.vel_world``) against ``max_vel_mps``,
+    Checked: acceleration magnitudes (``imu.*.acc_*``, ``imu_gt.*.acc_world``): their median
+    against ``limits.max_typical_acc_mps2`` (a unit error moves every sample; a glitch of motion
+    capture differentiated twice is a spike and passes) and every sample against
+    ``max_acc_mps2``; velocities (``imu_gt.*.vel_world``) likewise against
+    ``max_typical_vel_mps`` and ``max_vel_mps``;
     insole forces in body weights (``insole.*.force``, ``force_world``, ``combined``) against
     ``max_force_bw``, and positions (``smpl_params.trans``, ``imu_gt.*.pos_world``,
     ``CoP_world``, ``slam.head_traj``: magnitude and span over the take) against
@@ -1125,18 +1128,15 @@ def check_plausible(rec: Recording, limits: InputLimits | None = None) -> None:
             for k in ("acc_world_raw", "acc_world_filt", "acc_local_raw")
             if getattr(s, k) is not None]  # fmt: skip
     accs += [(f"imu_gt.{p}.acc_world", s.acc_world) for p, s in rec.imu_gt.items()]
-    for path, arr in accs:
+    vels = [(f"imu_gt.{p}.vel_world", s.vel_world) for p, s in rec.imu_gt.items()]
+    for (path, arr), (what, unit, mm) in [*((a, ("acc", "_acc_mps2", "mm/s^2")) for a in accs),
+                                          *((v, ("speed", "_vel_mps", "mm/s")) for v in vels)]:
         mx, med = _magnitude_max(arr)
-        if mx > limits.max_acc_mps2:
-            hint = ("values look like mm/s^2" if med > 100.0 * GRAVITY / 10 else
-                    "a spike: corrupt samples?")  # fmt: skip
-            _too_big(limits, "max_acc_mps2", mx, f"{path}: acc magnitude {mx:.3g} m/s^2 "
-                     f"(median {med:.3g}; {hint}) is above")  # fmt: skip
-    for p, s in rec.imu_gt.items():
-        mx, med = _magnitude_max(s.vel_world)
-        hint = "values look like mm/s" if med > 10.0 else "a spike: corrupt samples?"
-        _too_big(limits, "max_vel_mps", mx, f"imu_gt.{p}.vel_world: speed {mx:.3g} m/s "
-                 f"(median {med:.3g}; {hint}) is above")  # fmt: skip
+        su = "m/s^2" if what == "acc" else "m/s"
+        _too_big(limits, "max_typical" + unit, med, f"{path}: median {what} magnitude "
+                 f"{med:.3g} {su} (values look like {mm}) is above")  # fmt: skip
+        _too_big(limits, "max" + unit, mx, f"{path}: {what} magnitude {mx:.3g} {su} (median "
+                 f"{med:.3g}: corrupt samples?) is above")  # fmt: skip
     forces = [(f"insole.{p}.{k}", getattr(s, k)) for p, s in rec.insole.items()
               for k in ("force", "force_world")]  # fmt: skip
     if rec.insole_combined is not None:

@@ -182,7 +182,11 @@ def test_absurd_values_name_the_probable_unit(tmp_path) -> None:
         walk = np.linspace(0.0, 1.8, len(d["smpl_params"]["trans"]))
         d["smpl_params"]["trans"] = (d["smpl_params"]["trans"] + walk[:, None]) * 1000.0
 
-    cases = [(acc, r"acc magnitude .* m/s\^2 .*mm/s\^2.*max_acc_mps2"),
+    def spike(d):
+        d["imu"]["L_Foot"]["acc_local_raw"][7] = 1e30
+
+    cases = [(acc, r"median acc magnitude .* m/s\^2 .*mm/s\^2.*max_typical_acc_mps2"),
+             (spike, r"acc magnitude 1.73e\+30 m/s\^2 .*corrupt samples.*max_acc_mps2"),
              (force, r"insole force .* body weights .*newtons.*max_force_bw"),
              (trans, r"trans: spans .* m \(millimetres\?\).*max_position_m")]  # fmt: skip
     for k, (edit, match) in enumerate(cases):
@@ -194,8 +198,12 @@ def test_absurd_values_name_the_probable_unit(tmp_path) -> None:
     with pytest.raises(RecordingError, match="grams or Pa"):
         load_recording(path)
     # A genuine outlier take loads with the limit raised.
-    rec = load_recording(tmp_path / "absurd0.npz", limits=InputLimits(max_acc_mps2=float("inf")))
-    assert rec.n_frames == 120
+    lifted = InputLimits(max_acc_mps2=float("inf"), max_typical_acc_mps2=float("inf"))
+    assert load_recording(tmp_path / "absurd0.npz", limits=lifted).n_frames == 120
+    # A glitch of motion capture differentiated twice (700 g at one sample) is no unit error.
+    glitch = _scaled(tmp_path, "glitch.npz", lambda d: d["imu"]["L_Foot"]["acc_local_raw"].
+                     __setitem__(7, [7000.0, 0.0, 0.0]))  # fmt: skip
+    assert load_recording(glitch).n_frames == 120
 
 
 def test_recording_duration_and_rate_limits(tmp_path, monkeypatch) -> None:

@@ -72,8 +72,12 @@ class InputLimits:
             unpickling, and most containers walked in one file.
         max_depth: Deepest nesting of containers (pickle) or JSON values.
         max_int_digits: Most digits of an integer in JSON metadata.
-        max_acc_mps2: Largest accepted acceleration magnitude, m/s^2 (200 g).
-        max_vel_mps: Largest accepted linear velocity, m/s.
+        max_acc_mps2: Largest accepted acceleration magnitude of any sample, m/s^2 (10,000 g:
+            beyond any sensor; motion capture glitches differentiated twice reach ~1,000 g).
+        max_typical_acc_mps2: Largest accepted median acceleration magnitude of a stream, m/s^2
+            (20 g: no human motion is typically above it; mm/s^2 values are ~1,000x).
+        max_vel_mps: Largest accepted linear velocity of any sample, m/s.
+        max_typical_vel_mps: Largest accepted median speed of a stream, m/s (mm/s: ~1,000x).
         max_force_bw: Largest accepted insole force, body weights.
         max_position_m: Largest accepted position magnitude or span of a trajectory, metres.
     """
@@ -90,8 +94,10 @@ class InputLimits:
     max_elements: float = 10_000_000
     max_depth: float = 64
     max_int_digits: float = 100
-    max_acc_mps2: float = 2000.0
-    max_vel_mps: float = 100.0
+    max_acc_mps2: float = 1e5
+    max_typical_acc_mps2: float = 200.0
+    max_vel_mps: float = 1000.0
+    max_typical_vel_mps: float = 50.0
     max_force_bw: float = 30.0
     max_position_m: float = 1000.0
 
