@@ -21,6 +21,8 @@ import numpy as np
 import quadprog
 
 import grip.baselines.pip_physics as pip
+from grip.baselines.pip_config import SOLVERS, PipConfig
+from grip.baselines.pip_dynamics import backward_velocity
 from grip.cli.paths import default_motions_dir
 from grip.core.metrics import contacts_from_motion
 from grip.motion.catalog import load_clip
@@ -54,7 +56,7 @@ def main() -> None:
                     help="motion clip (default: CMU 07_05, a slow walk)")  # fmt: skip
     ap.add_argument("--frames", type=int, default=2000, help="frames to optimise (the clip "
                     "is replayed from its first frame as often as needed)")  # fmt: skip
-    ap.add_argument("--solver", choices=pip.SOLVERS, default="quadprog")
+    ap.add_argument("--solver", choices=SOLVERS, default="quadprog")
     args = ap.parse_args()
     if not args.clip:
         ap.error("no shared motion data found: pass --clip")
@@ -65,9 +67,9 @@ def main() -> None:
     body = motion.body_model()
     _, pos = motion.fk(body)
     local = motion.local_rot()
-    vel = pip.backward_velocity(pos, motion.fps)
+    vel = backward_velocity(pos, motion.fps)
     contact = contacts_from_motion(pos[:, list(pip.sk.FOOT_JOINTS)], motion.fps).astype(float)
-    phys = pip.PipPhysics(body, pip.PipConfig(fps=motion.fps, solver=args.solver))
+    phys = pip.PipPhysics(body, PipConfig(fps=motion.fps, solver=args.solver))
 
     problems: list = []
     solver_s = [0.0]

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 import grip.baselines.pip_physics as pip
+from grip.baselines.pip_config import PipConfig, PipInputError
+from grip.baselines.pip_dynamics import backward_velocity, foot_joint_height
 from grip.core import metrics as mt
 from grip.core.body import GRAVITY, BodyParams, build_body
 from grip.core.fk import forward_kinematics, integrate_root, rest_pose, sole_points
@@ -36,7 +38,7 @@ def walk(body, cmu_walk):
     return motion.local_rot(), pos, rot, motion.root_pos, motion.fps
 
 
-def _standing(body, cfg: pip.PipConfig | None = None, lift_m: float = 0.0):
+def _standing(body, cfg: PipConfig | None = None, lift_m: float = 0.0):
     """Optimiser reset to the rest pose standing on the floor (lifted by ``lift_m``)."""
     phys = pip.PipPhysics(body, cfg)
     rot, root = rest_pose(1)
@@ -51,26 +53,26 @@ def _sequence(rot, root, n):
 
 # ------------------------------------------------------------------ pure parts
 def test_gains_at_60_hz_are_pips() -> None:
-    cfg = pip.PipConfig.at_rate(60.0)
+    cfg = PipConfig.at_rate(60.0)
     assert (cfg.kp_theta, cfg.kd_theta, cfg.kp_r, cfg.kd_r) == pytest.approx((2400, 60, 3600, 60))
-    default = pip.PipConfig()
-    at100 = pip.PipConfig.at_rate(100.0)
+    default = PipConfig()
+    at100 = PipConfig.at_rate(100.0)
     assert at100.kp_r == default.kp_r and at100.kd_theta == default.kd_theta
     assert at100.kp_theta == pytest.approx(default.kp_theta, abs=0.5)
 
 
 def test_joint_floor_is_the_foot_joint_height_at_rest(body) -> None:
     # the rest pose stands on the floor (soles at height 0)
-    assert pip.foot_joint_height(body) == pytest.approx(body.rest_joint_pos[10, 1], abs=1e-12)
-    assert 0.01 < pip.foot_joint_height(body) < 0.05
+    assert foot_joint_height(body) == pytest.approx(body.rest_joint_pos[10, 1], abs=1e-12)
+    assert 0.01 < foot_joint_height(body) < 0.05
 
 
 def test_backward_velocity() -> None:
     p = np.cumsum(np.ones((4, 2, 3)), axis=0) * 0.01  # 1 m/s along every axis at 100 Hz
-    v = pip.backward_velocity(p, 100.0)
+    v = backward_velocity(p, 100.0)
     np.testing.assert_allclose(v, 1.0, atol=1e-12)
     with pytest.raises(ValueError, match="joint_pos"):
-        pip.backward_velocity(np.zeros((4, 3)), 100.0)
+        backward_velocity(np.zeros((4, 3)), 100.0)
 
 
 # ------------------------------------------------------------------ physics
@@ -143,7 +145,7 @@ def test_walk_with_perfect_input_tracks_the_ground_truth(body, walk) -> None:
     local, pos, rot, root, fps = walk
     contact = mt.contacts_from_motion(pos[:, FEET], fps)
     phys = pip.PipPhysics(body)
-    rec = phys.reconstruct(local, pip.backward_velocity(pos, fps), contact.astype(float), root[0])
+    rec = phys.reconstruct(local, backward_velocity(pos, fps), contact.astype(float), root[0])
     assert rec.notes["qp_failures"] == 0
     np.testing.assert_allclose(rec.joint_pos[0], pos[0], atol=1e-9)  # frame 0: the input pose
     assert mt.mpjpe(rec.joint_pos, pos) < 50.0  # mm
@@ -159,7 +161,7 @@ def test_physics_reduces_sliding_and_penetration_of_a_noisy_estimate(body, walk)
     rng = np.random.default_rng(0)
     jitter = rng.normal(scale=np.radians(3), size=(*local.shape[:2], 3))  # 3 deg per joint
     noisy_local = local @ axis_angle_to_matrix(jitter)
-    vel = pip.backward_velocity(pos, fps) + rng.normal(scale=0.1, size=pos.shape)
+    vel = backward_velocity(pos, fps) + rng.normal(scale=0.1, size=pos.shape)
     vel[..., 2] -= 0.05  # a velocity bias: the integrated estimate sinks into the floor
     kin_rot, kin_pos = forward_kinematics(noisy_local, integrate_root(root[0], vel[:, 0], fps),
                                           body.offsets)  # fmt: skip
@@ -176,7 +178,7 @@ def test_physics_reduces_sliding_and_penetration_of_a_noisy_estimate(body, walk)
 # ------------------------------------------------------------------ flags
 @pytest.mark.parametrize("cone", ["inner", "outer"])
 def test_friction_pyramid(body, cone: str) -> None:
-    phys, rot, _ = _standing(body, pip.PipConfig(friction=cone))
+    phys, rot, _ = _standing(body, PipConfig(friction=cone))
     vel = np.zeros((24, 3))
     vel[:, 0] = 1.0  # a sideways demand far beyond what friction can give
     fr = phys.step(rot, vel, np.ones(2))
@@ -192,7 +194,7 @@ def test_friction_pyramid(body, cone: str) -> None:
 
 @pytest.mark.parametrize("bounds", ["code", "paper"])
 def test_foot_velocity_bounds(body, bounds: str) -> None:
-    phys, rot, _ = _standing(body, pip.PipConfig(velocity_bounds=bounds))
+    phys, rot, _ = _standing(body, PipConfig(velocity_bounds=bounds))
     foot0 = phys.data.xpos[phys.index.body_ids[FEET]].copy()
     vel = np.zeros((24, 3))
     vel[:, 0] = 0.3  # the whole body moves sideways at 0.3 m/s
@@ -221,7 +223,7 @@ def test_explicit_integration_moves_with_the_old_velocity(body) -> None:
     vel[:, 0] = 0.3
     q = {}
     for integ in ("semi_implicit", "explicit"):
-        phys, rot, _ = _standing(body, pip.PipConfig(integrator=integ))
+        phys, rot, _ = _standing(body, PipConfig(integrator=integ))
         q0 = phys.qpos
         fr = phys.step(rot, vel, np.full(2, 0.6))
         assert np.abs(fr.qvel).max() > 0.05
@@ -235,7 +237,7 @@ def test_position_pd_on_all_joints_drives_the_feet(body) -> None:
     vel[FEET, 0] = 0.5  # only the feet are asked to move
     moved = {}
     for joints in ("code", "all"):
-        phys, rot, _ = _standing(body, pip.PipConfig(pd_joints=joints), lift_m=2.0)
+        phys, rot, _ = _standing(body, PipConfig(pd_joints=joints), lift_m=2.0)
         foot0 = phys.data.xpos[phys.index.body_ids[FEET]].copy()
         fr = phys.step(rot, vel, np.zeros(2))
         moved[joints] = (fr.joint_pos[FEET, 0] - foot0[:, 0]) * phys.cfg.fps
@@ -246,7 +248,7 @@ def test_position_pd_on_all_joints_drives_the_feet(body) -> None:
 def test_weight_form_changes_the_residual(body) -> None:
     res = {}
     for form in ("code", "paper"):
-        phys, rot, root = _standing(body, pip.PipConfig(weight_form=form))
+        phys, rot, root = _standing(body, PipConfig(weight_form=form))
         res[form] = phys.reconstruct(*_sequence(rot, root, 30)).notes["residual_force_mean_n"]
     # code: 0.01 |r|^2 vs 0.0025 |lambda_c|^2; paper: 0.1 |r|^2 vs 0.05 |lambda_c|^2, so the
     # paper form leans more on the residual
@@ -255,7 +257,7 @@ def test_weight_form_changes_the_residual(body) -> None:
 
 @pytest.mark.parametrize(("rule", "expected"), [("code", False), ("paper", True)])
 def test_contact_rule(body, rule: str, expected: bool) -> None:
-    phys, rot, _ = _standing(body, pip.PipConfig(contact_rule=rule), lift_m=0.004)
+    phys, rot, _ = _standing(body, PipConfig(contact_rule=rule), lift_m=0.004)
     fr = phys.step(rot, np.zeros((24, 3)), np.full(2, 0.2))  # 4 mm up, unlikely contact
     assert (fr.contacts == expected).all()
     assert (fr.grf[:, 2] > 100.0).all() == expected
@@ -283,7 +285,7 @@ def test_failed_qp_keeps_going_and_is_counted(body, monkeypatch) -> None:
 @pytest.mark.parametrize("mode", ["stop", "coast"])
 def test_a_failed_frame_stops_or_coasts(body, monkeypatch, mode: str) -> None:
     monkeypatch.setattr(pip, "_solve_qp", lambda *a: None)
-    cfg = pip.PipConfig(on_failure=mode, fallback_solver=None)
+    cfg = PipConfig(on_failure=mode, fallback_solver=None)
     phys, rot, root = _standing(body, cfg)
     rot_s, vel, prob, _ = _sequence(rot, root, 6)
     qvel0 = np.zeros(phys.nv)
@@ -310,7 +312,7 @@ def test_retry_with_the_fallback_solver(body, monkeypatch) -> None:
 
 
 def test_solution_norm_limit_counts_as_failure(body) -> None:
-    phys, rot, root = _standing(body, pip.PipConfig(max_solution_norm=1.0, fallback_solver=None))
+    phys, rot, root = _standing(body, PipConfig(max_solution_norm=1.0, fallback_solver=None))
     rec = phys.reconstruct(*_sequence(rot, root, 5))
     assert rec.notes["qp_failures"] == 5 and rec.notes["qp_retries"] == 0
 
@@ -319,23 +321,23 @@ def test_solution_norm_limit_counts_as_failure(body) -> None:
 def test_bad_inputs_are_refused_with_clear_errors(body) -> None:
     phys, rot, root = _standing(body)
     good = _sequence(rot, root, 6)
-    with pytest.raises(pip.PipInputError, match=r"local_rot has shape \(23, 3, 3\)"):
+    with pytest.raises(PipInputError, match=r"local_rot has shape \(23, 3, 3\)"):
         phys.step(rot[1:], np.zeros((24, 3)), np.ones(2))
-    with pytest.raises(pip.PipInputError, match=r"joint_vel has shape"):
+    with pytest.raises(PipInputError, match=r"joint_vel has shape"):
         phys.step(rot, np.zeros((24, 2)), np.ones(2))
-    with pytest.raises(pip.PipInputError, match=r"contact_prob must lie in \[0, 1\]"):
+    with pytest.raises(PipInputError, match=r"contact_prob must lie in \[0, 1\]"):
         phys.step(rot, np.zeros((24, 3)), np.array([0.5, 1.2]))
     vel = good[1].copy()
     vel[4, 7, 1] = np.nan
-    with pytest.raises(pip.PipInputError, match=r"joint_vel has non-finite values .*index 4\)"):
+    with pytest.raises(PipInputError, match=r"joint_vel has non-finite values .*index 4\)"):
         phys.reconstruct(good[0], vel, good[2], root)
-    with pytest.raises(pip.PipInputError, match=r"contact_prob has shape \(5, 2\)"):
+    with pytest.raises(PipInputError, match=r"contact_prob has shape \(5, 2\)"):
         phys.reconstruct(good[0], good[1], good[2][:5], root)
-    with pytest.raises(pip.PipInputError, match=r"local_rot must have shape \(T, 24, 3, 3\)"):
+    with pytest.raises(PipInputError, match=r"local_rot must have shape \(T, 24, 3, 3\)"):
         phys.reconstruct(rot, good[1], good[2], root)
-    with pytest.raises(pip.PipInputError, match="root_pos0 has non-finite"):
+    with pytest.raises(PipInputError, match="root_pos0 has non-finite"):
         phys.reconstruct(*good[:3], np.array([0.0, np.inf, 1.0]))
-    with pytest.raises(pip.PipInputError, match="quaternion"):
+    with pytest.raises(PipInputError, match="quaternion"):
         phys.reset(np.zeros(76))
 
 
@@ -352,7 +354,7 @@ def test_bad_inputs_are_refused_with_clear_errors(body) -> None:
 )
 def test_bad_config_is_refused(kw: dict, msg: str) -> None:
     with pytest.raises(ValueError, match=msg):
-        pip.PipConfig(**kw)
+        PipConfig(**kw)
 
 
 # ------------------------------------------------------------------ output

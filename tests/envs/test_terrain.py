@@ -9,18 +9,20 @@ import numpy as np
 import pytest
 import trimesh
 
+from envs.heightfield import (
+    HeightField,
+    add_heightfield,
+    heightmap_grid,
+    rasterize,
+    sample_heightmap,
+)
 from envs.terrain import (
     SCENE_NAMES,
-    HeightField,
     Scene,
-    add_heightfield,
     boxes_scene,
     chair_scene,
     flat_scene,
-    heightmap_grid,
     make_scene,
-    rasterize,
-    sample_heightmap,
     scene_from_objects,
     stairs_scene,
 )

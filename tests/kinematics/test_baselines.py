@@ -12,25 +12,21 @@ import torch
 from grip.core import skeleton as sk
 from grip.core.metrics import contacts_from_motion
 from grip.core.rotations import rot_z, sixd_to_matrix
-from grip.kinematics.baselines import (
-    BaselineEstimator,
-    BaselineTrainer,
-    PipNets,
-    TransPoseNets,
-    add_baseline_targets,
+from grip.kinematics.baseline_config import (
     config_from_json,
-    cumulative_loss,
     default_run_config,
-    export_baseline,
     feature_config,
     input_columns,
-    insole_contact_prob,
     n_inputs,
     replace_train,
 )
+from grip.kinematics.baseline_nets import PipNets, TransPoseNets, cumulative_loss
+from grip.kinematics.baseline_train import BaselineTrainer, add_baseline_targets
+from grip.kinematics.baselines import BaselineEstimator, export_baseline, insole_contact_prob
 from grip.kinematics.dataset import sequence_arrays
 from grip.kinematics.features import input_features, targets
-from grip.kinematics.train import load_checkpoint, rotate_batch
+from grip.nn.symmetry import rotate_batch
+from grip.nn.weights import load_checkpoint
 from prism_tools.synthetic import make_recording
 
 

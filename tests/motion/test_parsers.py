@@ -10,7 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from grip.motion.amass import SMPL_JOINT_NAMES, SMPL_PELVIS_M, SMPL_REST_OFFSETS, load_amass_npz
-from grip.motion.asf_amc import load_amc, load_asf
+from grip.motion.asf import load_asf
+from grip.motion.asf_amc import load_amc
 from grip.motion.bvh import load_bvh
 from grip.motion.catalog import clip_ref, find_clips, load_clip
 from grip.motion.deepmimic import (

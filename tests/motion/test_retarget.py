@@ -31,13 +31,9 @@ from grip.motion.joint_maps import (
 )
 from grip.motion.motion import Motion
 from grip.motion.quality import foot_metrics
-from grip.motion.retarget import (
-    RetargetConfig,
-    fit_floor_tilt,
-    leg_ik,
-    retarget,
-    world_from_source,
-)
+from grip.motion.retarget import RetargetConfig, retarget
+from grip.motion.retarget_bones import world_from_source
+from grip.motion.retarget_feet import fit_floor_tilt, leg_ik
 from grip.motion.source import MotionImportError, SourceMotion
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "motions"

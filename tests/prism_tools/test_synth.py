@@ -35,8 +35,8 @@ from prism_tools.synth import (
     synthesize_insoles,
     synthesize_sensors,
 )
+from prism_tools.synth.force_distribution import _nnls_distribute
 from prism_tools.synth.imu import resolve_acc_smoothing_frames, second_difference
-from prism_tools.synth.insole import _nnls_distribute
 from prism_tools.synth.noise import apply_drops, corrupt_imu, corrupt_insole_cells, drop_mask
 
 FPS = 100.0
