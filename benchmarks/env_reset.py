@@ -27,7 +27,7 @@ from grip.core.reference import ReferenceSet
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reference", default=str(SAMPLE_REFERENCE),
-                    help="reference set (grip train-policy writes RUN/reference_train.npz)")
+                    help="reference set (grip policy train writes RUN/reference_train.npz)")
     ap.add_argument("--resets", type=int, default=300)
     args = ap.parse_args()
     ref = ReferenceSet.load(args.reference)

@@ -1,7 +1,7 @@
 """Where KinematicsNet's root-relative error sits within one motion category: per joint group,
 per joint, and on frames with the pelvis lowered (seated, crouched) against upright ones.
 
-The segments are the ones ``grip eval-kin`` scores (500 frames, each initialised from its first
+The segments are the ones ``grip kin eval`` scores (500 frames, each initialised from its first
 frame's ground truth), so the category's overall number equals that table's PEL-MPJPE.
 "Lowered" frames have the true pelvis more than ``--lowered`` metres below the highest pelvis
 of the category's segments.
@@ -32,7 +32,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
 
 def joint_errors(est: KinematicsEstimator, recs: list) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame, per-joint root-relative errors ``(F, 24)`` (m) and true pelvis heights
-    ``(F,)`` (m) over the 500-frame segments of ``recs`` (those of ``grip eval-kin``)."""
+    ``(F,)`` (m) over the 500-frame segments of ``recs`` (those of ``grip kin eval``)."""
     errs, heights = [], []
     for rec, out in predict_segments(est, recs):
         gt = targets(rec)

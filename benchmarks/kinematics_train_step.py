@@ -37,8 +37,9 @@ def main() -> None:
     torch.set_flush_denormal(args.data is None)
 
     from grip.cli.paths import load_run_config
+    from grip.kinematics.config import KinematicsRunConfig
     from grip.kinematics.dataset import load_split_sequences, sequence_arrays
-    from grip.kinematics.train import KinematicsRunConfig, Trainer
+    from grip.kinematics.train import Trainer
     from prism_tools.synthetic import make_recording
 
     sets = ["train.bf16=true"] if args.bf16 else []

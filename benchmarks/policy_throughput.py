@@ -1,8 +1,8 @@
 """DynamicsNet training throughput as a ratio to the single-environment benchmark.
 
 In one run: the bare environment's step rate (one GripTrackingEnv, zero actions, as
-``grip bench-env``), then short PPO + AMP trainings (rollout collection, discriminator updates
-and PPO updates all included) with each vector-env layout. Prints env steps/s (simulated
+``benchmarks/env_steps.py``), then short PPO + AMP trainings (rollout collection, discriminator
+updates and PPO updates all included) with each vector-env layout. Prints env steps/s (simulated
 frames per second) of each and its ratio to the bare env; with an action repeat k the policy
 decides every k frames, so a training step covers k env steps.
 
@@ -41,6 +41,7 @@ def bare_env_rate(steps: int) -> float:
 
 
 def training_rate(cfg, rollouts: int) -> float:
+    from envs.factory import make_tracking_env
     from envs.tracking_env import SAMPLE_REFERENCE
     from policies.train import PolicyTrainer
 
@@ -51,7 +52,7 @@ def training_rate(cfg, rollouts: int) -> float:
     )  # fmt: skip
     run = Path(tempfile.mkdtemp(prefix="grip_tp_"))
     try:
-        tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE)
+        tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_tracking_env)
         t = time.perf_counter()
         tr.train()
         return tr.total_done() * cfg.env.action_repeat / (time.perf_counter() - t)

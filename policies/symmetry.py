@@ -10,7 +10,7 @@ rotations to ``M R B`` with ``B = diag(-1, 1, 1)`` the body's own left axis (so 
 ``(c0, c1) -> (-M c0, M c1)``), rotation differences ``D = E S^T`` to ``M D M`` (``(M c0, -M
 c1)``); joints swap with their partners (:data:`grip.core.skeleton.MIRROR`), the height map
 flips about the forward axis, the sensor features mirror as KinematicsNet's do
-(:func:`grip.kinematics.train.mirror_features`). A hinge action keeps its sign about x and
+(:func:`grip.nn.symmetry.mirror_features`). A hinge action keeps its sign about x and
 flips about y and z, and moves to the partner joint (the ranges of the right side mirror the
 left's, so the same rule holds for relative and absolute actions).
 
@@ -21,13 +21,19 @@ trained on mirrored references (``mirror_references``) is asked nothing new.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
 
 from envs import observations as O
 from envs.config import TrackingEnvConfig
-from envs.terrain import heightmap_grid
+from envs.heightfield import heightmap_grid
 from grip.core import skeleton as sk
+from grip.nn.symmetry import mirror_features
+
+if TYPE_CHECKING:
+    from policies.controller import Controller
 
 _MH = np.array([1.0, -1.0, 1.0])  # y -> -y in the heading frame
 _PERM = np.asarray(sk.MIRROR)
@@ -66,9 +72,6 @@ class ObservationMirror:
     """
 
     def __init__(self, env_cfg: TrackingEnvConfig, sites: tuple[str, ...], insoles: bool) -> None:
-        from grip.kinematics.train import mirror_features  # (KinematicsNet's rule for the inputs)
-
-        self._mirror_features = mirror_features
         self.variant = env_cfg.kinematic_obs
         self.sites, self.insoles = tuple(sites), bool(insoles)
         mirror_features(torch.zeros(1, 1, 15 * len(sites) + 10 * insoles), self.sites,
@@ -110,7 +113,7 @@ class ObservationMirror:
         if "sensor" in obs:
             x = np.asarray(obs["sensor"], np.float32)
             t = torch.from_numpy(np.ascontiguousarray(x.reshape(1, -1, x.shape[-1])))
-            m = self._mirror_features(t, self.sites, self.insoles).numpy()
+            m = mirror_features(t, self.sites, self.insoles).numpy()
             out["sensor"] = m.reshape(x.shape).astype(np.float32)
         return out
 
@@ -128,26 +131,30 @@ class MirrorAveragedPolicy:
     action on the mirrored observation: left-right symmetric by construction, and an ensemble
     of two for one network (the controller's counterpart of KinematicsNet's ``--tta mirror``).
 
-    Same interface as :class:`policies.runner.PolicyRunner`; the fall detector, settings and
-    notes are the wrapped policy's.
+    A :class:`policies.controller.Controller`; the fall detector, settings and notes are the
+    wrapped policy's.
     """
 
-    def __init__(self, policy, sites: tuple[str, ...], insoles: bool) -> None:
+    def __init__(self, policy: Controller, sites: tuple[str, ...], insoles: bool) -> None:
         self.policy = policy
         self.mirror = ObservationMirror(policy.env_cfg, sites, insoles)
         self.obs_keys = policy.obs_keys
         self.env_cfg = policy.env_cfg
-        self.amp_window = policy.amp_window
+        self.amp_window = policy.env_cfg.amp_window
         self.disc = policy.disc
         self.info = dict(policy.info, mirror_averaged=True)
 
     def use_action_noise(self, scale: float, seed: int = 0) -> None:
+        """The wrapped policy's action noise (both of its actions sample it)."""
         self.policy.use_action_noise(scale, seed)
 
     def act(self, obs: dict) -> np.ndarray:
+        """The mean of the action on ``obs`` and the mirror image of the action on the mirrored
+        observation."""
         a = self.policy.act(obs)
         b = self.mirror.action(self.policy.act(self.mirror.observation(obs)))
         return 0.5 * (a + b)
 
     def fall_probability(self, amp_obs: np.ndarray) -> np.ndarray:
+        """The wrapped policy's fall detector."""
         return self.policy.fall_probability(amp_obs)

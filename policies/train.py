@@ -14,12 +14,16 @@ normaliser and discriminator); the replay buffer of policy samples is not saved 
 within a few rollouts). ``model.zip`` is written by stable-baselines3 but never loaded by it:
 a resumed run builds its PPO from the config and takes the zip's state dicts and step counters
 (:mod:`policies.checkpoint`), so nothing pickled in the folder runs.
+
+Like SB3's ``PPO(policy, env)``, the trainer receives its environment: a constructor
+(:class:`EnvMaker`) that the edge passes in (``grip train-policy`` passes
+:func:`envs.factory.make_tracking_env`); no tracking-env module is imported here.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
+import functools
 import json
 import os
 import shutil
@@ -27,6 +31,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -47,7 +52,7 @@ from envs import observations as O
 from envs.config import TrackingEnvConfig
 from grip.core import skeleton as sk
 from grip.core.limits import read_json_file
-from grip.core.reference import ReferenceSet
+from grip.core.reference_sets import load_reference, select_clips
 from policies.amp import AmpTrainer, RealSampler
 from policies.checkpoint import read_ppo_zip, read_vecnorm
 from policies.config import PolicyRunConfig, StageConfig
@@ -61,54 +66,19 @@ JHOR_PRIOR_STD_M = 0.3
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
 
 
-def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
-    """The clips whose category matches one of the glob ``patterns`` (all when empty)."""
-    if not patterns:
-        return ref
-    clips = [c for c in ref.clips if any(fnmatch.fnmatch(c.category, p) for p in patterns)]
-    if not clips:
-        cats = sorted({c.category for c in ref.clips})
-        raise ValueError(f"{ref.source}: no clip matches categories {list(patterns)} "
-                         f"(categories present: {cats})")  # fmt: skip
-    return ReferenceSet(clips, ref.sensor_sites, ref.insoles, ref.source)
+class EnvMaker(Protocol):
+    """The environment constructor a trainer receives from the edge (SB3's ``PPO(policy, env)``
+    receives its env the same way).
 
+    ``make_env(env_cfg, categories, seed, push)`` returns one gymnasium environment, reset with
+    ``seed``, that tracks the clips of ``categories`` (category globs; all when empty) and is
+    pushed ``(force N, mean wait s, duration s)`` or not (``None``). The tracking env's is
+    :func:`envs.factory.make_tracking_env`. It must pickle, for subprocess vector envs (a
+    module-level function does).
+    """
 
-_REFERENCE: dict[str, ReferenceSet] = {}
-
-
-def load_reference(path: str) -> ReferenceSet:
-    """The reference set at ``path``, loaded once per process (the trainer's real samples and
-    every in-process environment share one copy)."""
-    ref = _REFERENCE.get(path)
-    if ref is None:
-        _REFERENCE.clear()
-        ref = _REFERENCE[path] = ReferenceSet.load(path)
-    return ref
-
-
-class EnvFactory:
-    """Picklable constructor of one training environment (for subprocess vector envs)."""
-
-    def __init__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int,
-                 push: tuple[float, float, float] | None = None) -> None:  # fmt: skip
-        self.env_cfg, self.categories, self.seed = env_cfg, categories, seed
-        self.push = push  # RandomPushes' (force N, mean wait s, duration s); None = no pushes
-
-    def __call__(self):
-        from envs.tracking_env import GripTrackingEnv
-
-        ref = select_clips(load_reference(self.env_cfg.reference), self.categories)
-        env = GripTrackingEnv(self.env_cfg, ref)
-        if self.push is not None:
-            from envs.wrappers import RandomPushes
-
-            env = RandomPushes(env, *self.push, seed=self.seed + 7)
-        if self.env_cfg.action_repeat > 1:
-            from envs.wrappers import ActionRepeat
-
-            env = ActionRepeat(env, self.env_cfg.action_repeat)
-        env.reset(seed=self.seed)
-        return env
+    def __call__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int,
+                 push: tuple[float, float, float] | None) -> Any: ...  # fmt: skip
 
 
 class AmpReward(VecEnvWrapper):
@@ -138,30 +108,33 @@ class AmpReward(VecEnvWrapper):
         return x
 
 
-def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int) -> VecEnv:
+def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int,
+                 make_env: EnvMaker) -> VecEnv:  # fmt: skip
+    """The vector env of one training stage: ``cfg.ppo.n_envs`` environments from
+    ``make_env``, seeded ``seed``, ``seed + 1000``, ..."""
     env_cfg = cfg.env_config(stage, reference)
     push = None  # RandomPushes only with a positive force
     if cfg.push_force_n > 0:
         push = (cfg.push_force_n, cfg.push_every_s, cfg.push_duration_s)
-    fns = [EnvFactory(env_cfg, stage.categories, seed + 1000 * i, push)
+    fns = [functools.partial(make_env, env_cfg, stage.categories, seed + 1000 * i, push)
            for i in range(cfg.ppo.n_envs)]  # fmt: skip
     if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:
         return SubprocVecEnv(fns, start_method="forkserver")
     return DummyVecEnv(fns)
 
 
-def stage2_rollout_env(env_cfg: TrackingEnvConfig, reference: str, categories: tuple[str, ...],
-                       n_envs: int, seed: int, fall_height_m: float = 0.3,
-                       max_episode_frames: int = 1000,
+def stage2_rollout_env(make_env: EnvMaker, env_cfg: TrackingEnvConfig, reference: str,
+                       categories: tuple[str, ...], n_envs: int, seed: int,
+                       fall_height_m: float = 0.3, max_episode_frames: int = 1000,
                        push: tuple[float, float, float] | None = None) -> DummyVecEnv:  # fmt: skip
-    """In-process environments that play GRIP's stage-2 episodes with an exported policy's
-    settings (``env_cfg``, e.g. ``runner.env_cfg``): random starts on the clips of
-    ``categories``, no distance termination, a pelvis below ``fall_height_m`` ends an episode
-    (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
+    """In-process environments from ``make_env`` that play GRIP's stage-2 episodes with an
+    exported policy's settings (``env_cfg``, e.g. ``runner.env_cfg``): random starts on the
+    clips of ``categories``, no distance termination, a pelvis below ``fall_height_m`` ends an
+    episode (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
     cfg = dataclasses.replace(env_cfg, reference=str(reference), random_start=True,
                               clip_index=-1, termination_dist_m=0.0, fall_height_m=fall_height_m,
                               max_episode_frames=max_episode_frames)  # fmt: skip
-    return DummyVecEnv([EnvFactory(cfg, tuple(categories), seed + 1000 * i, push)
+    return DummyVecEnv([functools.partial(make_env, cfg, tuple(categories), seed + 1000 * i, push)
                         for i in range(n_envs)])  # fmt: skip
 
 
@@ -318,6 +291,8 @@ class PolicyTrainer:
         cfg: Settings.
         run_dir: Run folder (created or resumed).
         reference: Training reference set (``.npz``); copied into the run on first use.
+        make_env: The environment constructor (:class:`EnvMaker`; the edge passes
+            :func:`envs.factory.make_tracking_env`).
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
         init: An exported policy (``policy.pt``) to start from instead of random weights
             (:meth:`warm_start`); ignored when the run resumes from its own checkpoint.
@@ -331,12 +306,13 @@ class PolicyTrainer:
     """
 
     def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
-                 reference: str | os.PathLike, progress: Callable | None = None,
-                 init: str | os.PathLike | None = None,
+                 reference: str | os.PathLike, make_env: EnvMaker,
+                 progress: Callable | None = None, init: str | os.PathLike | None = None,
                  init_member: int = 0) -> None:  # fmt: skip
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.reference = str(reference)
+        self.make_env = make_env
         self.progress = progress
         self.init = init
         self._init_runner = None
@@ -414,7 +390,7 @@ class PolicyTrainer:
     def _build_env(self, stage: StageConfig) -> VecNormalize:
         p = self.cfg.ppo
         seed = self.cfg.seed + 7919 * self.stage_index + self.stage_done
-        base = make_vec_env(self.cfg, stage, self.reference, seed)
+        base = make_vec_env(self.cfg, stage, self.reference, seed, self.make_env)
         self.amp_wrapper = AmpReward(base, self.amp, self.cfg.env.reward.weights.amp)
         mon = VecMonitor(self.amp_wrapper)
         return VecNormalize(mon, norm_obs=True, norm_reward=p.normalize_reward,

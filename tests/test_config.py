@@ -1,7 +1,7 @@
 import pytest
 
 from grip.config import ConfigError, load_config
-from grip.kinematics.train import KinematicsRunConfig
+from grip.kinematics.config import KinematicsRunConfig
 
 
 def test_toml_and_overrides(tmp_path):

@@ -1,5 +1,6 @@
 """Helpers for resumable, parallel runs (stdlib only): settings that a resume must match,
-worker processes that end with their parent, and temporary files a killed run left behind.
+worker processes that end with their parent, temporary files a killed run left behind, and
+what every run folder records (:func:`git_hash`, :func:`history_wall_s`).
 
 ``grip data build`` and ``grip reconstruct`` both resume into an output folder. Each records the
 settings its outputs were made with and refuses to go on with other ones
@@ -15,6 +16,7 @@ import json
 import os
 import re
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -30,6 +32,22 @@ PARENT_POLL_S = 0.5
 _PR_SET_PDEATHSIG = 1
 #: Temporary files of :func:`grip.core.atomic.atomic_write`: ``.<name>.<8 random chars>.tmp``.
 _TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+def git_hash() -> str:
+    """The repository's commit (``"unknown"`` outside a git checkout), recorded by every run."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                             cwd=Path(__file__).resolve().parent, timeout=5)  # fmt: skip
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def history_wall_s(history: list[dict]) -> float:
+    """Seconds of training (epochs with their validation) over every sitting of a run, from its
+    history's last ``wall_s``; epochs of checkpoints written before it was recorded count as 0."""
+    return float(history[-1].get("wall_s", 0.0)) if history else 0.0
 
 
 class SettingsMismatch(ValueError):

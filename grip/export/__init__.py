@@ -19,115 +19,32 @@ Shared conventions
   motion. Pass the subject's :class:`~grip.core.body.BodyParams`; ``None`` means the default
   ``BodyParams()`` (1.70 m, 70 kg). The joint positions of the export then differ from
   ``recon.joint_pos`` where the reconstruction was made on another body:
-  :func:`fk_mismatch_m` measures by how much.
+  :func:`~grip.export.common.fk_mismatch_m` measures by how much.
 * **Axes.** The world is z up (MuJoCo, PRISM). BVH and glTF expect y up; both exports use the
-  body model's canonical frame (:data:`Y_UP_FROM_WORLD`): x = world -x, y = world z (up),
-  z = world y. It is a proper rotation (no mirroring), and a subject facing world +y faces +z,
-  glTF's "front". MP4 and PNG stay in the world frame.
+  body model's canonical frame (:data:`~grip.export.common.Y_UP_FROM_WORLD`): x = world -x,
+  y = world z (up), z = world y. It is a proper rotation (no mirroring), and a subject facing
+  world +y faces +z, glTF's "front". MP4 and PNG stay in the world frame.
 * **Files.** Every writer is atomic (:mod:`grip.core.atomic`: a failure never leaves a partial
-  file) and raises :class:`ExportError` naming the file.
+  file) and raises :class:`~grip.export.common.ExportError` naming the file.
 
-This module imports numpy and :mod:`grip.core`/:mod:`grip.kinematics.features` (numpy only).
+The shared pieces (export frame, posed body, ground-truth check, file writes) are
+:mod:`grip.export.common`; the format modules import it and never this ``__init__``, which
+imports them only inside :func:`export_reconstruction` (no import cycle). This module imports
+numpy-level code only: :mod:`grip.export.common` and :mod:`grip.kinematics.features`.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import IO
 
-import numpy as np
-
-from grip.core.atomic import atomic_write
-from grip.core.body import CANONICAL_TO_WORLD, BodyModel, BodyParams, build_body
-from grip.core.fk import forward_kinematics
+from grip.core.body import BodyParams
 from grip.core.reconstruction import Reconstruction
-from grip.kinematics.features import GroundTruth, ground_truth
+from grip.export.common import ExportError, check_ground_truth
+from grip.kinematics.features import ground_truth
 
-__all__ = [
-    "FORMATS",
-    "Y_UP_FROM_WORLD",
-    "ExportError",
-    "GroundTruth",
-    "body_model",
-    "check_ground_truth",
-    "export_reconstruction",
-    "fk_mismatch_m",
-    "ground_truth",
-    "posed_body",
-    "write_file",
-]
-
-Y_UP_FROM_WORLD: np.ndarray = CANONICAL_TO_WORLD.T.copy()
-"""``(3, 3)`` rotation from the z-up world to the y-up export frame (BVH, glTF):
-``v_export = Y_UP_FROM_WORLD @ v_world``. Equal to its own inverse."""
-
-
-class ExportError(ValueError):
-    """An export failed or its input is unusable; the message names the file and the problem."""
-
-
-def write_file(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) -> Path:
-    """Atomically write ``path`` with ``write(f)``; file-system errors become
-    :class:`ExportError` naming the file.
-
-    Returns:
-        The path written.
-    """
-    path = Path(path)
-    try:
-        atomic_write(path, write)
-    except OSError as e:
-        raise ExportError(f"{path}: cannot write ({e.strerror or e})") from e
-    return path
-
-
-def body_model(body: BodyParams | BodyModel | None) -> BodyModel:
-    """The body model to pose: built from ``body``, or the default ``BodyParams()``."""
-    if isinstance(body, BodyModel):
-        return body
-    if body is not None and not isinstance(body, BodyParams):
-        raise TypeError(f"body must be BodyParams, BodyModel or None, got {type(body).__name__}")
-    return build_body(body or BodyParams())
-
-
-def posed_body(
-    recon: Reconstruction, body: BodyParams | BodyModel | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """The body model in the reconstruction's pose (what every export shows).
-
-    Args:
-        recon: The reconstruction (its local rotations and pelvis trajectory are used).
-        body: Subject parameters (``None``: ``BodyParams()``).
-
-    Returns:
-        ``global_rot (T, 24, 3, 3)`` and ``joint_pos (T, 24, 3)``, world frame (z up), m.
-    """
-    bm = body_model(body)
-    return forward_kinematics(recon.local_rot, recon.root_pos, bm.offsets)
-
-
-def fk_mismatch_m(recon: Reconstruction, body: BodyParams | BodyModel | None = None) -> float:
-    """Largest distance between ``recon.joint_pos`` and the posed body's joints, m.
-
-    Zero (to rounding) when the reconstruction was made on this body; centimetres mean the
-    export's skeleton is not the one the method used (pass the subject's BodyParams).
-    """
-    _, pos = posed_body(recon, body)
-    return float(np.linalg.norm(pos - recon.joint_pos, axis=-1).max())
-
-
-def check_ground_truth(recon: Reconstruction, gt: GroundTruth) -> None:
-    """Raise :class:`ExportError` unless ``gt`` covers the same frames as ``recon``."""
-    if gt.n_frames != recon.n_frames:
-        raise ExportError(
-            f"ground truth {gt.name!r} has {gt.n_frames} frames but reconstruction "
-            f"{recon.name!r} has {recon.n_frames}: pass the recording (or segment) it was made from"
-        )
-    if not np.isclose(gt.fps, recon.fps):
-        raise ExportError(f"ground truth {gt.name!r} is at {gt.fps:g} Hz but reconstruction "
-                          f"{recon.name!r} is at {recon.fps:g} Hz")  # fmt: skip
+__all__ = ["FORMATS", "export_reconstruction"]
 
 
 FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")

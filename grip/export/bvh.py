@@ -8,7 +8,7 @@ File layout
 * **Units**: centimetres by default (``unit="cm"``, what most animation tools assume), or metres
   (``unit="m"``). BVH has no comment syntax, so the unit is not written into the file; the
   project's reader (:func:`grip.motion.bvh.load_bvh`) infers it from the skeleton's height.
-* **Axes**: y up, the body model's canonical frame (:data:`grip.export.Y_UP_FROM_WORLD`:
+* **Axes**: y up, the body model's canonical frame (:data:`grip.export.common.Y_UP_FROM_WORLD`:
   x = world -x, y = world z, z = world y; a proper rotation). The zero pose (every channel 0) is
   the body model's T-pose standing upright and facing +z.
 * **Channels**: the root has ``Xposition Yposition Zposition Yrotation Xrotation Zrotation``
@@ -38,7 +38,7 @@ from grip.core.body import BodyModel, BodyParams
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import hinges_from_local
 from grip.core.rotations import matrix_to_euler
-from grip.export import Y_UP_FROM_WORLD, body_model, write_file
+from grip.export.common import Y_UP_FROM_WORLD, body_model, write_file
 
 UNITS: dict[str, float] = {"cm": 100.0, "m": 1.0}
 """File units per metre."""

@@ -2,7 +2,7 @@
 
 The body is drawn from the body model's own shapes (:attr:`grip.core.body.BodyModel.geoms`:
 capsules, boxes and a head sphere, the same shapes MuJoCo collides with), posed with the
-reconstruction's rotations and pelvis trajectory (:func:`grip.export.posed_body`). Two files:
+reconstruction's rotations and pelvis trajectory (:func:`grip.export.common.posed_body`). Two files:
 
 * :func:`write_pose_glb`: one frame as a single mesh (node ``"body"``).
 * :func:`write_strobe_glb`: every Nth frame along the trajectory, one node per frame named
@@ -10,7 +10,7 @@ reconstruction's rotations and pelvis trajectory (:func:`grip.export.posed_body`
   a fall event red, plus a grey ``"floor"`` slab whose top is the floor plane.
 
 Vertices are written in world coordinates (node transforms are the identity) in glTF's y-up
-frame (:data:`grip.export.Y_UP_FROM_WORLD`), metres. Left-side segments are tinted blue and
+frame (:data:`grip.export.common.Y_UP_FROM_WORLD`), metres. Left-side segments are tinted blue and
 right-side ones red in the single-frame mesh. No glTF animation is written: the strobe scene is
 static (BVH and MP4 carry the motion).
 """
@@ -28,7 +28,7 @@ from grip.core import skeleton as sk
 from grip.core.body import BodyModel, BodyParams
 from grip.core.reconstruction import Reconstruction
 from grip.core.rotations import rotation_between
-from grip.export import Y_UP_FROM_WORLD, ExportError, body_model, posed_body, write_file
+from grip.export.common import Y_UP_FROM_WORLD, ExportError, body_model, posed_body, write_file
 
 _SIDE_RGBA = {
     "L": np.array([90, 140, 220, 255], dtype=np.uint8),

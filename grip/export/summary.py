@@ -3,9 +3,9 @@
 Panels: the pelvis trajectory from above (world x-y) and its height over time; the vertical
 ground reaction force of each foot against the insole force; the contact states of both feet
 (reconstruction and insoles); the per-joint position errors. Ground-truth curves, the insole
-force and the errors appear when a :class:`grip.export.GroundTruth` is given; fall events
-(``recon.falls``: first replaced frame to detection frame) are shaded red on every time axis and
-marked with a cross on the trajectory.
+force and the errors appear when a :class:`~grip.kinematics.features.GroundTruth` is given;
+fall events (``recon.falls``: first replaced frame to detection frame) are shaded red on every
+time axis and marked with a cross on the trajectory.
 
 Errors are computed with :mod:`grip.core.metrics` on the method's own joint positions
 (``recon.joint_pos``): MPJPE (world) and PEL-MPJPE (pelvis-relative), per joint and overall.
@@ -24,7 +24,8 @@ from matplotlib.figure import Figure
 from grip.core import metrics as M
 from grip.core import skeleton as sk
 from grip.core.reconstruction import Reconstruction
-from grip.export import ExportError, GroundTruth, check_ground_truth, write_file
+from grip.export.common import ExportError, check_ground_truth, write_file
+from grip.kinematics.features import GroundTruth
 
 _REC_COLOR = "tab:blue"
 _GT_COLOR = "black"

@@ -32,7 +32,8 @@ from grip.core.body import BodyModel, BodyParams
 from grip.core.mjcf import MjcfConfig
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import pose_vector
-from grip.export import ExportError, GroundTruth, body_model, check_ground_truth, write_file
+from grip.export.common import ExportError, body_model, check_ground_truth, write_file
+from grip.kinematics.features import GroundTruth
 from grip.sim.model import HumanoidIndex, load_model, write_pose_vector
 
 _GT_RGBA = np.array([0.2, 0.85, 0.3, 0.35], dtype=np.float32)

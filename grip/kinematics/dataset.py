@@ -1,7 +1,9 @@
 """Training data for KinematicsNet: a dataset folder's split -> arrays -> random windows.
 
 Features and targets of every sequence of a split are computed once (numpy) and kept in memory
-as float32; a typical dataset built from the shared clips (~125k frames) takes ~120 MB.
+as float32; a typical dataset built from the shared clips (~125k frames) takes ~120 MB. Windows
+may be drawn at other playback speeds (:func:`sample_windows`), their rates rescaled to match
+(:func:`time_warp_rates`).
 """
 
 from __future__ import annotations
@@ -181,7 +183,7 @@ def sample_windows(
             frames ``start + speeds[i] * k`` (``k < length``), every feature and target linearly
             interpolated between the two nearest frames. Only the sampling: scaling the rates
             (accelerations, velocities) to the new speed is the caller's
-            (:func:`grip.kinematics.train.time_warp_rates`). ``None``: whole frames, speed 1.
+            (:func:`time_warp_rates`). ``None``: whole frames, speed 1.
         weights: ``(len(seqs),)`` sampling weights of the sequences instead of their lengths
             (e.g. :func:`category_weights`).
 
@@ -232,3 +234,52 @@ def sample_windows(
     out = {k: np.stack(v) for k, v in ys.items()}
     out["offsets"] = np.stack(offs)
     return np.stack(xs), out
+
+
+def time_warp_rates(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray, n_sites: int,
+                    insoles: bool) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
+    """Rescale the rates of windows resampled at playback ``speeds`` (``sample_windows(...,
+    speeds=...)``) to what the sensors would read at that speed.
+
+    A motion played ``s`` times faster has accelerations ``s^2`` and angular and linear
+    velocities ``s`` times the original's at the same pose. So the IMUs' free accelerations
+    scale by ``s^2``, their angular velocities and the leaf/pelvis velocity targets by ``s``;
+    orientations, positions and rotations keep their values. The insoles' total vertical force
+    (body weights) is one plus the centre of mass's vertical acceleration over g, so its
+    deviation from 1 scales by ``s^2``, shared between the feet as recorded; the CoP keeps its
+    value and the contact flags are rounded back to 0/1. The force rule is an approximation
+    (it ignores how the stance phases themselves would change); the rest is exact up to the
+    interpolation and the recording's low-pass filter.
+
+    Args:
+        x: ``(B, T, F)`` raw (unnormalised) features: 15 per IMU site, then 10 insole values.
+        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets``.
+        speeds: ``(B,)`` playback speeds.
+
+    Raises:
+        ValueError: ``y`` has a target without a known rule.
+    """
+    known = ("lp", "fp", "fa", "lv", "offsets")
+    unknown = [k for k in y if k not in known]
+    if unknown:
+        raise ValueError(f"time_warp_rates: no rule for target(s) {unknown}")
+    s = np.asarray(speeds, dtype=np.float64)[:, None, None]
+    x = x.copy()
+    b, t, _ = x.shape
+    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
+    imu[..., 0:3] *= (s**2)[..., None].astype(x.dtype)
+    imu[..., 3:6] *= s[..., None].astype(x.dtype)
+    x[..., : 15 * n_sites] = imu.reshape(b, t, -1)
+    if insoles:
+        ins = x[..., 15 * n_sites : 15 * n_sites + 10].reshape(b, t, 2, 5)
+        force = ins[..., 0].astype(np.float64)
+        total = force.sum(-1, keepdims=True)
+        new_total = np.maximum(1.0 + s**2 * (total - 1.0), 0.0)
+        share = np.divide(force, total, out=np.zeros_like(force), where=total > 1e-3)
+        ins[..., 0] = np.where(total > 1e-3, share * new_total, force).astype(x.dtype)
+        ins[..., 3:5] = np.round(ins[..., 3:5])
+        x[..., 15 * n_sites : 15 * n_sites + 10] = ins.reshape(b, t, 10)
+    y = dict(y)
+    if "lv" in y:
+        y["lv"] = (y["lv"] * s).astype(y["lv"].dtype)
+    return x, y

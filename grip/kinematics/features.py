@@ -150,6 +150,140 @@ def sensor_frames(rec, cfg: FeatureConfig = FeatureConfig()) -> Iterator[SensorF
         yield SensorFrame(acc[t], ori[t], None if ins is None else ins[t])
 
 
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """What a recording's first frames tell the pipeline beyond its sensors: the pose the subject
+    stands in (the humanoid and KinematicsNet's LSTMs start from it) and the sensor-to-segment
+    alignment (:attr:`FeatureConfig.align_first_frame`).
+
+    Attributes:
+        local_rot: ``(2, 24, 3, 3)`` local joint rotations of the first two frames (row 0 = the
+            root's world rotation; frame 1 gives the start velocity).
+        root_pos: ``(2, 3)`` pelvis positions of the same frames, world, m.
+        imu_ori: ``(S, 3, 3)`` segment orientations of the sensor sites at frame 0 (NaN for a
+            site without one: not re-aligned), or ``None`` when alignment is off.
+    """
+
+    local_rot: np.ndarray
+    root_pos: np.ndarray
+    imu_ori: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SensorStream:
+    """A recording's sensors as the pipeline reads them (no ground truth), for the sites of one
+    :class:`FeatureConfig`.
+
+    Attributes (T frames at ``fps``):
+        name, category: Recording name and category.
+        fps: Frame rate, Hz.
+        body: The subject (height, mass).
+        objects: Scene meshes ``{name: (vertices (V, 3), faces (F, 3))}`` or ``None``.
+        acc: ``(T, S, 3)`` world-frame free accelerations of the sites (filtered or raw as
+            :attr:`FeatureConfig.use_filtered_acc`), m/s^2.
+        ori: ``(T, S, 3, 3)`` sensor orientations, sensor -> world.
+        insole: ``(T, 10)`` insole values (:func:`insole_features`) or ``None``.
+        calibration: The calibration pose and orientations.
+    """
+
+    name: str
+    category: str
+    fps: float
+    body: BodyParams
+    objects: dict | None
+    acc: np.ndarray
+    ori: np.ndarray
+    insole: np.ndarray | None
+    calibration: Calibration
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.acc.shape[0])
+
+    def frames(self) -> Iterator[SensorFrame]:
+        """The frames one at a time, as :class:`FeatureStream` takes them."""
+        ins = self.insole
+        for t in range(self.n_frames):
+            yield SensorFrame(self.acc[t], self.ori[t], None if ins is None else ins[t])
+
+
+def recording_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibration:
+    """The :class:`Calibration` of a recording: its ground-truth pose of frames 0 and 1
+    (``smpl_params``; frame 0 twice for a one-frame recording) and
+    :func:`calibration_orientations`."""
+    n = min(rec.n_frames, 2)
+    sp = rec.smpl_params
+    poses = np.asarray(sp.poses, dtype=np.float64)[:n].reshape(-1, sk.N_JOINTS, 3)
+    local = axis_angle_to_matrix(poses)
+    root = (np.asarray(sp.trans, dtype=np.float64)[:n]
+            + np.asarray(sp.root_offset, dtype=np.float64))  # fmt: skip
+    if n == 1:
+        local, root = np.repeat(local, 2, axis=0), np.repeat(root, 2, axis=0)
+    return Calibration(local, root, calibration_orientations(rec, cfg))
+
+
+def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig()) -> SensorStream:
+    """The :class:`SensorStream` of a PRISM-format recording (its ground truth is only read
+    for the calibration, :func:`recording_calibration`).
+
+    Raises:
+        KeyError: naming a missing site or foot.
+    """
+    for site in cfg.sites:
+        if site not in rec.imu:
+            raise KeyError(f"recording {rec.name}: no IMU at site {site!r} "
+                           f"(has {sorted(rec.imu)})")  # fmt: skip
+    key = "acc_world_filt" if cfg.use_filtered_acc else "acc_world_raw"
+    acc = np.stack([np.asarray(getattr(rec.imu[s], key), dtype=np.float64) for s in cfg.sites],
+                   axis=1)  # fmt: skip
+    ori = np.stack([np.asarray(rec.imu[s].ori_world, dtype=np.float64) for s in cfg.sites],
+                   axis=1)  # fmt: skip
+    objects = None
+    if rec.objects:
+        objects = {n: (np.asarray(o.vertices), np.asarray(o.faces)) for n, o in rec.objects.items()}
+    return SensorStream(str(rec.name), rec.category or "unknown", float(rec.fps),
+                        recording_body(rec), objects, acc, ori,
+                        insole_features(rec) if cfg.insoles else None,
+                        recording_calibration(rec, cfg))  # fmt: skip
+
+
+def stream_features(stream: SensorStream, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:
+    """``(T, F)`` float32 network inputs of a :class:`SensorStream`: :func:`input_features`
+    (the same values) without the recording."""
+    calib = stream.calibration.imu_ori
+    rots = []
+    for i in range(len(cfg.sites)):
+        r = stream.ori[:, i]
+        if cfg.align_first_frame and calib is not None and np.isfinite(calib[i]).all():
+            r = r @ (r[0].T @ calib[i])  # constant sensor-to-segment offset from the first frame
+        rots.append(r)
+    rot = np.stack(rots, axis=1)
+    t = rot.shape[0]
+    gyr = angular_velocity(rot, stream.fps)
+    feats = np.concatenate([stream.acc / cfg.acc_scale, gyr, rot.reshape(t, len(cfg.sites), 9)],
+                           axis=-1).reshape(t, -1)  # fmt: skip
+    if cfg.insoles:
+        feats = np.concatenate([feats, stream.insole], axis=-1)
+    if not np.all(np.isfinite(feats)):
+        bad = int(np.argwhere(~np.isfinite(feats))[0][0])
+        raise ValueError(f"recording {stream.name}: non-finite sensor values (first at frame "
+                         f"{bad})")  # fmt: skip
+    return feats.astype(np.float32)
+
+
+def first_state(calibration: Calibration, body: BodyParams) -> dict[str, np.ndarray]:
+    """KinematicsNet's first-frame states of the calibration pose (``{"lp", "fp", "fa", "lv"}``,
+    flat float32; the velocities zero, as at the start of a real recording): what
+    :meth:`grip.kinematics.inference.KinematicsEstimator.predict` starts its LSTMs from."""
+    g_rot, pos = forward_kinematics(calibration.local_rot, calibration.root_pos,
+                                    build_body(body).offsets)  # fmt: skip
+    rel = pos - pos[:, :1]
+    vel = np.gradient(pos[:, list(sk.VELOCITY_JOINTS)], axis=0)
+    out = {"lp": rel[0, list(sk.LEAF_JOINTS)], "fp": rel[0], "fa": matrix_to_6d(g_rot)[0],
+           "lv": vel[0] * 0.0}  # fmt: skip
+    return {k: v.reshape(-1).astype(np.float32) for k, v in out.items()}
+
+
 def calibration_orientations(rec, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray | None:
     """``(S, 3, 3)`` ground-truth sensor orientations at the recording's first frame (the
     calibration pose, :attr:`FeatureConfig.align_first_frame`), NaN for sites without

@@ -1,4 +1,9 @@
-"""KinematicsNet inference: offline (whole sequences, batched) and streaming (one frame)."""
+"""KinematicsNet inference: offline (whole sequences, batched) and streaming (one frame).
+
+Checkpoints load through :mod:`grip.nn.weights`, their settings through
+:mod:`grip.kinematics.config` and the test-time symmetries come from :mod:`grip.nn.symmetry`;
+inference never imports the trainer (:mod:`grip.kinematics.train`).
+"""
 
 from __future__ import annotations
 
@@ -12,20 +17,19 @@ import torch
 from grip.core.body import build_body
 from grip.core.fk import integrate_root, joints_from_global
 from grip.core.rotations import sixd_to_matrix
+from grip.kinematics.config import run_config_from_dict
 from grip.kinematics.dataset import TARGET_KEYS, Normalizer
 from grip.kinematics.features import TTA_MODES, input_features, recording_body, targets
 from grip.kinematics.model import KinematicsNet
-from grip.kinematics.train import (
-    load_checkpoint,
+from grip.nn.symmetry import (
     mirror_features,
     mirror_site_order,
     mirror_targets,
     rotate_features,
     rotate_targets,
-    run_config_from_dict,
-    unpack_weights,
     yaw_matrices,
 )
+from grip.nn.weights import load_checkpoint, unpack_weights
 
 
 @dataclass
@@ -232,6 +236,11 @@ class KinematicsEstimator:
     def stream(self, rec_first_frame):
         """A :class:`StreamingEstimator` initialised from a recording's first frame."""
         return StreamingEstimator(self, self._first([rec_first_frame]))
+
+    def stream_from(self, first: dict[str, np.ndarray]) -> StreamingEstimator:
+        """A :class:`StreamingEstimator` from first-frame states ``{stage: (dim,)}``
+        (:func:`grip.kinematics.features.first_state`: no recording needed)."""
+        return StreamingEstimator(self, {k: torch.from_numpy(v[None]) for k, v in first.items()})
 
 
 class StreamingEstimator:

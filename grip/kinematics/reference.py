@@ -120,7 +120,7 @@ def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>")
 
 
 MIRROR_SUFFIX = "~mirror"
-_M = np.array([-1.0, 1.0, 1.0])  # the reflection x -> -x (as kinematics.train.mirror_batch)
+_M = np.array([-1.0, 1.0, 1.0])  # the reflection x -> -x (as grip.nn.symmetry.mirror_batch)
 # per hinge: the angle about x keeps its sign under R -> M R M, those about y and z flip
 _HINGE_SIGN = np.array([[1.0 if a == "x" else -1.0 for a in sk.HINGE_ORDERS[j]]
                         for j in range(1, sk.N_JOINTS)])  # fmt: skip
@@ -131,7 +131,7 @@ def mirror_reference_clip(clip: ReferenceClip, sites: Sequence[str], insoles: bo
     """The left-right mirror image of a reference clip (ground truth, estimate and sensors).
 
     The world is reflected through ``x = 0`` and left and right swap, the convention of
-    :func:`grip.kinematics.train.mirror_batch`, which mirrors the sensor features and the
+    :func:`grip.nn.symmetry.mirror_batch`, which mirrors the sensor features and the
     estimate (its joints, 6D rotations and velocities are KinematicsNet's ``fp``, ``fa`` and
     ``lv`` targets). The ground-truth pose vector: the root position ``p -> M p``, the root
     quaternion ``(w, x, y, z) -> (w, x, -y, -z)`` (``R -> M R M``), hinge angles about x keep
@@ -142,7 +142,7 @@ def mirror_reference_clip(clip: ReferenceClip, sites: Sequence[str], insoles: bo
     """
     import torch
 
-    from grip.kinematics.train import mirror_batch
+    from grip.nn.symmetry import mirror_batch
 
     q = clip.gt_qpos
     hinges = q[:, 7:].reshape(-1, sk.N_JOINTS - 1, 3) * _HINGE_SIGN

@@ -3,19 +3,22 @@
 A run folder holds ``config.json`` (resolved settings, seed, git hash), ``last.pt`` (the latest
 checkpoint, replaced atomically after every epoch), ``best.pt`` (lowest validation loss) and
 TensorBoard event files. Checkpoints contain only tensors and plain containers, so they load
-with ``torch.load(..., weights_only=True)``.
+with ``torch.load(..., weights_only=True)`` (:func:`grip.nn.weights.load_checkpoint`).
+
+Only training lives here: the run settings are :mod:`grip.kinematics.config`, the augmenting
+symmetries :mod:`grip.nn.symmetry`, weight packing and checkpoint loading
+:mod:`grip.nn.weights`, and the run folder's git hash :mod:`grip.core.runs`, so inference and
+the controller's code never import the trainer.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import os
-import subprocess
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -23,350 +26,20 @@ import torch
 
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write, atomic_write_text
-from grip.core.loaderrors import describe_load_error
 from grip.core.rotations import axis_angle_to_matrix
+from grip.core.runs import git_hash, history_wall_s
+from grip.kinematics.config import KinematicsRunConfig, run_config_from_dict
 from grip.kinematics.dataset import (
     TARGET_KEYS,
     Normalizer,
     SequenceArrays,
     category_weights,
     sample_windows,
+    time_warp_rates,
 )
-from grip.kinematics.features import FeatureConfig
-from grip.kinematics.model import STAGES, KinematicsNet, KinematicsNetConfig
-
-CHECKPOINT_VERSION = 1
-VAL_SOURCES: tuple[str, ...] = ("test", "holdout")
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Optimisation settings (GRIP: Adam, batch 256, 100 Hz).
-
-    Attributes:
-        window_frames: Frames per training window.
-        batch_size: Windows per step.
-        steps_per_epoch: Optimiser steps per epoch.
-        stage_epochs: Epochs per stage in the stage-wise phase (LP, then FP, FA, LV).
-        joint_epochs: Epochs of joint training of all stages.
-        lr: Adam learning rate.
-        weight_decay: Decoupled weight decay (AdamW); 0 keeps plain Adam.
-        grad_clip: Gradient-norm clip.
-        fk_loss_weight: Weight of the forward-kinematics joint-position loss on FA's rotations.
-        acc_noise: Std of Gaussian noise added to normalised acceleration features.
-        ori_noise_rad: Std of random rotation noise (rad) applied to IMU orientations.
-        yaw_augment: Rotate each window about the vertical axis by a random angle.
-        mirror_augment: Mirror half of the windows left-right (:func:`mirror_batch`); needs a
-            sensor set that is its own mirror image (every left site with its right partner).
-        category_balance: Even out the motion categories of the training windows
-            (:func:`grip.kinematics.dataset.category_weights`): 0 samples frames uniformly
-            (common motions dominate), 1 gives every category the same share.
-        time_warp: Play each training window at a random speed ``s``, log-uniform in
-            ``[1 / (1 + time_warp), 1 + time_warp]`` (0: off): frames are interpolated
-            (:func:`grip.kinematics.dataset.sample_windows`) and the rates rescaled
-            (:func:`time_warp_rates`), so the network sees the same motions faster and slower.
-        lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
-            ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
-        val_windows: Validation windows (fixed draw) evaluated after every epoch.
-        val_source: Where the validation windows (and so ``best.pt``) come from: ``"test"``,
-            the dataset's test split (the runs of the shipped models), or ``"holdout"``, a
-            fraction ``val_fraction`` of the training clips held out of training
-            (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
-            unseen by model selection.
-        val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
-        reverse_categories: Category globs (e.g. ``["walk"]``) of training clips whose
-            motions, played backwards, join the training sequences as ``"<category>-reversed"``
-            (:mod:`grip.dataset.augment`: a forward walk played backwards is a backward walk,
-            its sensors synthesised as the dataset's); held-out clips do not contribute. Needs
-            a ``grip data build`` folder. Empty: none.
-        seed: Seed of windows, noise and initialisation.
-        bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
-            (weights, losses and the optimiser stay float32). On a CPU with AMX or
-            AVX512-BF16 the LSTMs run several times faster
-            (``benchmarks/kinematics_train_step.py --bf16``); elsewhere it may be slower.
-            Inference stays float32.
-    """
-
-    window_frames: int = 200
-    batch_size: int = 64
-    steps_per_epoch: int = 200
-    stage_epochs: int = 2
-    joint_epochs: int = 10
-    lr: float = 1e-3
-    weight_decay: float = 0.0
-    grad_clip: float = 1.0
-    fk_loss_weight: float = 1.0
-    acc_noise: float = 0.05
-    ori_noise_rad: float = 0.02
-    yaw_augment: bool = True
-    mirror_augment: bool = False
-    time_warp: float = 0.0
-    category_balance: float = 0.0
-    lr_final: float | None = None
-    val_windows: int = 256
-    val_source: str = "test"
-    val_fraction: float = 0.1
-    reverse_categories: tuple[str, ...] = ()
-    seed: int = 0
-    bf16: bool = False
-
-    def __post_init__(self) -> None:
-        if self.val_source not in VAL_SOURCES:
-            raise ValueError(f"train.val_source must be one of {list(VAL_SOURCES)}, "
-                             f"got {self.val_source!r}")  # fmt: skip
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not 0.0 <= self.category_balance <= 1.0:
-            raise ValueError(f"train.category_balance must be in [0, 1], got "
-                             f"{self.category_balance}")  # fmt: skip
-        if not 0.0 <= self.time_warp <= 1.0:
-            raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
-
-
-@dataclass(frozen=True)
-class KinematicsRunConfig:
-    """Everything a training run needs (written to ``config.json``).
-
-    ``dropout`` is applied to every stage's LSTM input in training (PIP: 0.4 on its nets' inputs).
-    """
-
-    features: FeatureConfig = field(default_factory=FeatureConfig)
-    hidden: int = 192
-    layers: int = 2
-    init_hidden: int = 256
-    dropout: float = 0.0
-    train: TrainConfig = field(default_factory=TrainConfig)
-
-    def net_config(self) -> KinematicsNetConfig:
-        return KinematicsNetConfig(n_inputs=self.features.n_features, hidden=self.hidden,
-                                   layers=self.layers, init_hidden=self.init_hidden,
-                                   dropout=self.dropout)  # fmt: skip
-
-    def same_network(self, other: KinematicsRunConfig) -> bool:
-        """Whether ``other``'s weights fit this network (dropout, which has none, may differ)."""
-        mine, theirs = self.net_config(), other.net_config()
-        return dataclasses.replace(mine, dropout=0.0) == dataclasses.replace(theirs, dropout=0.0)
-
-    def phases(self) -> list[tuple[str, int]]:
-        """``(phase, epochs)``: one phase per stage, then ``"joint"``."""
-        return [(s, self.train.stage_epochs) for s in STAGES] + [("joint", self.train.joint_epochs)]
-
-    def total_epochs(self) -> int:
-        return sum(n for _, n in self.phases())
-
-
-def run_config_from_dict(d: dict) -> KinematicsRunConfig:
-    """Inverse of ``asdict`` for :class:`KinematicsRunConfig` (unknown keys are errors)."""
-    d = dict(d)
-    feats = dict(d.pop("features", {}))
-    if "sites" in feats:
-        feats["sites"] = tuple(feats["sites"])
-    train = TrainConfig(**d.pop("train", {}))
-    return KinematicsRunConfig(features=FeatureConfig(**feats), train=train, **d)
-
-
-def history_wall_s(history: list[dict]) -> float:
-    """Seconds of training (epochs with their validation) over every sitting of a run, from its
-    history's last ``wall_s``; epochs of checkpoints written before it was recorded count as 0."""
-    return float(history[-1].get("wall_s", 0.0)) if history else 0.0
-
-
-def git_hash() -> str:
-    """The repository's commit (``"unknown"`` outside a git checkout)."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                             cwd=Path(__file__).resolve().parent, timeout=5)  # fmt: skip
-        return out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-# ---------------------------------------------------------------------------- augmentation
-def yaw_matrices(angles: torch.Tensor) -> torch.Tensor:
-    c, s = torch.cos(angles), torch.sin(angles)
-    z, o = torch.zeros_like(c), torch.ones_like(c)
-    return torch.stack([c, -s, z, s, c, z, z, z, o], -1).view(*angles.shape, 3, 3)
-
-
-def rotate_batch(
-    x: torch.Tensor, y: dict[str, torch.Tensor], rot: torch.Tensor, n_sites: int
-) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """Rotate raw features and targets of each window by a world rotation ``rot (B, 3, 3)``.
-
-    Accelerations, angular velocities, orientations, leaf/joint positions, 6D global rotations and
-    velocities all rotate; insole values do not.
-    """
-    return rotate_features(x, rot, n_sites), rotate_targets(y, rot)
-
-
-def rotate_features(x: torch.Tensor, rot: torch.Tensor, n_sites: int) -> torch.Tensor:
-    """Raw features ``(B, T, F)`` of ``n_sites`` IMUs (and insoles) seen in a world turned by
-    ``rot (B, 3, 3)`` (:func:`rotate_batch`'s rule for the inputs)."""
-    b, t, _ = x.shape
-    r = rot[:, None]  # (B, 1, 3, 3)
-    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
-    acc = torch.einsum("btij,btsj->btsi", r, imu[..., 0:3])
-    gyr = torch.einsum("btij,btsj->btsi", r, imu[..., 3:6])
-    ori = (r[:, :, None] @ imu[..., 6:15].reshape(b, t, n_sites, 3, 3)).reshape(b, t, n_sites, 9)
-    return torch.cat([torch.cat([acc, gyr, ori], -1).reshape(b, t, -1), x[..., 15 * n_sites :]], -1)
-
-
-def rotate_targets(y: dict[str, torch.Tensor], rot: torch.Tensor) -> dict[str, torch.Tensor]:
-    """Targets or outputs ``{stage: (B, T, dim)}`` in a world turned by ``rot (B, 3, 3)``
-    (:func:`rotate_batch`'s rule; other keys pass unchanged)."""
-    r = rot[:, None]
-    out = {}
-    for k, v in y.items():
-        b, t = v.shape[:2]
-        if k in ("lp", "fp", "lv"):
-            out[k] = torch.einsum("btij,btnj->btni", r, v.reshape(b, t, -1, 3)).reshape(b, t, -1)
-        elif k == "fa":
-            cols = v.reshape(b, t, 24, 2, 3)
-            out[k] = torch.einsum("btij,btncj->btnci", r, cols).reshape(b, t, -1)
-        else:
-            out[k] = v
-    return out
-
-
-def mirror_site_order(sites: tuple[str, ...]) -> list[int]:
-    """Index of each site's mirror partner in ``sites`` (``L_X`` <-> ``R_X``; ``Head`` and
-    ``Pelvis`` are their own).
-
-    Raises:
-        ValueError: A site's partner is not in the set (such a set has no mirror image).
-    """
-    swap = {"L_": "R_", "R_": "L_"}
-    partner = [swap.get(s[:2], s[:2]) + s[2:] for s in sites]
-    missing = [p for p in partner if p not in sites]
-    if missing:
-        raise ValueError(f"mirror_augment needs every site's left/right partner; "
-                         f"{list(sites)} lacks {missing}")  # fmt: skip
-    return [sites.index(p) for p in partner]
-
-
-_M = torch.tensor([-1.0, 1.0, 1.0])  # the reflection x -> -x, as a diagonal
-_LEAF_MIRROR = [sk.LEAF_JOINTS.index(int(sk.MIRROR[j])) for j in sk.LEAF_JOINTS]
-_VEL_MIRROR = [sk.VELOCITY_JOINTS.index(int(sk.MIRROR[j])) for j in sk.VELOCITY_JOINTS]
-
-
-def mirror_batch(
-    x: torch.Tensor, y: dict[str, torch.Tensor], sites: tuple[str, ...], insoles: bool
-) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """Raw features and targets of the left-right mirror image of each window.
-
-    The world is reflected through the plane ``x = 0`` (``M = diag(-1, 1, 1)``; with random yaw
-    this covers every vertical mirror plane) and left and right swap: positions, velocities and
-    accelerations map to ``M v``, world angular velocities (pseudo-vectors) to ``-M w``,
-    rotations and IMU orientations to ``M R M``, the two insoles swap (their CoP is in the
-    foot's own forward/medial frame, which the mirror keeps), and the rest offsets of the body
-    map to ``M o``. Exact for a mirror-symmetric body with mirror-symmetric sensor mounts.
-
-    Args:
-        x: ``(B, T, F)`` raw (unnormalised) features of ``sites`` (and the insoles).
-        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets (B, 24, 3)``.
-
-    Raises:
-        ValueError: ``sites`` is not closed under the mirror, or ``y`` has an unknown key.
-    """
-    return mirror_features(x, sites, insoles), mirror_targets(y)
-
-
-def mirror_features(x: torch.Tensor, sites: tuple[str, ...], insoles: bool) -> torch.Tensor:
-    """Raw features ``(B, T, F)`` of the mirror image (:func:`mirror_batch`'s rule for the
-    inputs).
-
-    Raises:
-        ValueError: ``sites`` is not closed under the mirror.
-    """
-    order = mirror_site_order(tuple(sites))
-    b, t, _ = x.shape
-    n = len(sites)
-    m = _M.to(x.dtype)
-    imu = x[..., : 15 * n].reshape(b, t, n, 15)[:, :, order]
-    acc = imu[..., 0:3] * m
-    gyr = -imu[..., 3:6] * m
-    ori = (imu[..., 6:15].reshape(b, t, n, 3, 3) * (m[:, None] * m[None, :])).reshape(b, t, n, 9)
-    parts = [torch.cat([acc, gyr, ori], -1).reshape(b, t, -1)]
-    if insoles:
-        parts.append(x[..., 15 * n : 15 * n + 10].reshape(b, t, 2, 5).flip(2).reshape(b, t, 10))
-    return torch.cat(parts, -1)
-
-
-def mirror_targets(y: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Targets or outputs of the mirror image (:func:`mirror_batch`'s rule): ``lp, fp, fa,
-    lv`` as ``(B, T, dim)``, ``offsets`` as ``(B, 24, 3)``. Mirroring twice is the identity.
-
-    Raises:
-        ValueError: ``y`` has a key without a mirror rule.
-    """
-    perm = torch.from_numpy(sk.MIRROR)
-    out = {}
-    for k, v in y.items():
-        m = _M.to(v.dtype)
-        if k in ("lp", "fp", "lv"):
-            b, t = v.shape[:2]
-            idx = {"lp": _LEAF_MIRROR, "fp": perm, "lv": _VEL_MIRROR}[k]
-            out[k] = (v.reshape(b, t, -1, 3)[:, :, idx] * m).reshape(b, t, -1)
-        elif k == "fa":
-            # the columns c0, c1 of R become those of M R M: -M c0, M c1
-            b, t = v.shape[:2]
-            cols = v.reshape(b, t, 24, 2, 3)[:, :, perm]
-            sign = torch.stack([-m, m])
-            out[k] = (cols * sign).reshape(b, t, -1)
-        elif k == "offsets":
-            out[k] = v[:, perm] * m
-        else:
-            raise ValueError(f"mirror_batch: no mirror rule for target {k!r}")
-    return out
-
-
-def time_warp_rates(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray, n_sites: int,
-                    insoles: bool) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
-    """Rescale the rates of windows resampled at playback ``speeds`` (``sample_windows(...,
-    speeds=...)``) to what the sensors would read at that speed.
-
-    A motion played ``s`` times faster has accelerations ``s^2`` and angular and linear
-    velocities ``s`` times the original's at the same pose. So the IMUs' free accelerations
-    scale by ``s^2``, their angular velocities and the leaf/pelvis velocity targets by ``s``;
-    orientations, positions and rotations keep their values. The insoles' total vertical force
-    (body weights) is one plus the centre of mass's vertical acceleration over g, so its
-    deviation from 1 scales by ``s^2``, shared between the feet as recorded; the CoP keeps its
-    value and the contact flags are rounded back to 0/1. The force rule is an approximation
-    (it ignores how the stance phases themselves would change); the rest is exact up to the
-    interpolation and the recording's low-pass filter.
-
-    Args:
-        x: ``(B, T, F)`` raw (unnormalised) features: 15 per IMU site, then 10 insole values.
-        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets``.
-        speeds: ``(B,)`` playback speeds.
-
-    Raises:
-        ValueError: ``y`` has a target without a known rule.
-    """
-    known = ("lp", "fp", "fa", "lv", "offsets")
-    unknown = [k for k in y if k not in known]
-    if unknown:
-        raise ValueError(f"time_warp_rates: no rule for target(s) {unknown}")
-    s = np.asarray(speeds, dtype=np.float64)[:, None, None]
-    x = x.copy()
-    b, t, _ = x.shape
-    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
-    imu[..., 0:3] *= (s**2)[..., None].astype(x.dtype)
-    imu[..., 3:6] *= s[..., None].astype(x.dtype)
-    x[..., : 15 * n_sites] = imu.reshape(b, t, -1)
-    if insoles:
-        ins = x[..., 15 * n_sites : 15 * n_sites + 10].reshape(b, t, 2, 5)
-        force = ins[..., 0].astype(np.float64)
-        total = force.sum(-1, keepdims=True)
-        new_total = np.maximum(1.0 + s**2 * (total - 1.0), 0.0)
-        share = np.divide(force, total, out=np.zeros_like(force), where=total > 1e-3)
-        ins[..., 0] = np.where(total > 1e-3, share * new_total, force).astype(x.dtype)
-        ins[..., 3:5] = np.round(ins[..., 3:5])
-        x[..., 15 * n_sites : 15 * n_sites + 10] = ins.reshape(b, t, 10)
-    y = dict(y)
-    if "lv" in y:
-        y["lv"] = (y["lv"] * s).astype(y["lv"].dtype)
-    return x, y
+from grip.kinematics.model import KinematicsNet
+from grip.nn.symmetry import mirror_batch, mirror_site_order, rotate_batch, yaw_matrices
+from grip.nn.weights import CHECKPOINT_VERSION, load_checkpoint, pack_weights, unpack_weights
 
 
 def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
@@ -667,55 +340,6 @@ class Trainer:
         self.history = json.loads(ck["history"])
 
 
-def load_checkpoint(path: str | os.PathLike) -> dict:
-    """Load a checkpoint safely (``weights_only=True``); errors name the file."""
-    path = Path(path)
-    try:
-        ck = torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise
-    except Exception as e:  # torch raises many types for corrupt or hostile files
-        raise ValueError(f"{path}: not a KinematicsNet checkpoint: {describe_load_error(e)}") from e
-    missing = [k for k in ("version", "config", "model", "norm_mean", "norm_std") if k not in ck]
-    if missing:
-        raise ValueError(f"{path}: checkpoint lacks {missing}")
-    return ck
-
-
-PRECISIONS: tuple[str, ...] = ("fp32", "fp16", "int8")
-"""Weight storage of inference exports (:func:`pack_weights`)."""
-
-_SCALE = "@scale"
-
-
-def pack_weights(state: dict[str, torch.Tensor], precision: str) -> dict[str, torch.Tensor]:
-    """A state dict stored at ``precision``: ``"fp32"``, ``"fp16"``, or ``"int8"`` (every weight
-    matrix of at least 256 entries as int8 with one float32 scale per row, under
-    ``<name>@scale``, symmetric: ``w = q * scale``; the rest float16). :func:`unpack_weights`
-    restores float32 tensors."""
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision {precision!r}: use one of {list(PRECISIONS)}")
-    out: dict[str, torch.Tensor] = {}
-    for k, v in state.items():
-        if not v.is_floating_point() or precision == "fp32":
-            out[k] = v
-        elif precision == "int8" and v.dim() == 2 and v.numel() >= 256:
-            w = v.float()
-            scale = w.abs().amax(dim=1, keepdim=True) / 127.0
-            scale[scale == 0] = 1.0
-            out[k] = torch.round(w / scale).to(torch.int8)
-            out[k + _SCALE] = scale
-        else:
-            out[k] = v.half()
-    return out
-
-
-def unpack_weights(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Float32 tensors of a state dict written by :func:`pack_weights` (any precision)."""
-    return {k: v.float() * state[k + _SCALE] if k + _SCALE in state else v.float()
-            for k, v in state.items() if not k.endswith(_SCALE)}  # fmt: skip
-
-
 def export_for_inference(src: str | os.PathLike, dst: str | os.PathLike,
                          precision: str = "fp16") -> int:  # fmt: skip
     """Write a small inference-only copy of a training checkpoint (no optimiser state).
@@ -739,6 +363,3 @@ def write_run_config(run_dir: Path, cfg: KinematicsRunConfig, extra: dict) -> No
     atomic_write_text(run_dir / "config.json", json.dumps(payload, indent=1))
 
 
-def replace_train(cfg: KinematicsRunConfig, **kw) -> KinematicsRunConfig:
-    """Copy of ``cfg`` with some :class:`TrainConfig` fields replaced."""
-    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, **kw))

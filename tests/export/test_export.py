@@ -13,17 +13,17 @@ from grip.core.body import CANONICAL_TO_WORLD, build_body
 from grip.core.fk import forward_kinematics, rest_pose
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import pose_vector
-from grip.export import (
+from grip.export.bvh import hierarchy_order, motion_channels, write_bvh
+from grip.export.common import (
     Y_UP_FROM_WORLD,
     ExportError,
     check_ground_truth,
     fk_mismatch_m,
-    ground_truth,
     posed_body,
 )
-from grip.export.bvh import hierarchy_order, motion_channels, write_bvh
 from grip.export.glb import body_mesh, write_pose_glb, write_strobe_glb
 from grip.export.summary import per_joint_errors, summary_stats, write_summary_png
+from grip.kinematics.features import ground_truth
 from grip.motion.bvh import load_bvh
 from prism_tools.synthetic import make_recording
 

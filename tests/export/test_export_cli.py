@@ -12,7 +12,7 @@ import pytest
 
 from grip.cli.main import main
 from grip.core.reconstruction import Reconstruction
-from grip.export import ground_truth
+from grip.kinematics.features import ground_truth
 from prism_tools.io import save_recording
 from prism_tools.synthetic import make_recording
 

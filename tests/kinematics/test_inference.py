@@ -3,10 +3,11 @@ import pytest
 
 from grip.core import skeleton as sk
 from grip.core.body import build_body
+from grip.kinematics.config import KinematicsRunConfig, TrainConfig
 from grip.kinematics.dataset import sequence_arrays
 from grip.kinematics.features import FeatureConfig, input_features, recording_body
 from grip.kinematics.inference import KinematicsEstimator, decode_outputs
-from grip.kinematics.train import KinematicsRunConfig, TrainConfig, Trainer
+from grip.kinematics.train import Trainer
 from prism_tools.synthetic import make_recording
 
 
@@ -82,7 +83,7 @@ def test_full_test_time_augmentation_is_exactly_equivariant(ckpt):
     mirrored input is the turned or mirrored estimate; the bare network is not equivariant."""
     import torch
 
-    from grip.kinematics.train import (
+    from grip.nn.symmetry import (
         mirror_features,
         mirror_targets,
         rotate_features,

@@ -7,17 +7,12 @@ import pytest
 import torch
 
 from grip.core import skeleton as sk
+from grip.kinematics.config import KinematicsRunConfig, TrainConfig
 from grip.kinematics.dataset import sequence_arrays
 from grip.kinematics.features import FeatureConfig
-from grip.kinematics.train import (
-    KinematicsRunConfig,
-    TrainConfig,
-    Trainer,
-    fk_positions,
-    mirror_batch,
-    mirror_site_order,
-)
+from grip.kinematics.train import Trainer, fk_positions
 from grip.motion.motion import Motion
+from grip.nn.symmetry import mirror_batch, mirror_site_order
 from prism_tools.synth import recording_from_motion
 from prism_tools.synthetic import make_recording
 

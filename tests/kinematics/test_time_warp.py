@@ -5,9 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from grip.kinematics.dataset import sample_windows, sequence_arrays
+from grip.kinematics.config import KinematicsRunConfig, TrainConfig
+from grip.kinematics.dataset import sample_windows, sequence_arrays, time_warp_rates
 from grip.kinematics.features import FeatureConfig
-from grip.kinematics.train import KinematicsRunConfig, TrainConfig, Trainer, time_warp_rates
+from grip.kinematics.train import Trainer
 from grip.motion.motion import Motion
 from prism_tools.synth import recording_from_motion
 from prism_tools.synthetic import make_recording

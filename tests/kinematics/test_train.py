@@ -8,18 +8,13 @@ import pytest
 import torch
 
 from grip.core.body import build_body
+from grip.kinematics.config import KinematicsRunConfig, TrainConfig
 from grip.kinematics.dataset import sequence_arrays
 from grip.kinematics.features import FeatureConfig, targets
 from grip.kinematics.model import STAGE_DIMS
-from grip.kinematics.train import (
-    KinematicsRunConfig,
-    TrainConfig,
-    Trainer,
-    fk_positions,
-    load_checkpoint,
-    rotate_batch,
-    yaw_matrices,
-)
+from grip.kinematics.train import Trainer, fk_positions
+from grip.nn.symmetry import rotate_batch, yaw_matrices
+from grip.nn.weights import load_checkpoint
 from prism_tools.synthetic import make_recording
 
 
@@ -134,7 +129,7 @@ def test_corrupt_and_hostile_checkpoints_are_clean_errors(tmp_path):
 
 
 def test_pack_weights_round_trip():
-    from grip.kinematics.train import pack_weights, unpack_weights
+    from grip.nn.weights import pack_weights, unpack_weights
 
     g = torch.Generator().manual_seed(0)
     state = {"w": torch.randn(64, 128, generator=g), "b": torch.randn(64, generator=g),

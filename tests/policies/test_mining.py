@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from envs.factory import make_tracking_env
 from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
 from policies.mining import ClipFailureStats
 from policies.train import PolicyTrainer, run_config_dict
@@ -81,7 +82,7 @@ def test_training_with_mining_counts_episodes_pushes_weights_and_resumes(tmp_pat
     run = tmp_path / "run"
     run.mkdir()
     (run / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
-    tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE)
+    tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_tracking_env)
     tr.train()
     mining = tr.mining
     assert mining is not None and mining.episodes.sum() > 0
@@ -98,7 +99,7 @@ def test_training_with_mining_counts_episodes_pushes_weights_and_resumes(tmp_pat
     # a resumed run starts from the saved counts: one more rollout adds its episodes, then
     # decays everything once
     longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=320))
-    tr2 = PolicyTrainer(longer, run, SAMPLE_REFERENCE)
+    tr2 = PolicyTrainer(longer, run, SAMPLE_REFERENCE, make_tracking_env)
     tr2.train()
     assert len(tr2.history) == len(tr.history) + 1
     new = tr2.history[-1]["episodes"]

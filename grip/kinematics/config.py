@@ -1,0 +1,149 @@
+"""Settings of a KinematicsNet training run (written to its ``config.json`` and checkpoints).
+
+:class:`KinematicsRunConfig` holds the sensor features, the network size and the optimisation
+settings (:class:`TrainConfig`); ``configs/kinematics/*.toml`` override its defaults. Training
+(:mod:`grip.kinematics.train`) and inference (:mod:`grip.kinematics.inference`) both read it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from grip.kinematics.features import FeatureConfig
+from grip.kinematics.model import STAGES, KinematicsNetConfig
+
+VAL_SOURCES: tuple[str, ...] = ("test", "holdout")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings (GRIP: Adam, batch 256, 100 Hz).
+
+    Attributes:
+        window_frames: Frames per training window.
+        batch_size: Windows per step.
+        steps_per_epoch: Optimiser steps per epoch.
+        stage_epochs: Epochs per stage in the stage-wise phase (LP, then FP, FA, LV).
+        joint_epochs: Epochs of joint training of all stages.
+        lr: Adam learning rate.
+        weight_decay: Decoupled weight decay (AdamW); 0 keeps plain Adam.
+        grad_clip: Gradient-norm clip.
+        fk_loss_weight: Weight of the forward-kinematics joint-position loss on FA's rotations.
+        acc_noise: Std of Gaussian noise added to normalised acceleration features.
+        ori_noise_rad: Std of random rotation noise (rad) applied to IMU orientations.
+        yaw_augment: Rotate each window about the vertical axis by a random angle.
+        mirror_augment: Mirror half of the windows left-right
+            (:func:`grip.nn.symmetry.mirror_batch`); needs a
+            sensor set that is its own mirror image (every left site with its right partner).
+        category_balance: Even out the motion categories of the training windows
+            (:func:`grip.kinematics.dataset.category_weights`): 0 samples frames uniformly
+            (common motions dominate), 1 gives every category the same share.
+        time_warp: Play each training window at a random speed ``s``, log-uniform in
+            ``[1 / (1 + time_warp), 1 + time_warp]`` (0: off): frames are interpolated
+            (:func:`grip.kinematics.dataset.sample_windows`) and the rates rescaled
+            (:func:`grip.kinematics.dataset.time_warp_rates`), so the network sees the same
+            motions faster and slower.
+        lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
+            ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
+        val_windows: Validation windows (fixed draw) evaluated after every epoch.
+        val_source: Where the validation windows (and so ``best.pt``) come from: ``"test"``,
+            the dataset's test split (the runs of the shipped models), or ``"holdout"``, a
+            fraction ``val_fraction`` of the training clips held out of training
+            (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
+            unseen by model selection.
+        val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
+        reverse_categories: Category globs (e.g. ``["walk"]``) of training clips whose
+            motions, played backwards, join the training sequences as ``"<category>-reversed"``
+            (:mod:`grip.dataset.augment`: a forward walk played backwards is a backward walk,
+            its sensors synthesised as the dataset's); held-out clips do not contribute. Needs
+            a ``grip data build`` folder. Empty: none.
+        seed: Seed of windows, noise and initialisation.
+        bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
+            (weights, losses and the optimiser stay float32). On a CPU with AMX or
+            AVX512-BF16 the LSTMs run several times faster
+            (``benchmarks/kinematics_train_step.py --bf16``); elsewhere it may be slower.
+            Inference stays float32.
+    """
+
+    window_frames: int = 200
+    batch_size: int = 64
+    steps_per_epoch: int = 200
+    stage_epochs: int = 2
+    joint_epochs: int = 10
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    grad_clip: float = 1.0
+    fk_loss_weight: float = 1.0
+    acc_noise: float = 0.05
+    ori_noise_rad: float = 0.02
+    yaw_augment: bool = True
+    mirror_augment: bool = False
+    time_warp: float = 0.0
+    category_balance: float = 0.0
+    lr_final: float | None = None
+    val_windows: int = 256
+    val_source: str = "test"
+    val_fraction: float = 0.1
+    reverse_categories: tuple[str, ...] = ()
+    seed: int = 0
+    bf16: bool = False
+
+    def __post_init__(self) -> None:
+        if self.val_source not in VAL_SOURCES:
+            raise ValueError(f"train.val_source must be one of {list(VAL_SOURCES)}, "
+                             f"got {self.val_source!r}")  # fmt: skip
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not 0.0 <= self.category_balance <= 1.0:
+            raise ValueError(f"train.category_balance must be in [0, 1], got "
+                             f"{self.category_balance}")  # fmt: skip
+        if not 0.0 <= self.time_warp <= 1.0:
+            raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
+
+
+@dataclass(frozen=True)
+class KinematicsRunConfig:
+    """Everything a training run needs (written to ``config.json``).
+
+    ``dropout`` is applied to every stage's LSTM input in training (PIP: 0.4 on its nets' inputs).
+    """
+
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    hidden: int = 192
+    layers: int = 2
+    init_hidden: int = 256
+    dropout: float = 0.0
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def net_config(self) -> KinematicsNetConfig:
+        return KinematicsNetConfig(n_inputs=self.features.n_features, hidden=self.hidden,
+                                   layers=self.layers, init_hidden=self.init_hidden,
+                                   dropout=self.dropout)  # fmt: skip
+
+    def same_network(self, other: KinematicsRunConfig) -> bool:
+        """Whether ``other``'s weights fit this network (dropout, which has none, may differ)."""
+        mine, theirs = self.net_config(), other.net_config()
+        return dataclasses.replace(mine, dropout=0.0) == dataclasses.replace(theirs, dropout=0.0)
+
+    def phases(self) -> list[tuple[str, int]]:
+        """``(phase, epochs)``: one phase per stage, then ``"joint"``."""
+        return [(s, self.train.stage_epochs) for s in STAGES] + [("joint", self.train.joint_epochs)]
+
+    def total_epochs(self) -> int:
+        return sum(n for _, n in self.phases())
+
+
+def run_config_from_dict(d: dict) -> KinematicsRunConfig:
+    """Inverse of ``asdict`` for :class:`KinematicsRunConfig` (unknown keys are errors)."""
+    d = dict(d)
+    feats = dict(d.pop("features", {}))
+    if "sites" in feats:
+        feats["sites"] = tuple(feats["sites"])
+    train = TrainConfig(**d.pop("train", {}))
+    return KinematicsRunConfig(features=FeatureConfig(**feats), train=train, **d)
+
+
+def replace_train(cfg: KinematicsRunConfig, **kw) -> KinematicsRunConfig:
+    """Copy of ``cfg`` with some :class:`TrainConfig` fields replaced."""
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, **kw))
