@@ -36,15 +36,15 @@ TARGET_MS = 5.0
 
 def _physics_ms(stream: GripStream, steps: int = 300) -> float:
     """ms per bare control step (``mj_step`` x substeps) on the stream's model and state."""
-    env = stream.env
-    m = env.model
+    h = stream.player.h
+    m = h.model
     d = mujoco.MjData(m)
-    d.qpos[:] = env.data.qpos
-    d.ctrl[:] = env.data.ctrl
+    d.qpos[:] = h.data.qpos
+    d.ctrl[:] = h.data.ctrl
     mujoco.mj_forward(m, d)
     start = time.perf_counter()
     for _ in range(steps):
-        for _ in range(env.cfg.substeps):
+        for _ in range(h.cfg.substeps):
             mujoco.mj_step(m, d)
     return 1e3 * (time.perf_counter() - start) / steps
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from envs.observations import heading_matrix
 from grip.core import skeleton as sk
 
 KEY_JOINTS: tuple[int, ...] = (20, 21, 7, 8)
@@ -133,3 +134,30 @@ class AmpHistory:
     def vector(self) -> np.ndarray:
         """``(window * FRAME_DIM,)`` float32 copy."""
         return self._buf.reshape(-1).astype(np.float32)
+
+
+_KEY = np.array(KEY_JOINTS)
+
+
+def amp_frame(sim_pvw: np.ndarray, sim_rot: np.ndarray, hinge_q: np.ndarray,
+              hinge_qd: np.ndarray, out: np.ndarray) -> np.ndarray:  # fmt: skip
+    """The AMP frame of one simulated state: :func:`amp_features` for one frame, written out
+    (the batched version's einsums cost more than the physics of a step).
+
+    Args:
+        sim_pvw: ``(3, J, 3)`` world positions, linear and angular velocities of the bodies.
+        sim_rot: ``(J, 3, 3)`` world rotations.
+        hinge_q: ``(69,)`` hinge angles, rad.
+        hinge_qd: ``(69,)`` hinge rates, rad/s.
+        out: ``(FRAME_DIM,)`` buffer, filled and returned.
+    """
+    h = heading_matrix(sim_rot[0])
+    p = PARTS
+    out[p["root_height"]] = sim_pvw[0, 0, 2]
+    out[p["root_rot"]] = (h.T @ sim_rot[0])[:, :2].T.reshape(6)
+    out[p["root_vel"]] = sim_pvw[1, 0] @ h
+    out[p["root_angvel"]] = sim_pvw[2, 0] @ h
+    out[p["hinge_q"]] = hinge_q
+    out[p["hinge_qd"]] = hinge_qd
+    out[p["key_pos"]] = ((sim_pvw[0, _KEY] - sim_pvw[0, 0]) @ h).reshape(-1)
+    return out

@@ -106,7 +106,7 @@ class TrackingEnvConfig:
         action_repeat: The controller's decision period in frames: a policy action is held for
             this many frames (the environment itself always advances one frame per step; the
             training wrapper :class:`envs.wrappers.ActionRepeat` and the inference loop
-            :class:`grip.eval.reconstruct.ClipPlayer` hold it). 1 = a decision every frame.
+            :class:`grip.pipeline.Player` hold it). 1 = a decision every frame.
         blowup_lin_vel_mps: Pelvis speed above which the state counts as a simulation blow-up,
             m/s: a sprint is 10, a 10 m free fall ends at 14; the bundled clips under any action
             (zeros, -1, +1, random, bang-bang) stay below 5.

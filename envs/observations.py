@@ -117,3 +117,108 @@ def observation_parts(
     kin = np.concatenate([six[n + _N_IMU :].ravel(), six[n : n + _N_IMU].ravel(),
                           vecs[_N_SELF_VEC:].ravel()])  # fmt: skip
     return kin, self_vec
+
+
+def observe(
+    variant: str,
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    est_pos: np.ndarray,
+    est_leaf_rot: np.ndarray,
+    est_vel: np.ndarray,
+    est_leaf_angvel: np.ndarray,
+    est_root_pos: np.ndarray,
+    sensor: np.ndarray,
+    grid: np.ndarray,
+    terrain=None,
+    out: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """The policy's observation dict (float32 arrays): ``"sensor"`` (the KinematicsNet inputs),
+    ``"kinematic"`` and ``"self"`` (:func:`observation_parts`) and ``"environment"`` (terrain
+    height minus pelvis height on ``grid``, turned with the heading).
+
+    Args:
+        variant, sim_pvw, sim_rot, est_pos, est_leaf_rot, est_vel, est_leaf_angvel,
+            est_root_pos: As :func:`observation_parts` (the heading comes from ``sim_rot[0]``).
+        sensor: ``(F,)`` KinematicsNet input features of the frame.
+        grid: ``(N, 2)`` height-map offsets in the heading frame, m
+            (:func:`envs.heightfield.heightmap_grid`).
+        terrain: ``(center_xy, rot2, grid, out) -> (N,)`` terrain heights
+            (:attr:`grip.sim.humanoid.Humanoid.terrain`), ``None`` for the flat floor.
+        out: ``(N,)`` float64 buffer for the terrain heights.
+    """
+    root = sim_pvw[0, 0]
+    h = heading_matrix(sim_rot[0])
+    kin, self_vec = observation_parts(variant, h, sim_pvw, sim_rot, est_pos, est_leaf_rot,
+                                      est_vel, est_leaf_angvel, est_root_pos)  # fmt: skip
+    if terrain is None:  # flat floor: the height map is the pelvis height
+        hm = np.full(grid.shape[0], -root[2], dtype=np.float32)
+    else:
+        hm = (terrain(root[:2], h[:2, :2], grid, out) - root[2]).astype(np.float32)
+    return {
+        "sensor": sensor.astype(np.float32),
+        "kinematic": kin.astype(np.float32),
+        "self": self_vec.astype(np.float32),
+        "environment": hm,
+    }
+
+
+class EstimateFrames:
+    """A kinematic estimate laid out for the control step: what the observation and a relative
+    action read per frame, gathered once per clip (and per new frame of a growing one) rather
+    than per step. Shared by the training task and the inference pipeline, so both observe
+    and act alike.
+
+    ``est`` is any object with the estimate arrays of :class:`grip.core.reference.
+    ReferenceClip` (``est_pos``, ``est_rot``, ``est_vel``, ``est_angvel``, ``est_hinge``,
+    ``est_hinge_vel``, ``est_root_pos``, ``sensor``; rows at least ``n_frames``).
+
+    Attributes:
+        leaf_rot: ``(T, 4, 3, 3)`` estimated rotations of :data:`IMU_JOINTS`.
+        leaf_angvel: ``(T, 4, 3)`` their angular velocities, rad/s.
+        target: ``(T, 69)`` PD target of a relative action of 0: the estimated hinge angles
+            (plus ``kd/kp`` x their rates with velocity feed-forward), rad.
+    """
+
+    def __init__(self) -> None:
+        self.est = None
+        self._key: tuple | None = None
+        self.leaf_rot = self.leaf_angvel = self.target = np.zeros(0)
+
+    def update(self, est, kd_over_kp: np.ndarray, feedforward: bool, start: int = 0,
+               key=None) -> None:  # fmt: skip
+        """Gather frames ``start..est.n_frames - 1`` of ``est`` (all of them when ``est`` or
+        ``key`` changed, or its arrays were reallocated)."""
+        rows = len(est.est_pos)  # a growing estimate's capacity, else its length
+        if self._key != (est, key) or len(self.target) != rows:
+            self._key, self.est, start = (est, key), est, 0
+            self.leaf_rot = np.empty((rows, _N_IMU, 3, 3))
+            self.leaf_angvel = np.empty((rows, _N_IMU, 3))
+            self.target = np.empty((rows, 3 * (sk.N_JOINTS - 1)))
+        sl = slice(start, est.n_frames)
+        self.leaf_rot[sl] = est.est_rot[sl, IMU_JOINTS]
+        self.leaf_angvel[sl] = est.est_angvel[sl, IMU_JOINTS]
+        ref = self.target[sl]
+        ref[:] = est.est_hinge[sl]
+        if feedforward:
+            ref += kd_over_kp * est.est_hinge_vel[sl]
+
+    def pd_target(self, action: np.ndarray, t: int, relative: bool, gain: np.ndarray,
+                  lo: np.ndarray, half: np.ndarray) -> np.ndarray:  # fmt: skip
+        """``(69,)`` PD target of an action toward frame ``t`` (the action clipped to [-1, 1]):
+        relative: ``target[t] + action x gain``; absolute: the action spans ``lo .. lo + 2
+        half`` (the hinge ranges), rad. The humanoid clips it to the hinge limits."""
+        a = np.minimum(np.maximum(action, -1.0), 1.0)  # (np.clip's dispatch costs more per step)
+        if relative:
+            return self.target[t] + a * gain
+        return lo + (a + 1.0) * half
+
+    def observe(self, t: int, variant: str, sim_pvw: np.ndarray, sim_rot: np.ndarray,
+                root_offset: np.ndarray, grid: np.ndarray, terrain=None,
+                out: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+        """:func:`observe` against estimate frame ``t`` (the frame the next action aims at);
+        ``root_offset (3,)`` is added to the integrated root (where the episode started)."""
+        e = self.est
+        return observe(variant, sim_pvw, sim_rot, e.est_pos[t], self.leaf_rot[t], e.est_vel[t],
+                       self.leaf_angvel[t], e.est_root_pos[t] + root_offset, e.sensor[t], grid,
+                       terrain, out)  # fmt: skip

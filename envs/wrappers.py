@@ -18,7 +18,7 @@ class ActionRepeat(gym.Wrapper):
     by this step) added; ``mpjpe_m`` stays the last frame's.
 
     With relative actions the PD target still follows the reference frame by frame; only the
-    policy's correction is held (:class:`grip.eval.reconstruct.ClipPlayer` holds it the same
+    policy's correction is held (:class:`grip.pipeline.Player` holds it the same
     way at inference).
     """
 

@@ -190,32 +190,102 @@ class ReferenceClip:
         return int(self.gt_qpos.shape[0])
 
     def _derive(self) -> None:
-        fps = float(self.fps)
-        q = self.gt_qpos
-        q[:, 3:7] /= np.linalg.norm(q[:, 3:7], axis=1, keepdims=True)
-        local = local_rot_from_qpos(q)
-        offsets = build_body(self.body).offsets
-        gt_rot, gt_pos = forward_kinematics(local, q[:, :3], offsets)
-        qvel = np.empty((self.n_frames, 6 + N_HINGES))
-        qvel[:, :3] = np.gradient(q[:, :3], axis=0) * fps
-        qvel[:, 3:6] = angular_velocity(local[:, 0], fps, local=True)
-        qvel[:, 6:] = np.gradient(np.unwrap(q[:, 7:], axis=0), axis=0) * fps
-        est_rot = sixd_to_matrix(self.est_rot6d)
-        est_hinge = hinge_angles(est_rot)
-        derived = {
-            "gt_qvel": qvel,
-            "gt_pos": gt_pos,
-            "gt_rot": gt_rot,
-            "gt_vel": np.gradient(gt_pos, axis=0) * fps,
-            "gt_angvel": angular_velocity(gt_rot, fps),
-            "est_rot": est_rot,
-            "est_angvel": angular_velocity(est_rot, fps),
-            "est_hinge": est_hinge,
-            "est_hinge_vel": np.gradient(est_hinge, axis=0) * fps,
-            "est_root_pos": integrate_root(q[0, :3], self.est_vel[:, -1], fps),
-        }
-        for k, v in derived.items():
+        for k, v in ground_truth_arrays(self.gt_qpos, self.body, self.fps).items():
             setattr(self, k, v)
+        est = derive_estimate(self.est_rot6d, self.est_vel, self.gt_qpos[0, :3], self.fps)
+        for k, v in est.items():
+            setattr(self, k, v)
+
+
+def ground_truth_arrays(gt_qpos: np.ndarray, body: BodyParams, fps: float) -> dict[str, np.ndarray]:
+    """The ground truth of a pose track, derived (float64; ``gt_qpos``'s quaternions are
+    normalised in place).
+
+    Args:
+        gt_qpos: ``(T >= 2, 76)`` pose vectors (:func:`pose_vector`).
+        body: The subject.
+        fps: Frame rate, Hz.
+
+    Returns:
+        ``gt_qvel (T, 75)`` (root linear velocity in the world, root angular velocity in the root
+        frame, hinge rates: MuJoCo's free-joint convention), ``gt_pos (T, 24, 3)``, ``gt_rot (T,
+        24, 3, 3)``, ``gt_vel (T, 24, 3)``, ``gt_angvel (T, 24, 3)`` (world, per joint).
+    """
+    fps = float(fps)
+    q = gt_qpos
+    q[:, 3:7] /= np.linalg.norm(q[:, 3:7], axis=1, keepdims=True)
+    local = local_rot_from_qpos(q)
+    offsets = build_body(body).offsets
+    gt_rot, gt_pos = forward_kinematics(local, q[:, :3], offsets)
+    qvel = np.empty((q.shape[0], 6 + N_HINGES))
+    qvel[:, :3] = np.gradient(q[:, :3], axis=0) * fps
+    qvel[:, 3:6] = angular_velocity(local[:, 0], fps, local=True)
+    qvel[:, 6:] = np.gradient(np.unwrap(q[:, 7:], axis=0), axis=0) * fps
+    return {
+        "gt_qvel": qvel,
+        "gt_pos": gt_pos,
+        "gt_rot": gt_rot,
+        "gt_vel": np.gradient(gt_pos, axis=0) * fps,
+        "gt_angvel": angular_velocity(gt_rot, fps),
+    }
+
+
+def derive_estimate(est_rot6d: np.ndarray, est_vel: np.ndarray, root0: np.ndarray,
+                    fps: float) -> dict[str, np.ndarray]:  # fmt: skip
+    """The derived arrays of a kinematic estimate (float64): ``est_rot (T, 24, 3, 3)``,
+    ``est_angvel (T, 24, 3)`` (world), ``est_hinge (T, 69)`` (unwrapped), ``est_hinge_vel (T,
+    69)`` and ``est_root_pos (T, 3)``: the root integrated from the estimated pelvis velocity
+    ``est_vel[:, -1]``, starting at ``root0 (3,)`` (the calibration frame's root), m."""
+    fps = float(fps)
+    est_rot = sixd_to_matrix(est_rot6d)
+    est_hinge = hinge_angles(est_rot)
+    return {
+        "est_rot": est_rot,
+        "est_angvel": angular_velocity(est_rot, fps),
+        "est_hinge": est_hinge,
+        "est_hinge_vel": np.gradient(est_hinge, axis=0) * fps,
+        "est_root_pos": integrate_root(root0, est_vel[:, -1], fps),
+    }
+
+
+_EST_PRIMARY = {k: PRIMARY[k] for k in ("est_pos", "est_rot6d", "est_vel", "sensor")}
+
+
+@dataclass(eq=False)
+class Estimate:
+    """A whole recording's kinematic estimate with the sensor features it came from: what the
+    controller follows (no ground truth; :class:`ReferenceClip` adds it for training).
+
+    Attributes (T frames at ``fps``): ``name``, ``fps``, ``est_pos``, ``est_rot6d``, ``est_vel``
+    and ``sensor`` as in :class:`ReferenceClip`; ``root0 (3,)`` the root position the
+    integrated root starts at (the calibration frame's), m. Derived on construction:
+    :func:`derive_estimate`'s arrays.
+    """
+
+    name: str
+    fps: float
+    est_pos: np.ndarray
+    est_rot6d: np.ndarray
+    est_vel: np.ndarray
+    sensor: np.ndarray
+    root0: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.shape(self.est_pos)[0] if np.ndim(self.est_pos) else 0
+        for k, shape in _EST_PRIMARY.items():
+            a = np.asarray(getattr(self, k), dtype=np.float64)
+            if a.ndim != 1 + len(shape) or a.shape[0] != t or t < 2 or any(
+                    s not in (-1, d) for s, d in zip(shape, a.shape[1:], strict=True)):
+                raise ReferenceError(f"estimate {self.name!r}: {k} has shape {a.shape}, "
+                                     f"expected (T >= 2, {shape})")  # fmt: skip
+            setattr(self, k, a)
+        self.root0 = np.asarray(self.root0, dtype=np.float64).reshape(3)
+        for k, v in derive_estimate(self.est_rot6d, self.est_vel, self.root0, self.fps).items():
+            setattr(self, k, v)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.est_pos.shape[0])
 
 
 def _unwrap_step(dd: np.ndarray) -> np.ndarray:
@@ -228,23 +298,20 @@ def _unwrap_step(dd: np.ndarray) -> np.ndarray:
     return corr
 
 
-class LiveClip:
-    """A reference clip that grows one estimated frame at a time (streaming reconstruction).
+class LiveEstimate:
+    """A kinematic estimate that grows one frame at a time (streaming reconstruction).
 
-    It has the attributes :class:`envs.tracking_env.GripTrackingEnv` reads from a
-    :class:`ReferenceClip`, as arrays of :attr:`capacity` rows (at least :attr:`n_frames`; they
-    grow by doubling, :attr:`capacity` tells the env when). The values of frames
-    ``0 .. n_frames - 1`` are those a :class:`ReferenceClip` of the frames so far would have:
-    the derivatives of the newest frame are one-sided (as at a clip's end) and turn central when
-    the next frame arrives, the hinge angles are unwrapped as :func:`numpy.unwrap` does.
-
-    Ground truth: only the calibration is known. Every ``gt_*`` row holds the calibration
-    frame of ``head`` (pose and velocity): what the env starts from; its reward and error
-    ``info`` are meaningless while streaming (its observations and actions never read them).
+    It has the attributes of :class:`Estimate`, as arrays of :attr:`capacity` rows (at least
+    :attr:`n_frames`; they grow by doubling). The values of frames ``0 .. n_frames - 1`` are
+    those an :class:`Estimate` of the frames so far would have: the derivatives of the newest
+    frame are one-sided (as at a clip's end) and turn central when the next frame arrives, the
+    hinge angles are unwrapped as :func:`numpy.unwrap` does.
 
     Args:
-        head: A :class:`ReferenceClip` of the recording's first frames (its ground truth at
-            frame 0 and the velocity there; its estimate is not used).
+        name: Recording name, for messages.
+        fps: Frame rate, Hz.
+        root0: ``(3,)`` the calibration frame's root position, where the integrated root
+            starts, m.
         sensor_dim: Width of the sensor features.
         capacity: Rows allocated at first.
     """
@@ -255,12 +322,11 @@ class LiveClip:
         "est_angvel": (sk.N_JOINTS, 3), "est_hinge": (N_HINGES,),
         "est_hinge_vel": (N_HINGES,), "est_root_pos": (3,),
     }  # fmt: skip
-    _GT = ("gt_qpos", "gt_qvel", "gt_pos", "gt_rot", "gt_vel", "gt_angvel")
 
-    def __init__(self, head: ReferenceClip, sensor_dim: int, capacity: int = 1024) -> None:
-        self.name, self.category, self.fps = head.name, head.category, float(head.fps)
-        self.body, self.objects = head.body, head.objects
-        self._head = head
+    def __init__(self, name: str, fps: float, root0: np.ndarray, sensor_dim: int,
+                 capacity: int = 1024) -> None:  # fmt: skip
+        self.name, self.fps = str(name), float(fps)
+        self.root0 = np.asarray(root0, dtype=np.float64).reshape(3)
         self._sensor_dim = int(sensor_dim)
         self._n = 0
         self._raw_prev = np.zeros(N_HINGES)  # hinge angles of the previous frame, wrapped
@@ -275,9 +341,6 @@ class LiveClip:
         self.sensor = np.zeros((rows, self._sensor_dim))
         for k, a in old.items():
             getattr(self, k)[: self._n] = a[: self._n]
-        for k in self._GT:
-            row = getattr(self._head, k)[0]
-            setattr(self, k, np.broadcast_to(row, (rows, *row.shape)))
 
     @property
     def n_frames(self) -> int:
@@ -330,9 +393,9 @@ class LiveClip:
         # root: forward Euler on the estimated pelvis velocity (integrate_root)
         if i > 0:
             self._disp = self._disp + self.est_vel[i - 1, -1] / fps
-            self.est_root_pos[i] = self._disp + self._head.gt_qpos[0, :3]
+            self.est_root_pos[i] = self._disp + self.root0
         else:
-            self.est_root_pos[i] = self._head.gt_qpos[0, :3]
+            self.est_root_pos[i] = self.root0
         self._n = i + 1
         # derivatives (numpy.gradient, angular_velocity): frame i one-sided, i - 1 central
         h, r = self.est_hinge, self.est_rot

@@ -2,9 +2,10 @@
 
 The stream runs the same computation as the offline path (:mod:`grip.eval.reconstruct`), frame
 by frame: :class:`grip.kinematics.features.FeatureStream` builds the network inputs,
-KinematicsNet steps its LSTMs once per frame, a :class:`grip.core.reference.LiveClip` grows by
-the estimate, and :class:`grip.eval.reconstruct.ClipPlayer` advances the policy and MuJoCo one
-control step with GRIP's fall recovery.
+KinematicsNet steps its LSTMs once per frame, a :class:`grip.core.reference.LiveEstimate` grows
+by the estimate, and :class:`grip.pipeline.Player` advances the policy and the humanoid one
+control step with GRIP's fall recovery. No ground truth is read: the calibration frames give the
+start pose and the sensor alignment (:class:`grip.kinematics.features.Calibration`).
 
 Latency: two frames (20 ms at 100 Hz) on top of the computation. The angular velocities of the
 sensors and of the estimate are central differences (as in training), so frame ``t`` of the
@@ -41,17 +42,18 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import build_body
 from grip.core.reconstruction import Reconstruction
-from grip.core.reference import LiveClip, ReferenceClip, ReferenceSet
-from grip.core.rotations import matrix_to_6d, matrix_to_quat, quat_slerp, quat_to_matrix
-from grip.eval.reconstruct import ClipPlayer, RecoveryConfig, inference_env
+from grip.core.reference import LiveEstimate
+from grip.core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
 from grip.kinematics.features import (
     FeatureStream,
     SensorFrame,
-    recording_body,
+    SensorStream,
+    first_state,
     sensor_frame_arrays,
+    sensor_stream,
 )
 from grip.kinematics.inference import decode_outputs
-from grip.kinematics.reference import gt_qpos
+from grip.pipeline import GripPipeline, Player, RecoveryConfig, start_from_calibration
 
 LATENCY_FRAMES = 2
 """Frames between a sensor frame going in and its simulated frame coming out."""
@@ -110,23 +112,6 @@ class StreamFrame:
     blowup: bool = False
 
 
-def calibration_clip(calibration, sensor_dim: int) -> ReferenceClip:
-    """A :class:`ReferenceClip` of a recording's first two frames of ground truth (one frame:
-    the body at rest), the start of a stream. Only its ground truth is read (by
-    :class:`grip.core.reference.LiveClip`); its estimate arrays are zeros and identities."""
-    n = min(calibration.n_frames, 2)
-    q = gt_qpos(calibration.slice_frames(0, n))
-    if n == 1:
-        q = np.repeat(q, 2, axis=0)
-    eye = matrix_to_6d(np.broadcast_to(np.eye(3), (2, sk.N_JOINTS, 3, 3)))
-    return ReferenceClip(
-        name=str(calibration.name), category=calibration.category or "unknown",
-        fps=float(calibration.fps), body=recording_body(calibration), gt_qpos=q,
-        est_pos=np.zeros((2, sk.N_JOINTS, 3)), est_rot6d=eye,
-        est_vel=np.zeros((2, len(sk.VELOCITY_JOINTS), 3)), sensor=np.zeros((2, sensor_dim)),
-    )  # fmt: skip
-
-
 class GripStream:
     """GRIP on a live sensor stream (see the module docstring).
 
@@ -134,9 +119,10 @@ class GripStream:
         runner: A :class:`policies.runner.PolicyRunner` or an ensemble of them
             (:class:`policies.ensemble.PolicyEnsemble`).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
-        calibration: The recording's first frames with ground truth (``smpl_params``,
-            ``imu_gt``; a PRISM recording or a slice of one): the calibration pose the humanoid
-            and the LSTMs start from, and the sensor-to-segment alignment.
+        calibration: The recording's first frames: a :class:`grip.kinematics.features.
+            SensorStream` (its calibration and subject), or a PRISM recording or slice of one
+            (its ``smpl_params`` and ``imu_gt`` of frames 0 and 1 only): the calibration pose the
+            humanoid and the LSTMs start from, and the sensor-to-segment alignment.
         recovery: Fall detection and recovery settings (default :class:`RecoveryConfig`).
         capacity: Frames allocated at first (the buffers double when a stream runs longer).
         max_gap_frames: Longest run of missing frames filled by interpolation (longer ones are
@@ -161,15 +147,18 @@ class GripStream:
         self._cfg, self.max_gap_frames = cfg, int(max_gap_frames)
         recovery = recovery or RecoveryConfig()
         self.runner, self.estimator, self.recovery = runner, estimator, recovery
-        self._features = FeatureStream.for_recording(calibration, cfg)
-        self._kin = estimator.stream(calibration.slice_frames(0, min(2, calibration.n_frames)))
-        self.clip = LiveClip(calibration_clip(calibration, cfg.n_features), cfg.n_features,
-                             capacity)  # fmt: skip
-        self._sites, self._insoles = tuple(cfg.sites), bool(cfg.insoles)
-        self._offsets = build_body(recording_body(calibration)).offsets
+        head = calibration
+        if not isinstance(head, SensorStream):
+            head = sensor_stream(calibration.slice_frames(0, min(2, calibration.n_frames)), cfg)
+        cal, self._head = head.calibration, head
+        self._features = FeatureStream(cfg, head.fps, cal.imu_ori, head.name)
+        self._kin = estimator.stream_from(first_state(cal, head.body))
+        self.clip = LiveEstimate(head.name, head.fps, cal.root_pos[0], cfg.n_features, capacity)
+        self._start = start_from_calibration(cal, head.body, head.fps)
+        self._pipeline = GripPipeline(runner, estimator, recovery)
+        self._offsets = build_body(head.body).offsets
         self._capacity = capacity
-        self.env = None
-        self.player: ClipPlayer | None = None
+        self.player: Player | None = None
         self._busy_s = 0.0
         self._finished = False
         self.events: list[StreamEvent] = []
@@ -355,22 +344,22 @@ class GripStream:
         i = self.clip.append(joint_pos[0], global_rot[0], vel[0], row)
         self._est = (joint_pos[0], global_rot[0], row)
         if i == 1:  # the first two estimates are in: the humanoid starts at the calibration
-            ref = ReferenceSet([self.clip], self._sites, self._insoles, "<stream>")
-            self.env = inference_env(self.runner, ref)
-            self.player = ClipPlayer(self.env, self.runner, self.recovery)
-            self.player.start(0, frames_hint=self._capacity)
+            head = self._head
+            self.player = self._pipeline.player(head.body, head.objects)
+            self.player.start(self.clip, self._start, head.name, head.fps,
+                              frames_hint=self._capacity)  # fmt: skip
             return self._frame_out()
         if self._resume is not None:  # after a gap: start when two estimates are in again
             if i <= self._resume:
                 return None
-            self.env.refresh_reference(i - 1)
+            self.player.refresh(i - 1)
             self._place()
             return self._frame_out()
         if i < 1 or self.player.done:
             return None
         # frame i - 1's derivatives turned central, frame i is new: re-observe, then step
         p = self.player
-        p.obs = self.env.refresh_reference(i - 1)
+        p.refresh(i - 1)
         p.advance()
         if len(p.blowup_frames) > self._n_blowups:
             self._n_blowups = len(p.blowup_frames)
@@ -426,5 +415,4 @@ class GripStream:
         return recon
 
     def close(self) -> None:
-        if self.env is not None:
-            self.env.close()
+        """Nothing to release (kept for callers that close their streams)."""

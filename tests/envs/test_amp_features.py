@@ -17,7 +17,7 @@ def test_simulated_frame_matches_ground_truth_at_reset(reference):
     ref = A.reference_amp_features(env.clip)
     window = info["amp_obs"].reshape(4, A.FRAME_DIM)
     np.testing.assert_allclose(window, ref[17:21], atol=1e-5)  # ground-truth history
-    sim = env._amp_frame(*env._sim_state())
+    sim = env._amp_frame(*env.humanoid.state())
     # the state is written from the ground truth: only finite-difference velocities differ
     np.testing.assert_allclose(sim, ref[20], atol=5e-3)
     _, _, _, _, info = env.step(np.zeros(env.action_space.shape))

@@ -127,7 +127,7 @@ def test_without_a_policy_the_humanoid_falls(walk_reference) -> None:
     heights = []
     for _ in range(400):
         _, _, term, trunc, _ = env.step(np.zeros(69, np.float32))
-        heights.append(env.data.xpos[env._sim.pelvis_body][2])
+        heights.append(env.data.xpos[env.humanoid.pelvis_body][2])
         if term or trunc:
             break
     assert min(heights) < 0.5  # the standing pelvis is at ~0.9 m
@@ -184,7 +184,7 @@ def test_an_absurd_state_is_a_blow_up_before_mujoco_notices(reference, what) -> 
     # states MuJoCo integrates without a warning (its limit is 1e10) but no body can be in
     env = _env(reference, random_start=False)
     env.reset(seed=0)
-    d, ix = env.data, env._sim.index
+    d, ix = env.data, env.humanoid.index
     if what == "pelvis_speed":
         d.qvel[ix.root_dof_adr + 2] = 1e3  # 10 m up in one step
     elif what == "joint_speed":
@@ -212,7 +212,7 @@ def test_stairs_show_up_in_the_height_map(reference) -> None:
     env.data.qpos[3:7] = matrix_to_quat(CANONICAL_TO_WORLD)
     env.data.qvel[:] = 0.0
     obs, *_ = env.step(np.zeros(69, np.float32))
-    pelvis_z = env.data.xpos[env._sim.pelvis_body][2]
+    pelvis_z = env.data.xpos[env.humanoid.pelvis_body][2]
     hm = obs["environment"].reshape(25, 25) + pelvis_z  # rows: left (y), columns: forward (x)
     np.testing.assert_allclose(hm[12, 12], 0.30, atol=0.02)  # under the pelvis
     assert hm[12, -1] > hm[12, 12] + 0.1 > hm[12, 0] + 0.2  # higher ahead, lower behind
@@ -305,7 +305,7 @@ def test_switching_subjects_equals_a_model_compiled_for_each(reference) -> None:
 
     shared = GripTrackingEnv(cfg, both)
     runs = [play(shared, i) for i in (1, 2, 0, 2)]  # switch to each body and back
-    assert len(shared._sims) == 1
+    assert len(shared._scenes._scenes) == 1
     for (q, f), i in zip(runs, (1, 2, 0, 2), strict=True):
         own = GripTrackingEnv(cfg, ReferenceSet([both.clip(i)], both.sensor_sites, both.insoles))
         q_own, f_own = play(own, 0)

@@ -65,7 +65,7 @@ def test_a_push_moves_the_pelvis_along_its_force_by_its_impulse(reference) -> No
     plain.reset(seed=0)
     pushed.reset(seed=0)
     m, d = plain.model, plain.data
-    pelvis = plain._sim.pelvis_body
+    pelvis = plain.humanoid.pelvis_body
     mass = float(m.body_subtreemass[pelvis])
     forces = []
     for _ in range(10):  # 0.1 s at 100 Hz: the whole first push

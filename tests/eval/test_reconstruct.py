@@ -13,14 +13,10 @@ import numpy as np
 import pytest
 
 from envs.config import TrackingEnvConfig
-from envs.tracking_env import GripTrackingEnv
+from envs.tracking_env import SAMPLE_REFERENCE
 from grip.core.body import GRAVITY
-from grip.eval.reconstruct import (
-    RecoveryConfig,
-    inference_env,
-    kinematic_frames,
-    simulate_clip,
-)
+from grip.core.reference import ReferenceSet
+from grip.pipeline import GripPipeline, RecoveryConfig, kinematic_frames, start_from_clip
 
 
 class _Runner:
@@ -40,14 +36,24 @@ class _Runner:
 
 
 @pytest.fixture(scope="module")
-def env() -> GripTrackingEnv:
-    return inference_env(_Runner(0.0), GripTrackingEnv().reference)
+def clip():
+    return ReferenceSet.load(SAMPLE_REFERENCE).clip(0)
 
 
-def test_following_the_estimate_gives_a_full_physical_reconstruction(env) -> None:
+def simulate_clip(clip, runner, recovery: RecoveryConfig, stop_at_fall: bool = False):
+    """The pipeline's player on a reference clip's estimate from its first frame (the player is
+    left on ``runner.player`` for runners that reach into the simulation)."""
+    pipe = GripPipeline(runner, None, recovery)
+    player = runner.player = pipe.player(clip.body, clip.objects, stop_at_fall)
+    player.start(clip, start_from_clip(clip), clip.name, clip.fps)
+    while not player.advance():
+        pass
+    return player.reconstruction(1.0), {"blowups": player.blowups}
+
+
+def test_following_the_estimate_gives_a_full_physical_reconstruction(clip) -> None:
     # PD servos alone on the estimate (no policy) keep a walk up for ~80 frames: look at those
-    recon, info = simulate_clip(env, _Runner(0.0), 0, RecoveryConfig())
-    clip = env.reference.clip(0)
+    recon, info = simulate_clip(clip, _Runner(0.0), RecoveryConfig())
     assert recon.n_frames == clip.n_frames and recon.method == "grip" and info["blowups"] == 0
     np.testing.assert_allclose(recon.joint_pos[0], clip.gt_pos[0], atol=1e-6)  # GT start
     first = recon.falls[0, 0] if recon.fell else recon.n_frames
@@ -68,10 +74,9 @@ def test_following_the_estimate_gives_a_full_physical_reconstruction(env) -> Non
     assert recon.ms_per_frame > 0
 
 
-def test_a_fall_is_recovered_from_the_history_buffer(env) -> None:
+def test_a_fall_is_recovered_from_the_history_buffer(clip) -> None:
     rec_cfg = RecoveryConfig(history_frames=20)
-    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, rec_cfg)
-    clip = env.reference.clip(0)
+    recon, _ = simulate_clip(clip, _Runner(-1.0, prob=0.0), rec_cfg)
     assert recon.n_frames == clip.n_frames and recon.fell
     s, t = recon.falls[0]
     assert t - s == 20 and t > 0
@@ -84,34 +89,35 @@ def test_a_fall_is_recovered_from_the_history_buffer(env) -> None:
     assert recon.joint_pos[t + 1, 0, 2] > rec_cfg.fall_height_m
 
 
-def test_a_human_looking_low_pelvis_is_not_a_fall(env) -> None:
-    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.9), 0, RecoveryConfig())
+def test_a_human_looking_low_pelvis_is_not_a_fall(clip) -> None:
+    recon, _ = simulate_clip(clip, _Runner(-1.0, prob=0.9), RecoveryConfig())
     assert not recon.fell
 
 
-def test_without_recovery_each_fall_is_reported_once_and_the_body_stays_down(env) -> None:
-    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, RecoveryConfig(enabled=False))
+def test_without_recovery_each_fall_is_reported_once_and_the_body_stays_down(clip) -> None:
+    recon, _ = simulate_clip(clip, _Runner(-1.0, prob=0.0), RecoveryConfig(enabled=False))
     assert recon.falls.shape == (1, 2) and recon.falls[0, 0] == recon.falls[0, 1]
     assert recon.joint_pos[-1, 0, 2] < 0.3
 
 
-def test_evaluation_mode_stops_at_the_first_fall(env) -> None:
-    recon, _ = simulate_clip(env, _Runner(-1.0, prob=0.0), 0, RecoveryConfig(enabled=False),
+def test_evaluation_mode_stops_at_the_first_fall(clip) -> None:
+    recon, _ = simulate_clip(clip, _Runner(-1.0, prob=0.0), RecoveryConfig(enabled=False),
                              stop_at_fall=True)  # fmt: skip
     assert recon.falls.tolist() == [[recon.n_frames - 1] * 2]
     assert recon.joint_pos[-1, 0, 2] < 0.3 < recon.joint_pos[0, 0, 2]
 
 
-def test_teleport_puts_the_body_on_the_ground(env) -> None:
-    env.reset(options={"clip": 0, "start": 0})
-    clip = env.clip
+def test_teleport_puts_the_body_on_the_ground(clip) -> None:
+    h = GripPipeline(_Runner(0.0), None).humanoid(clip.body, None)
+    h.reset(clip.gt_qpos[0], clip.gt_qvel[0])
     q = clip.gt_qpos[10].copy()
     q[2] += 0.5  # half a metre in the air
-    obs, info = env.teleport(q)
-    assert abs(env._lowest_clearance()) < 1e-9
-    assert all(np.isfinite(v).all() for v in obs.values()) and info["frame"] == 0
+    h.teleport(q)
+    assert abs(h.lowest_clearance()) < 1e-9
+    pvw, rot = h.state()
+    assert np.isfinite(pvw).all() and np.isfinite(rot).all()
     with pytest.raises(ValueError, match="teleport"):
-        env.teleport(np.full(76, np.nan))
+        h.teleport(np.full(76, np.nan))
 
 
 def test_recovery_config_is_checked() -> None:
@@ -119,19 +125,18 @@ def test_recovery_config_is_checked() -> None:
         dataclasses.replace(RecoveryConfig(), history_frames=0)
 
 
-def test_reading_foot_forces_does_not_change_the_simulation(env) -> None:
-    from grip.sim.model import FootContacts
-
+def test_reading_foot_forces_does_not_change_the_simulation(clip) -> None:
+    h = GripPipeline(_Runner(0.0), None).humanoid(clip.body, None)
     final = []
     for read in (False, True):
-        env.reset(options={"clip": 0, "start": 0})
-        feet = FootContacts(env.model, env._sim.index)
-        for _ in range(40):
-            env.step(np.zeros(69))
+        h.reset(clip.gt_qpos[0], clip.gt_qvel[0])
+        for t in range(1, 41):
+            h.set_targets(clip.est_hinge[t])
+            h.step()
             if read:
-                grf, _ = feet(env.data)
+                grf, _ = h.foot_forces()
                 assert (grf[:, 2] >= 0).all()
-        final.append(env.data.qpos.copy())
+        final.append(h.data.qpos.copy())
     np.testing.assert_array_equal(final[0], final[1])
 
 
@@ -148,11 +153,10 @@ class _CountingRunner(_Runner):
         return np.full(69, 0.05 * (-1) ** self.calls)
 
 
-def test_the_action_is_held_for_the_policys_action_repeat(env) -> None:
-    clip = env.reference.clip(0)
+def test_the_action_is_held_for_the_policys_action_repeat(clip) -> None:
     for repeat in (1, 3):
         runner = _CountingRunner(repeat)
-        recon, _ = simulate_clip(env, runner, 0, RecoveryConfig(enabled=False))
+        recon, _ = simulate_clip(clip, runner, RecoveryConfig(enabled=False))
         frames = clip.n_frames - 1
         assert runner.calls == -(-frames // repeat)  # one decision per `repeat` frames
         assert recon.n_frames == clip.n_frames  # and still one output per frame
@@ -163,24 +167,23 @@ class _BlowingRunner(_Runner):
     (an absurd state MuJoCo integrates without a warning: the body is km away within a few
     frames) or 1e12 (MuJoCo gives up and resets the state itself)."""
 
-    def __init__(self, env: GripTrackingEnv, frames: tuple[int, ...], qvel: float) -> None:
+    def __init__(self, frames: tuple[int, ...], qvel: float) -> None:
         super().__init__(0.0, prob=None)
-        self.env, self.frames, self.qvel = env, frames, qvel
+        self.frames, self.qvel = frames, qvel
 
     def act(self, obs: dict) -> np.ndarray:
-        if self.env.frame + 1 in self.frames:
-            self.env.data.qvel[:] = self.qvel
+        if self.player.t + 1 in self.frames:
+            self.player.h.data.qvel[:] = self.qvel
         return np.zeros(69)
 
 
 @pytest.mark.parametrize("qvel", [1e3, 1e12])
 @pytest.mark.parametrize("enabled", [True, False])
-def test_a_blow_up_is_recovered_and_never_ends_the_recording(env, qvel, enabled) -> None:
+def test_a_blow_up_is_recovered_and_never_ends_the_recording(clip, qvel, enabled) -> None:
     frames = (60, 61, 150)  # 61: a second blow-up right after the first one's recovery
-    runner = _BlowingRunner(env, frames, qvel)
-    recon, info = simulate_clip(env, runner, 0, RecoveryConfig(history_frames=20,
+    runner = _BlowingRunner(frames, qvel)
+    recon, info = simulate_clip(clip, runner, RecoveryConfig(history_frames=20,
                                                                enabled=enabled))  # fmt: skip
-    clip = env.reference.clip(0)
     assert recon.n_frames == clip.n_frames  # every input frame has an output frame
     assert info["blowups"] == recon.notes["blowups"] == 3
     assert recon.notes["blowup_frames"] == list(frames)
@@ -195,9 +198,9 @@ def test_a_blow_up_is_recovered_and_never_ends_the_recording(env, qvel, enabled)
         assert step < 0.1
 
 
-def test_evaluation_ends_a_segment_before_its_blow_up(env) -> None:
-    runner = _BlowingRunner(env, (60,), 1e3)
-    recon, info = simulate_clip(env, runner, 0, RecoveryConfig(enabled=False),
+def test_evaluation_ends_a_segment_before_its_blow_up(clip) -> None:
+    runner = _BlowingRunner((60,), 1e3)
+    recon, info = simulate_clip(clip, runner, RecoveryConfig(enabled=False),
                                 stop_at_fall=True)  # fmt: skip
     assert recon.n_frames == 60 and recon.fell and info["blowups"] == 1
     assert recon.falls.tolist() == [[59, 59]]

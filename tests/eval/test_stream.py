@@ -2,7 +2,7 @@
 
 A scripted policy and an oracle estimator (it replays the ground truth, like
 :func:`grip.kinematics.reference.oracle_reference_clip`) check the stream's machinery against
-:func:`grip.eval.reconstruct.simulate_clip` closely, falls and recoveries included; the shipped
+:class:`grip.pipeline.Player` on the whole clip closely, falls and recoveries included; the shipped
 models check the whole stack against ``GripReconstructor``.
 """
 
@@ -12,12 +12,11 @@ import numpy as np
 import pytest
 
 from envs.config import TrackingEnvConfig
-from grip.core.reference import ReferenceSet
 from grip.core.rotations import matrix_to_6d
-from grip.eval.reconstruct import RecoveryConfig, inference_env, simulate_clip
 from grip.eval.stream import LATENCY_FRAMES, GripStream
 from grip.kinematics.features import FeatureConfig, SensorFrame, sensor_frames, targets
 from grip.kinematics.reference import oracle_reference_clip
+from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
 from prism_tools.io import load_recording
 
 SAMPLE = "grip/assets/sample_recording.npz"
@@ -45,7 +44,7 @@ class _Oracle:
         self.cfg = type("Cfg", (), {"features": cfg})()
         self._t = targets(rec)
 
-    def stream(self, calibration):
+    def stream_from(self, first):
         t, i = self._t, iter(range(10**9))
         step = lambda row: (lambda k: {  # noqa: E731
             "fp": t.joint_pos[k], "fa": matrix_to_6d(t.global_rot[k]), "lv": t.velocity[k],
@@ -71,8 +70,7 @@ def test_stream_gives_the_offline_reconstruction(rec, action) -> None:
     cfg = FeatureConfig()
     runner, recovery = _Runner(action), RecoveryConfig(history_frames=20)
     clip = oracle_reference_clip(rec, cfg)
-    env = inference_env(runner, ReferenceSet([clip], cfg.sites, cfg.insoles))
-    offline, _ = simulate_clip(env, runner, 0, recovery)
+    offline, _ = GripPipeline(runner, None, recovery).play(clip, start_from_clip(clip), clip.body)
     stream = GripStream(runner, _Oracle(rec, cfg), rec.slice_frames(0, 2), recovery, capacity=64)
     outs = _run(stream, list(sensor_frames(rec, cfg)))
     live = stream.reconstruction()
@@ -231,7 +229,7 @@ class _IndexedOracle(_Oracle):
     """The ground truth of the frame whose accelerations the row carries (a stream does not
     step the estimator over a gap it does not fill, so counting steps loses the frame)."""
 
-    def stream(self, calibration):
+    def stream_from(self, first):
         t, cfg = self._t, self.cfg.features
         acc = np.stack([f.acc.reshape(-1) for f in sensor_frames(self._rec, cfg)])
         s = len(cfg.sites)
@@ -250,7 +248,7 @@ def test_a_long_gap_is_reported_and_the_stream_resumes_after_it(rec, full) -> No
     stream = _stream(rec)
     oracle = _IndexedOracle(rec, FeatureConfig())
     oracle._rec = rec
-    stream._kin = oracle.stream(None)
+    stream._kin = oracle.stream_from(None)
     outs = _push_all(stream, frames, key="index")
     _numbered(outs)
     assert outs[100] is None and outs[101] is None  # the pipeline restarts...
@@ -285,9 +283,9 @@ class _BlowingRunner(_Runner):
         self.disc, self.frame, self.qvel, self.stream = None, frame, qvel, None
 
     def act(self, obs: dict) -> np.ndarray:
-        env = self.stream.env
-        if env.frame + 1 == self.frame:
-            env.data.qvel[:] = self.qvel
+        player = self.stream.player
+        if player.t + 1 == self.frame:
+            player.h.data.qvel[:] = self.qvel
         return np.zeros(69)
 
 

@@ -1,0 +1,88 @@
+"""Humanoids in their scenes: one compiled :class:`grip.sim.humanoid.Humanoid` per scene, the
+subjects switched in (the training task and the inference pipeline share it)."""
+
+from __future__ import annotations
+
+import functools
+import types
+
+import mujoco
+
+from envs.config import TrackingEnvConfig
+from envs.heightfield import add_heightfield, rasterize, sample_heightmap
+from envs.terrain import make_scene
+from grip.core.body import BodyParams
+from grip.core.mjcf import MjcfConfig, build_mjcf
+from grip.sim.humanoid import Humanoid, HumanoidConfig
+
+SceneObjects = dict  # {name: (vertices (V, 3), faces (F, 3))}
+
+
+class HumanoidScenes:
+    """A bounded cache of humanoids, one per scene; a new subject is compiled once and then
+    swapped in by copying arrays (:class:`grip.sim.model.ModelVariants`), so that moving across
+    the many subjects of a training set does not compile models.
+
+    Args:
+        cfg: Stepping and blow-up bounds of every humanoid.
+        mjcf: Humanoid and simulation options.
+        terrain: ``"auto"`` (a recording's scene objects, else flat) or a fixed scene name
+            (:func:`envs.terrain.make_scene`).
+        heightfield_cell_m: Resolution of a terrain height field, m.
+        max_scenes: Scenes kept (the oldest is dropped).
+    """
+
+    def __init__(self, cfg: HumanoidConfig, mjcf: MjcfConfig, terrain: str = "auto",
+                 heightfield_cell_m: float = 0.02, max_scenes: int = 16) -> None:  # fmt: skip
+        self.cfg, self.mjcf, self.terrain = cfg, mjcf, terrain
+        self.cell_m, self.max_scenes = heightfield_cell_m, max_scenes
+        self._scenes: dict[tuple, Humanoid] = {}
+
+    def _scene_key(self, objects: SceneObjects | None, tag) -> tuple:
+        if self.terrain == "auto":
+            return ("objects", tag) if objects else ("flat",)
+        return (self.terrain,)
+
+    def _compile(self, body: BodyParams, objects: SceneObjects | None, kind: str):
+        if kind == "objects":
+            objs = {n: types.SimpleNamespace(vertices=v, faces=f)
+                    for n, (v, f) in objects.items()}  # fmt: skip
+            scene = make_scene("objects", objects=objs)
+        else:
+            scene = make_scene(kind)
+        xml = build_mjcf(body, self.mjcf)
+        hf = None if scene.is_flat else rasterize(scene, self.cell_m)
+        if hf is not None:
+            xml = add_heightfield(xml, hf)
+        return mujoco.MjModel.from_xml_string(xml), hf
+
+    def get(self, body: BodyParams, objects: SceneObjects | None = None, tag=None) -> Humanoid:
+        """The humanoid of ``body`` in the scene of ``objects`` (``tag`` names that scene: scenes
+        with objects are told apart by it, e.g. a clip index)."""
+        skey, bkey = self._scene_key(objects, tag), (body.height_m, body.mass_kg)
+        h = self._scenes.get(skey)
+        if h is not None:
+            if h.key != bkey:
+                if not h.has(bkey):
+                    h.add(bkey, self._compile(body, objects, skey[0])[0])
+                h.switch(bkey)
+            return h
+        model, hf = self._compile(body, objects, skey[0])
+        terrain = None if hf is None else functools.partial(sample_heightmap, hf)
+        top = 0.0 if hf is None else float(hf.heights.max())
+        h = Humanoid(model, self.cfg, bkey, terrain, top)
+        if len(self._scenes) >= self.max_scenes:
+            self._scenes.pop(next(iter(self._scenes)))
+        self._scenes[skey] = h
+        return h
+
+
+def humanoid_config(cfg: TrackingEnvConfig) -> HumanoidConfig:
+    """The :class:`grip.sim.humanoid.HumanoidConfig` of a tracking env's settings."""
+    return HumanoidConfig(cfg.substeps, cfg.blowup_lin_vel_mps, cfg.blowup_ang_vel_radps,
+                          cfg.blowup_height_m, cfg.blowup_depth_m)  # fmt: skip
+
+
+def humanoid_scenes(cfg: TrackingEnvConfig) -> HumanoidScenes:
+    """The humanoids of a tracking env's settings (a policy's ``env_cfg``), one per scene."""
+    return HumanoidScenes(humanoid_config(cfg), cfg.mjcf, cfg.terrain, cfg.heightfield_cell_m)

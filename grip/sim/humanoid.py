@@ -1,0 +1,286 @@
+"""``Humanoid``: one subject's simulated body, PD targets in, state out (no task, no reference).
+
+The physics half of dm_control's ``Environment(physics, task)``: the training task
+(:class:`envs.tracking_env.GripTrackingEnv`) and the inference pipeline (:mod:`grip.pipeline`)
+both drive a :class:`Humanoid`; neither reaches into MuJoCo themselves. Everything a control step
+touches is resolved once (index arrays, views of ``MjData``), so that a step costs MuJoCo's time
+plus a few microseconds.
+
+State layout: ``pvw (3, 24, 3)`` = world positions (m), linear (m/s) and angular (rad/s)
+velocities of the 24 SMPL bodies, ``rot (24, 3, 3)`` their world rotations. Pose vectors are
+``(76,)`` ``[root_pos, root_quat_wxyz, 69 hinges]`` and velocity vectors ``(75,)`` (root linear
+velocity in the world, root angular velocity in the root frame, hinge rates), both in SMPL
+order (:func:`grip.core.reference.pose_vector`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from grip.core import skeleton as sk
+from grip.sim.model import (
+    FootContacts,
+    HumanoidIndex,
+    ModelVariants,
+    write_pose_vector,
+    write_velocity_vector,
+)
+
+HeightSampler = Callable[..., np.ndarray]
+"""Terrain heights around a point: ``(center_xy (2,), rot2 (2, 2), grid (N, 2), out=None) ->
+(N,)`` heights above z = 0 at ``center_xy + grid @ rot2.T``, m
+(``envs.heightfield.sample_heightmap`` bound to a height field)."""
+
+_UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
+                                       mujoco.mjtWarning.mjWARN_BADQVEL,
+                                       mujoco.mjtWarning.mjWARN_BADQACC)])  # fmt: skip
+"""MuJoCo's warnings for a state it could not integrate (it then resets ``MjData`` itself, which
+also zeroes the counters, and counts the warning: a second blow-up leaves the count at 1)."""
+_W_QPOS, _W_QVEL, _W_QACC = (int(w) for w in _UNSTABLE)
+_C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
+
+
+def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice for consecutive indices (basic indexing is cheaper than fancy indexing)."""
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
+@dataclass(frozen=True)
+class HumanoidConfig:
+    """Stepping and blow-up detection of a :class:`Humanoid`.
+
+    Attributes:
+        substeps: Physics steps per control step.
+        blowup_lin_vel_mps: Pelvis speed above which the state is a blow-up, m/s.
+        blowup_ang_vel_radps: Angular speed of any joint above which the state is a blow-up,
+            rad/s.
+        blowup_height_m: Pelvis height above the highest terrain point that is a blow-up, m.
+        blowup_depth_m: Pelvis depth below the floor (z = 0) that is a blow-up, m.
+    """
+
+    substeps: int = 2
+    blowup_lin_vel_mps: float = 50.0
+    blowup_ang_vel_radps: float = 200.0
+    blowup_height_m: float = 4.0
+    blowup_depth_m: float = 1.0
+
+
+class Humanoid:
+    """One compiled humanoid (one scene) with its data, stepped by PD targets.
+
+    Args:
+        model: The compiled humanoid (:func:`grip.core.mjcf.build_mjcf`, maybe with a height
+            field), modified in place when another subject is switched in (:meth:`switch`).
+        cfg: Stepping and blow-up bounds.
+        key: The subject the model was compiled for (any hashable, e.g. ``(height_m,
+            mass_kg)``).
+        terrain: Heights of the scene's terrain (``None``: the flat floor z = 0).
+        terrain_top_m: Highest terrain point, m (bounds the blow-up check).
+    """
+
+    def __init__(self, model: mujoco.MjModel, cfg: HumanoidConfig = HumanoidConfig(),
+                 key: Hashable = None, terrain: HeightSampler | None = None,
+                 terrain_top_m: float = 0.0) -> None:  # fmt: skip
+        self.model, self.cfg, self.terrain = model, cfg, terrain
+        self.index = ix = HumanoidIndex.from_model(model)
+        self.data = d = mujoco.MjData(model)
+        act = ix.actuator_ids
+        rng = model.actuator_ctrlrange[act]
+        self.lo, self.hi = rng[:, 0].copy(), rng[:, 1].copy()  # (69,) hinge limits, rad
+        self.half = 0.5 * (rng[:, 1] - rng[:, 0])  # (69,) half the hinge ranges, rad
+        self.pelvis_body = int(ix.body_ids[0])
+        self.variants = ModelVariants(model, key)
+        self.kd_over_kp = self._kd_over_kp()
+        # views of MjData arrays, taken once (attribute access through the bindings is slow)
+        self.xpos, self.xmat, self.cvel = d.xpos, d.xmat, d.cvel
+        self.com = d.subtree_com[self.pelvis_body]  # (3,) subtree COM of the pelvis
+        self.ctrl, self.qvel, self.qpos = d.ctrl, d.qvel, d.qpos
+        self.act_force = d.actuator_force
+        self.warnings = d.warning.number  # live view
+        self.act = _as_slice(act)
+        rv = ix.root_dof_adr
+        self._lin = slice(rv, rv + 3)  # qvel of the pelvis' linear velocity
+        self._ang = _as_slice(np.setdiff1d(np.arange(model.nv), np.arange(rv, rv + 3)))
+        self._root_z = ix.root_qpos_adr + 2
+        self.z_range = (-cfg.blowup_depth_m, terrain_top_m + cfg.blowup_height_m)
+        self._feet: FootContacts | None = None
+        self._geoms = np.flatnonzero(model.geom_bodyid > 0)
+
+    # ------------------------------------------------------------------ subjects
+    def _kd_over_kp(self) -> np.ndarray:
+        act = self.index.actuator_ids
+        return -self.model.actuator_biasprm[act, 2] / self.model.actuator_gainprm[act, 0]
+
+    @property
+    def key(self) -> Hashable:
+        """The subject switched in."""
+        return self.variants.key
+
+    def has(self, key: Hashable) -> bool:
+        """Whether subject ``key`` was added."""
+        return key in self.variants
+
+    def add(self, key: Hashable, compiled: mujoco.MjModel) -> None:
+        """Register another subject from its compiled model (same topology)."""
+        self.variants.add(key, compiled)
+
+    def switch(self, key: Hashable) -> None:
+        """Make the model that of subject ``key`` (added before)."""
+        if key != self.variants.key:
+            self.variants.switch(key)
+            self.kd_over_kp = self._kd_over_kp()
+
+    # ------------------------------------------------------------------ state in
+    def reset(self, qpos76: np.ndarray, qvel75: np.ndarray) -> None:
+        """Start from a pose and velocity (fresh ``MjData``; PD targets at the pose)."""
+        m, d, ix = self.model, self.data, self.index
+        mujoco.mj_resetData(m, d)
+        write_pose_vector(qpos76, ix, d.qpos)
+        write_velocity_vector(qvel75, ix, d.qvel)
+        d.ctrl[ix.actuator_ids] = np.clip(qpos76[7:], self.lo, self.hi)
+        mujoco.mj_forward(m, d)
+        self.warnings[_UNSTABLE] = 0
+
+    def teleport(self, qpos76: np.ndarray, qvel75: np.ndarray | None = None) -> None:
+        """Put the body in a new state, lifted or lowered so that its lowest geom rests on the
+        terrain under it (GRIP's fall recovery); hinges are clipped to their limits and the PD
+        targets set to them. ``qvel75``: zeros if ``None``.
+
+        Raises:
+            ValueError: Not a finite ``(76,)`` pose and ``(75,)`` velocity.
+        """
+        m, d, ix = self.model, self.data, self.index
+        q = np.asarray(qpos76, dtype=np.float64).reshape(-1)
+        v = np.zeros(75) if qvel75 is None else np.asarray(qvel75, dtype=np.float64).reshape(-1)
+        finite = np.isfinite(q).all() and np.isfinite(v).all()
+        if q.shape != (76,) or v.shape != (75,) or not finite:
+            raise ValueError(f"teleport needs finite (76,) qpos and (75,) qvel, got {q.shape}, "
+                             f"{v.shape}")  # fmt: skip
+        q = q.copy()
+        q[7:] = np.clip(q[7:], self.lo, self.hi)
+        write_pose_vector(q, ix, d.qpos)
+        write_velocity_vector(v, ix, d.qvel)
+        d.ctrl[ix.actuator_ids] = q[7:]
+        mujoco.mj_forward(m, d)
+        d.qpos[self._root_z] -= self.lowest_clearance()
+        mujoco.mj_forward(m, d)
+        self.warnings[_UNSTABLE] = 0
+
+    def set_targets(self, target69: np.ndarray) -> None:
+        """PD targets of the 69 hinges (SMPL order, rad), clipped to their limits."""
+        self.ctrl[self.act] = np.minimum(np.maximum(target69, self.lo), self.hi)
+
+    def push_pelvis(self, force: np.ndarray) -> None:
+        """A world-frame force (N, ``(3,)``) at the pelvis' centre of mass until changed (zeros
+        end it; :meth:`reset` clears it)."""
+        self.data.xfrc_applied[self.pelvis_body, :3] = force
+
+    # ------------------------------------------------------------------ stepping
+    def step(self) -> None:
+        """One control step: ``cfg.substeps`` physics steps toward the PD targets."""
+        m, d = self.model, self.data
+        # mj_step = mj_step1 (positions, velocities) + mj_step2 (forces, integration). Run them
+        # as step2 + step1 so that positions and velocities of the new state are computed once,
+        # by the step itself (same trajectory as mj_step, bit for bit).
+        for _ in range(self.cfg.substeps):
+            mujoco.mj_step2(m, d)
+            mujoco.mj_step1(m, d)
+
+    def step_pinned(self, root_from: np.ndarray, root_to: np.ndarray,
+                    root_vel: np.ndarray) -> None:  # fmt: skip
+        """One control step with the root written before each substep: position interpolated
+        from ``root_from[:3]`` to ``root_to[:3]``, orientation ``root_from[3:7]`` for the first
+        half of the substeps and ``root_to[3:7]`` after, velocity ``root_vel (6,)`` (a physics
+        check of the PD servos, not a mode of training or inference)."""
+        m, d, ix = self.model, self.data, self.index
+        r, rv, n = ix.root_qpos_adr, ix.root_dof_adr, self.cfg.substeps
+        for k in range(n):
+            f = (k + 1) / n
+            d.qpos[r : r + 3] = (1 - f) * root_from[:3] + f * root_to[:3]
+            d.qpos[r + 3 : r + 7] = (root_to if f >= 0.5 else root_from)[3:7]
+            d.qvel[rv : rv + 6] = root_vel
+            mujoco.mj_step(m, d)
+        mujoco.mj_step1(m, d)  # derived quantities of the final state (see step())
+
+    def blown_up(self) -> bool:
+        """Whether the state is a simulation blow-up: MuJoCo could not integrate it (its
+        bad-qpos/qvel/qacc warnings, counted since the last check, then cleared), or it is
+        absurd before MuJoCo's own limit (1e10): non-finite, the pelvis faster than
+        ``cfg.blowup_lin_vel_mps``, any joint faster than ``cfg.blowup_ang_vel_radps``, the
+        pelvis ``cfg.blowup_depth_m`` under the floor or ``cfg.blowup_height_m`` above the
+        terrain. Costs ~3 us."""
+        w = self.warnings
+        if w[_W_QPOS] or w[_W_QVEL] or w[_W_QACC]:  # (scalar reads: cheaper than w[_UNSTABLE])
+            w[_UNSTABLE] = 0
+            return True
+        cfg, v = self.cfg, self.qvel
+        lin = v[self._lin]
+        z = self.qpos[self._root_z]
+        lo, hi = self.z_range
+        # (written so that NaN fails every comparison and counts as a blow-up)
+        ok = (float(lin @ lin) <= cfg.blowup_lin_vel_mps**2
+              and float(np.abs(v[self._ang]).max()) <= cfg.blowup_ang_vel_radps
+              and lo <= z <= hi)  # fmt: skip
+        return not ok
+
+    # ------------------------------------------------------------------ state out
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """``pvw (3, 24, 3)`` world positions, linear and angular velocities of the bodies and
+        ``rot (24, 3, 3)`` their world rotations (new arrays)."""
+        ids = self.index.body_ids
+        pvw = np.empty((3, sk.N_JOINTS, 3))
+        pos = pvw[0]
+        pos[:] = self.xpos[ids]
+        cvel = self.cvel[ids]
+        w = cvel[:, :3]
+        pvw[2] = w
+        r = pos - self.com
+        # cvel is the velocity at the subtree COM; move it to each body origin: v + w x r
+        pvw[1] = cvel[:, 3:] + (w[:, _C1] * r[:, _C2] - w[:, _C2] * r[:, _C1])
+        return pvw, self.xmat[ids].reshape(-1, 3, 3)
+
+    def hinge_angles(self) -> np.ndarray:
+        """``(69,)`` hinge angles, SMPL order, rad (a copy)."""
+        return self.qpos[self.index.hinge_qpos_adr]
+
+    def hinge_velocities(self) -> np.ndarray:
+        """``(69,)`` hinge rates, SMPL order, rad/s (a copy)."""
+        return self.qvel[self.index.hinge_dof_adr]
+
+    def torques(self) -> np.ndarray:
+        """``(69,)`` actuator torques, SMPL order, N m (a view: copy to keep)."""
+        return self.act_force[self.act]
+
+    def foot_forces(self) -> tuple[np.ndarray, np.ndarray]:
+        """``grf (2, 3)`` ground reaction force on the left, right foot (N, world) and ``cop
+        (2, 3)`` centre of pressure (m, NaN without contact): :class:`grip.sim.model.
+        FootContacts` (does not change the simulation)."""
+        if self._feet is None:
+            self._feet = FootContacts(self.model, self.index)
+        return self._feet(self.data)
+
+    def heights_around(self, center_xy: np.ndarray, rot2: np.ndarray, grid: np.ndarray,
+                       out: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """Terrain heights at ``center_xy + grid @ rot2.T`` (``(N,)``, m; zeros when flat)."""
+        if self.terrain is None:
+            if out is None:
+                return np.zeros(len(grid))
+            out.fill(0.0)
+            return out
+        return self.terrain(center_xy, rot2, grid, out)
+
+    def lowest_clearance(self) -> float:
+        """Height of the lowest geom point (bounding-box corner) above the terrain under it, m."""
+        m, d, g = self.model, self.data, self._geoms
+        rot = d.geom_xmat[g].reshape(-1, 3, 3)
+        centre = d.geom_xpos[g] + np.einsum("gij,gj->gi", rot, m.geom_aabb[g, :3])
+        z = centre[:, 2] - np.einsum("gj,gj->g", np.abs(rot[:, 2]), m.geom_aabb[g, 3:])
+        mid = centre[:, :2].mean(axis=0)
+        ground = self.heights_around(mid, np.eye(2), centre[:, :2] - mid)
+        return float((z - ground).min())

@@ -1,0 +1,46 @@
+"""The inference pipeline reads sensors and the calibration frames only, with the numbers of the
+recording-based functions it replaces."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grip.core.reference import Estimate
+from grip.kinematics.features import (
+    FeatureConfig,
+    first_state,
+    input_features,
+    sensor_stream,
+    stream_features,
+    targets,
+)
+from grip.kinematics.reference import oracle_reference_clip
+from grip.pipeline import start_from_calibration, start_from_clip
+from prism_tools.synthetic import make_recording
+
+
+def test_sensor_stream_features_equal_the_recordings() -> None:
+    rec = make_recording(60, seed=4)
+    for cfg in (FeatureConfig(), FeatureConfig(insoles=False, align_first_frame=False)):
+        s = sensor_stream(rec, cfg)
+        np.testing.assert_array_equal(stream_features(s, cfg), input_features(rec, cfg))
+        assert [f.acc.shape for f in list(s.frames())[:1]] == [(len(cfg.sites), 3)]
+
+
+def test_calibration_gives_the_ground_truths_start() -> None:
+    rec = make_recording(60, seed=5)
+    s = sensor_stream(rec)
+    first = first_state(s.calibration, s.body)
+    t = targets(rec.slice_frames(0, 2))
+    np.testing.assert_array_equal(first["fp"], t.joint_pos[0].reshape(-1).astype(np.float32))
+    np.testing.assert_array_equal(first["fa"], t.rot6d[0].reshape(-1).astype(np.float32))
+    assert not first["lv"].any()
+    clip = oracle_reference_clip(rec)
+    a, b = start_from_calibration(s.calibration, s.body, s.fps), start_from_clip(clip)
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+    np.testing.assert_allclose(a.qvel, b.qvel, atol=1e-12)
+    np.testing.assert_allclose(a.amp, b.amp, atol=1e-9)
+    est = Estimate(clip.name, clip.fps, clip.est_pos, clip.est_rot6d, clip.est_vel, clip.sensor,
+                   s.calibration.root_pos[0])  # fmt: skip
+    for k in ("est_rot", "est_angvel", "est_hinge", "est_hinge_vel", "est_root_pos"):
+        np.testing.assert_array_equal(getattr(est, k), getattr(clip, k), err_msg=k)
