@@ -26,8 +26,8 @@ import torch
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.assets import SHIPPED_POLICY
-from policies.ensemble import load_policy
-from policies.train import load_reference, select_clips
+from grip.core.reference_sets import load_reference, select_clips
+from policies.controller import load_controller
 
 TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy")
 
@@ -35,7 +35,7 @@ TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "energy")
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reference", required=True,
-                    help="reference set (grip train-policy writes RUN/reference_train.npz)")
+                    help="reference set (grip policy train writes RUN/reference_train.npz)")
     ap.add_argument("--policy", default=str(SHIPPED_POLICY))
     ap.add_argument("--episodes", type=int, default=120)
     ap.add_argument("--category", action="append", default=None,
@@ -45,7 +45,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     torch.set_grad_enabled(False)
-    runner = load_policy(args.policy)
+    runner = load_controller(args.policy)
     cats = tuple(args.category or ("walk*", "run*", "dash*"))
     ref = select_clips(load_reference(args.reference), cats)
     cfg = dataclasses.replace(runner.env_cfg, termination_dist_m=0.0,

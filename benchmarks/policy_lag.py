@@ -24,16 +24,16 @@ import numpy as np
 from grip.assets import SHIPPED_POLICY
 from grip.cli.recordings import kin_checkpoint, load_recordings, split_paths
 from grip.kinematics.inference import KinematicsEstimator
-from policies.ensemble import PolicyEnsemble
+from policies.controller import load_controller
 
 SEGMENT = 500
 
 
 def _trace(args, runner, est) -> None:
-    import envs.tracking_env as te
+    import envs.scenes as te
     from grip.core.reference import ReferenceSet
-    from grip.eval.reconstruct import RecoveryConfig, inference_env, simulate_clip
     from grip.kinematics.reference import build_reference_set, oracle_reference_clip
+    from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
 
     if args.option:
         build, opt = te.build_mjcf, f"<option {args.option} "
@@ -43,10 +43,10 @@ def _trace(args, runner, est) -> None:
     f = est.cfg.features
     ref = (ReferenceSet([oracle_reference_clip(rec, f)], tuple(f.sites), f.insoles, "truth")
            if args.reference == "truth" else build_reference_set([rec], est))  # fmt: skip
-    env = inference_env(runner, ref)
-    recon, _ = simulate_clip(env, runner, 0, RecoveryConfig(enabled=False), stop_at_fall=True)
-    env.close()
-    c, n = ref.clip(0), recon.n_frames
+    c = ref.clip(0)
+    recon, _ = GripPipeline(runner, est, RecoveryConfig(enabled=False)).play(
+        c, start_from_clip(c), c.body, c.objects, stop_at_fall=True)
+    n = recon.n_frames
     print(f"{rec.name}: {n} frames, {'fell' if recon.fell else 'kept'}")
     print("frame | pelvis z sim/truth | along travel m | tilt deg sim/truth | feet z | contacts")
     for t in range(0, n, 10):
@@ -94,7 +94,7 @@ def main() -> None:
                     help="policy or ensemble file (repeatable; default: the shipped one)")
     ap.add_argument("--option", default="", help="trace: extra MuJoCo <option> attributes")
     args = ap.parse_args()
-    runner = PolicyEnsemble.load(args.policy or [SHIPPED_POLICY])
+    runner = load_controller(args.policy or [SHIPPED_POLICY])
     est = KinematicsEstimator.from_checkpoint(kin_checkpoint(None))
     (_trace if args.mode == "trace" else _reversed)(args, runner, est)
 

@@ -28,17 +28,19 @@ import numpy as np
 import torch
 
 from envs import amp as A
+from envs.factory import make_tracking_env
 from grip.assets import SHIPPED_POLICY
 from grip.core import skeleton as sk
+from grip.core.reference_sets import load_reference, select_clips
 from policies.amp import RealSampler
-from policies.ensemble import PolicyEnsemble, load_policy
-from policies.train import load_reference, select_clips, stage2_rollout_env
+from policies.controller import load_controller
+from policies.train import stage2_rollout_env
 
 
 def policy_windows(runner, ref_path: str, cats: tuple[str, ...], n_envs: int, steps: int,
                    seed: int) -> np.ndarray:  # fmt: skip
     """``(n_envs * steps, window * FRAME_DIM)`` AMP windows of the policy's decisions."""
-    venv = stage2_rollout_env(runner.env_cfg, ref_path, cats, n_envs, seed)
+    venv = stage2_rollout_env(make_tracking_env, runner.env_cfg, ref_path, cats, n_envs, seed)
     out = []
     try:
         obs = venv.reset()
@@ -82,7 +84,7 @@ def separability(real: np.ndarray, fake: np.ndarray, seed: int = 0) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reference", required=True,
-                    help="reference set (grip train-policy writes RUN/reference_train.npz)")
+                    help="reference set (grip policy train writes RUN/reference_train.npz)")
     ap.add_argument("--policy", action="append", default=None,
                     help="policy or ensemble file (repeatable; default: the shipped one)")
     ap.add_argument("--judge", default=None,
@@ -97,10 +99,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=100)
     args = ap.parse_args()
     torch.set_num_threads(1)
-    runner = PolicyEnsemble.load(args.policy or [SHIPPED_POLICY])
+    runner = load_controller(args.policy or [SHIPPED_POLICY])
     if args.noise > 0:
         runner.use_action_noise(args.noise, seed=args.seed)
-    judge = load_policy(args.judge) if args.judge else runner
+    judge = load_controller(args.judge) if args.judge else runner
     disc = judge.disc
     if disc is None:
         raise SystemExit(f"{args.judge or args.policy}: the file has no discriminator")

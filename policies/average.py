@@ -1,4 +1,4 @@
-"""Weight averaging of exported policies (``grip policy-average``).
+"""Weight averaging of exported policies (``grip policy combine --average``).
 
 PPO's exports swing from one checkpoint to the next (README, "DynamicsNet"); the average of a
 run's late exports, like the stochastic weight averaging of supervised training, sits between
@@ -15,33 +15,13 @@ deviation are averaged as they are.
 
 from __future__ import annotations
 
-import io
 import json
-import os
-from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import torch
 
-from grip.core.atomic import atomic_write
-from policies.runner import ENSEMBLE_FORMAT, FORMAT, load_weights
-
 _SAME = ("actor_sizes", "critic_sizes", "obs_keys", "clip_obs")
-
-
-def _load(path: Path) -> dict:
-    ck = load_weights(path, "policy file")
-    if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
-        raise ValueError(f"{path}: an ensemble file; weight averaging takes single policies of "
-                         "one run (grip policy-ensemble joins policies of any runs)")
-    if not isinstance(ck, dict) or ck.get("format") != FORMAT:
-        raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
-    missing = [k for k in ("config", "actor", "actor_sizes", "obs_keys", "obs_mean", "obs_var",
-                           "clip_obs") if k not in ck]  # fmt: skip
-    if missing:
-        raise ValueError(f"{path}: policy file lacks {missing}")
-    return ck
+_NEEDED = ("config", "actor", "actor_sizes", "obs_keys", "obs_mean", "obs_var", "clip_obs")
 
 
 def _norm(ck: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -74,29 +54,32 @@ def _average_mlp(cks: list[dict], part: str, mean: np.ndarray, std: np.ndarray) 
     return out
 
 
-def average_policies(paths: Sequence[str | os.PathLike], out: str | os.PathLike) -> int:
-    """Write the weight average of exported policies to ``out``; returns its size in bytes.
+def average_members(members: list[dict], names: list[str]) -> dict:
+    """The weight average of policy payloads (members of policy files, named ``names`` in
+    errors) as one payload: the last member's, with averaged networks.
 
     Raises:
-        ValueError: Fewer than two files, a file that is not a policy, or files whose networks,
-            observations or settings differ (named).
+        ValueError: Fewer than two members, or members whose networks, observations or
+            settings differ (named).
     """
-    paths = [Path(p) for p in paths]
-    if len(paths) < 2:
-        raise ValueError("policy averaging needs at least two policy files")
-    cks = [_load(p) for p in paths]
-    base = cks[-1]
-    for p, ck in zip(paths, cks, strict=True):
+    if len(members) < 2:
+        raise ValueError("policy averaging needs at least two policies")
+    for ck, name in zip(members, names, strict=True):
+        missing = [k for k in _NEEDED if k not in ck]
+        if missing:
+            raise ValueError(f"{name}: policy file lacks {missing}")
+    cks, base, last = members, members[-1], names[-1]
+    for p, ck in zip(names, cks, strict=True):
         for key in _SAME:
-            if ck[key] != base[key]:
-                raise ValueError(f"{p}: {key} {ck[key]} differs from {paths[-1]}'s {base[key]}")
+            if ck.get(key) != base.get(key):
+                raise ValueError(f"{p}: {key} {ck.get(key)} differs from {last}'s {base.get(key)}")
         act, act_base = (json.loads(c["config"])["ppo"]["activation"] for c in (ck, base))
         if act != act_base:
-            raise ValueError(f"{p}: activation {act} differs from {paths[-1]}'s {act_base}")
+            raise ValueError(f"{p}: activation {act} differs from {last}'s {act_base}")
         for part in ("actor", "critic"):
             if (part in ck) != (part in base):
                 raise ValueError(f"{p}: has {'no ' if part not in ck else ''}{part} network, "
-                                 f"unlike {paths[-1]}")  # fmt: skip
+                                 f"unlike {last}")  # fmt: skip
     mean, std = _norm(base)
     payload = dict(base)
     payload["actor"] = _average_mlp(cks, "actor", mean, std)
@@ -108,9 +91,6 @@ def average_policies(paths: Sequence[str | os.PathLike], out: str | os.PathLike)
     holdouts = {json.dumps(json.loads(ck.get("info", "{}")).get("holdout")) for ck in cks}
     if len(holdouts) > 1:
         info.pop("holdout", None)  # no clip set is held out of every file's training
-    info["averaged"] = [str(p) for p in paths]
+    info["averaged"] = list(names)
     payload["info"] = json.dumps(info)
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    atomic_write(out, lambda f: f.write(buf.getvalue()))
-    return len(buf.getvalue())
+    return payload

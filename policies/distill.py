@@ -144,6 +144,8 @@ class Distiller:
         teacher: Policy or ensemble files whose (mean) action the student learns.
         run_dir: Run folder (created or resumed).
         reference: The training reference set (``.npz``, as ``grip train-policy`` builds it).
+        make_env: The environment constructor (:class:`policies.train.EnvMaker`; the edge
+            passes :func:`envs.factory.make_tracking_env`).
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
         log: Where each iteration's summary line goes (None: nowhere).
 
@@ -154,7 +156,7 @@ class Distiller:
 
     def __init__(self, cfg: DistillConfig, teacher: Sequence[str | os.PathLike],
                  run_dir: str | os.PathLike, reference: str | os.PathLike,
-                 progress: Callable | None = None,
+                 make_env: Callable, progress: Callable | None = None,
                  log: Callable[[str], None] | None = None) -> None:  # fmt: skip
         from policies.ensemble import PolicyEnsemble
         from policies.runner import PolicyRunner
@@ -162,6 +164,7 @@ class Distiller:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.reference = str(reference)
+        self.make_env = make_env
         self.progress = progress
         self.log = log or (lambda _s: None)
         self.teacher_files = [str(p) for p in teacher]
@@ -262,9 +265,9 @@ class Distiller:
 
         c = self.cfg
         push = (c.push_force_n, c.push_every_s, c.push_duration_s) if c.push_force_n > 0 else None
-        return stage2_rollout_env(self.teacher.env_cfg, self.reference, c.categories, c.n_envs,
-                                  c.seed + 7919 * self.iteration, c.fall_height_m,
-                                  c.max_episode_frames, push)  # fmt: skip
+        return stage2_rollout_env(self.make_env, self.teacher.env_cfg, self.reference,
+                                  c.categories, c.n_envs, c.seed + 7919 * self.iteration,
+                                  c.fall_height_m, c.max_episode_frames, push)  # fmt: skip
 
     def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
         """One rollout of ``decisions_per_iteration`` decisions with the student acting (the
@@ -378,7 +381,7 @@ class Distiller:
     def export(self, out: str | os.PathLike, precision: str = "fp16") -> int:
         """Write the student as a policy file (the member's payload with the student's actor);
         returns its size in bytes."""
-        from grip.kinematics.train import pack_weights
+        from grip.nn.weights import pack_weights
 
         payload = dict(self.base)
         payload["actor"] = pack_weights(self.student.actor.state_dict(), precision)
@@ -389,10 +392,9 @@ class Distiller:
                              "decisions": sum(h["decisions"] for h in self.history),
                              "wall_s": self.wall_s()}  # fmt: skip
         payload["info"] = json.dumps(info)
-        buf = io.BytesIO()
-        torch.save(payload, buf)
-        atomic_write(out, lambda f: f.write(buf.getvalue()))
-        return len(buf.getvalue())
+        from policies.runner import write_policy_file
+
+        return write_policy_file([payload], [self.teacher_names[self.cfg.init_member]], out)
 
 
 def plot_distill_curves(history: list[dict], out_png: str | os.PathLike) -> None:

@@ -9,18 +9,16 @@ drive the humanoid the same way: the same observation parts and the same environ
 settings, which inference never uses, may differ. GRIP's fall detector uses the first
 member's discriminator.
 
-``grip policy-ensemble A.pt B.pt ... --out F.pt`` writes the members into one file
-(:func:`write_ensemble`, format :data:`policies.runner.ENSEMBLE_FORMAT`): their actors and
-observation normalisers, the first member's discriminator, no value networks (an ensemble is
-for inference; fine-tune a member). :func:`load_policy` reads a policy or an ensemble file;
-``grip eval-policy --policy A --policy B`` builds one from separate files.
+An ensemble is stored as a policy file of several members (:mod:`policies.runner`), written by
+``grip policy combine A.pt B.pt ... --out F.pt`` (:func:`policies.controller.combine` with
+:func:`ensemble_members`: actors and observation normalisers, the first member's
+discriminator, no value networks: an ensemble is for inference; fine-tune a member).
+:func:`policies.controller.load_controller` reads one or several files as one controller.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import io
-import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,8 +27,7 @@ import numpy as np
 import torch
 
 from envs.config import TrackingEnvConfig
-from grip.core.atomic import atomic_write
-from policies.runner import ENSEMBLE_FORMAT, VERSION, PolicyRunner, load_weights, pack_disc
+from policies.runner import PolicyRunner, read_policy_file
 
 _DROPPED = ("critic", "critic_sizes")  # the value networks: training only
 _DISC = ("disc", "amp_frame_dim")
@@ -43,7 +40,8 @@ def _driving_settings(cfg: TrackingEnvConfig) -> TrackingEnvConfig:
 
 
 class PolicyEnsemble:
-    """The mean action of several :class:`policies.runner.PolicyRunner` (the same interface).
+    """The mean action of several :class:`policies.runner.PolicyRunner`: a
+    :class:`policies.controller.Controller`.
 
     Args:
         members: The policies; the first one's settings, discriminator and notes are the
@@ -113,24 +111,6 @@ class PolicyEnsemble:
         stds = np.stack([m._std for m in self.members])
         return means, stds, clips.pop(), layers, act_fn
 
-    @classmethod
-    def load(cls, paths: Sequence[str | os.PathLike]) -> PolicyRunner | PolicyEnsemble:
-        """One file: :func:`load_policy`; several: the ensemble of all their policies (an
-        ensemble file among them adds its members). Errors name the file."""
-        if len(paths) == 1:
-            return load_policy(paths[0])
-        members: list[PolicyRunner] = []
-        names: list[str] = []
-        for p in paths:
-            pol = load_policy(p)
-            if isinstance(pol, PolicyEnsemble):
-                members += pol.members
-                names += [f"{p} [{i}]" for i in range(len(pol.members))]
-            else:
-                members.append(pol)
-                names.append(str(p))
-        return cls(members, names)
-
     def use_action_noise(self, scale: float, seed: int = 0) -> None:
         """Every member samples its action with its own noise (:meth:`PolicyRunner.
         use_action_noise`); the ensemble plays their mean."""
@@ -166,60 +146,27 @@ class PolicyEnsemble:
         return self._first.fall_probability(amp_obs)
 
 
-def _payloads(path: Path) -> list[dict]:
-    """The single-policy payloads of a policy or ensemble file (checked by loading them)."""
-    ck = load_weights(path, "policy file")
-    if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
-        load_policy(path)  # refuses a corrupt ensemble, naming the file
-        return list(ck["members"])
-    PolicyRunner.from_payload(ck, path)
-    return [ck]
-
-
-def write_ensemble(paths: Sequence[str | os.PathLike], out: str | os.PathLike,
-                   precision: str = "int8") -> tuple[int, int]:  # fmt: skip
-    """Write the policies of ``paths`` (policy or ensemble files) into one ensemble file; returns
-    its size in bytes and its number of policies. Members keep their normalisers and notes; their
-    actors are stored at ``precision`` (:func:`grip.kinematics.train.pack_weights`: int8 with a
-    float32 scale per row by default, ``fp16`` as exported), and so is the first member's
-    discriminator network (the fall detector); value networks are left out, and every other
-    discriminator.
+def ensemble_members(members: list[dict], names: list[str]) -> list[dict]:
+    """The payloads an ensemble file stores of ``members`` (named ``names`` in errors): each
+    without its value network, and every discriminator but the first member's (the fall
+    detector).
 
     Raises:
-        ValueError: Fewer than two policies in all, a file that is not a policy, or members that
-            do not drive the humanoid alike (:class:`PolicyEnsemble`).
+        ValueError: Fewer than two members, or members that do not drive the humanoid alike
+            (:class:`PolicyEnsemble`).
     """
-    paths = [Path(p) for p in paths]
-    members: list[dict] = []
-    names: list[str] = []
-    for p in paths:
-        got = _payloads(p)
-        members += got
-        names += [str(p)] if len(got) == 1 else [f"{p} [{i}]" for i in range(len(got))]
     if len(members) < 2:
         raise ValueError("an ensemble needs at least two policies")
     PolicyEnsemble([PolicyRunner.from_payload(m, n) for m, n in zip(members, names, strict=True)],
                    names)  # refuses members that act differently  # fmt: skip
-    from grip.kinematics.train import pack_weights, unpack_weights
-
-    kept = [{k: v for k, v in m.items() if k not in _DROPPED and (i == 0 or k not in _DISC)}
+    return [{k: v for k, v in m.items() if k not in _DROPPED and (i == 0 or k not in _DISC)}
             for i, m in enumerate(members)]  # fmt: skip
-    for m in kept:  # the actors at ``precision`` (int8: one float32 scale per weight row)
-        m["actor"] = pack_weights(unpack_weights(m["actor"]), precision)
-    if "disc" in kept[0]:  # the fall detector's network too
-        kept[0]["disc"] = pack_disc(kept[0]["disc"], precision)
-    payload = {"format": ENSEMBLE_FORMAT, "version": VERSION, "members": kept,
-               "names": json.dumps(names)}  # fmt: skip
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    atomic_write(out, lambda f: f.write(buf.getvalue()))
-    return len(buf.getvalue()), len(kept)
 
 
 def member_payload(path: str | os.PathLike, k: int) -> tuple[dict, str, int]:
-    """Member ``k`` of an ensemble file as a single-policy payload (with the file's
+    """Member ``k`` of a policy file as a single-policy payload (with the file's
     discriminator, which only the first member stores), its name, and the number of policies
-    in the file. A single-policy file is its own member 0.
+    in the file.
 
     Raises:
         ValueError: naming the file, when it is no policy or holds no member ``k``.
@@ -233,48 +180,21 @@ def member_payload(path: str | os.PathLike, k: int) -> tuple[dict, str, int]:
 
 
 def member_payloads(path: str | os.PathLike) -> list[tuple[dict, str]]:
-    """Every member of a policy or ensemble file as a single-policy payload (later members with
-    the file's discriminator, which only the first stores) and its name; the file is read and
-    checked once. A single-policy file is its own only member."""
+    """Every member of a policy file as a single-policy payload (later members with the file's
+    discriminator, which only the first stores) and its name (the file's name for a file of one
+    member); the members are checked by loading them.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: naming the file, when it is no policy file or a member is broken.
+    """
     path = Path(path)
-    got = _payloads(path)  # checked by loading
+    got, stored = read_policy_file(path)
     if len(got) == 1:
+        PolicyRunner.from_payload(got[0], path)
         return [(got[0], str(path))]
-    names = load_policy(path).info["members"]
+    names = [f"{path} (member {i}: {n})" for i, n in enumerate(stored)]
+    for m, n in zip(got, names, strict=True):
+        PolicyRunner.from_payload(m, n)
     disc = {key: got[0][key] for key in _DISC if key in got[0]}
     return [({**m, **disc}, n) for m, n in zip(got, names, strict=True)]
-
-
-def write_member(path: str | os.PathLike, k: int, out: str | os.PathLike) -> int:
-    """Write member ``k`` of an ensemble file as a policy file of its own (:func:`member_payload`:
-    its actor as stored, its normaliser, the file's discriminator, no value network); returns
-    its size in bytes."""
-    payload, _, _ = member_payload(path, k)
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    atomic_write(out, lambda f: f.write(buf.getvalue()))
-    return len(buf.getvalue())
-
-
-def load_policy(path: str | os.PathLike) -> PolicyRunner | PolicyEnsemble:
-    """Read a policy file (:class:`PolicyRunner`) or an ensemble file (:class:`PolicyEnsemble`);
-    errors name the file and the problem."""
-    path = Path(path)
-    ck = load_weights(path, "policy file")
-    if not (isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT):
-        return PolicyRunner.from_payload(ck, path)
-    members = ck.get("members")
-    if not isinstance(members, list) or len(members) < 2:
-        raise ValueError(f"{path}: ensemble file without its list of member policies")
-    try:
-        names = [str(n) for n in json.loads(ck.get("names", "[]"))]
-    except (ValueError, TypeError) as e:
-        raise ValueError(f"{path}: ensemble file with unreadable member names ({e})") from e
-    if len(names) != len(members):
-        names = [f"member {i}" for i in range(len(members))]
-    runners = [PolicyRunner.from_payload(m, f"{path} (member {i}: {names[i]})")
-               for i, m in enumerate(members)]  # fmt: skip
-    try:
-        return PolicyEnsemble(runners, [f"{path} (member {i}: {n})" for i, n in enumerate(names)])
-    except ValueError as e:
-        raise ValueError(f"{path}: {e}") from e

@@ -1,8 +1,12 @@
 """The trained controller for inference: a plain torch MLP, its observation normaliser and the
-AMP discriminator, in one small file (no stable-baselines3 pickle at load time).
+AMP discriminator, and the policy file that holds them (no stable-baselines3 pickle at load time).
 
-``export_policy(run_dir, out)`` writes it from a training run's checkpoint, read without
-unpickling anything (:mod:`policies.checkpoint`); ``PolicyRunner.load(path)`` reads it with
+A policy file is a list of one or more members (a single policy is an ensemble of one):
+``{"format": "grip-policy", "version": 2, "members": [member, ...], "names": "[...]"}``, each
+member the weights and settings of one policy. :func:`read_policy_file` also reads the layouts
+written before: a single policy at the top level (version 1) and ``"grip-policy-ensemble"``.
+``export_policy(run_dir, out)`` writes the file of a training run's checkpoint, read without
+unpickling anything (:mod:`policies.checkpoint`); everything is read with
 ``torch.load(weights_only=True)``.
 """
 
@@ -28,9 +32,12 @@ from policies.amp import Discriminator
 from policies.config import PolicyRunConfig
 
 FORMAT = "grip-policy"
-VERSION = 1
-ENSEMBLE_FORMAT = "grip-policy-ensemble"
-"""Several policies in one file (:mod:`policies.ensemble`)."""
+VERSION = 2
+"""Version 2: a list of members; version 1 stored one policy at the top level."""
+LEGACY_ENSEMBLE_FORMAT = "grip-policy-ensemble"
+"""Several policies in one file, as written before version 2 (two or more members)."""
+MEMBER_KEYS: tuple[str, ...] = ("config", "actor", "obs_keys", "obs_mean", "obs_var")
+"""What every member of a policy file holds at the least."""
 ACTIVATION_FNS: dict[str, type[nn.Module]] = {
     "silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU,
 }  # fmt: skip
@@ -82,16 +89,16 @@ _DISC_NET = ("trunk", "head")
 
 def _disc_state(state: dict) -> dict:
     """A stored discriminator state as float32 (its network may be fp16 or int8)."""
-    from grip.kinematics.train import unpack_weights
+    from grip.nn.weights import unpack_weights
 
     net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
     return {**{k: v for k, v in state.items() if k not in net}, **unpack_weights(net)}
 
 
 def pack_disc(state: dict, precision: str) -> dict:
-    """The discriminator's network weights at ``precision`` (:func:`grip.kinematics.train.
+    """The discriminator's network weights at ``precision`` (:func:`grip.nn.weights.
     pack_weights`); its input normaliser as stored."""
-    from grip.kinematics.train import pack_weights, unpack_weights
+    from grip.nn.weights import pack_weights, unpack_weights
 
     net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
     return {**{k: v for k, v in state.items() if k not in net},
@@ -99,7 +106,7 @@ def pack_disc(state: dict, precision: str) -> dict:
 
 
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
-    from grip.kinematics.train import unpack_weights  # fp32, fp16 or int8 (pack_weights)
+    from grip.nn.weights import unpack_weights  # fp32, fp16 or int8 (pack_weights)
 
     mlp = _mlp([int(s) for s in sizes], activation)
     mlp.load_state_dict(unpack_weights(state))
@@ -124,7 +131,7 @@ def load_weights(path: str | os.PathLike, what: str) -> object:
 
 class PolicyRunner:
     """Actions of a trained DynamicsNet (the Gaussian's mean unless :meth:`use_action_noise`),
-    and the discriminator's probability.
+    and the discriminator's probability: a :class:`policies.controller.Controller`.
 
     Attributes:
         env_cfg: The environment settings the policy was trained with (observation variant,
@@ -192,19 +199,21 @@ class PolicyRunner:
     # ------------------------------------------------------------------ file
     @classmethod
     def load(cls, path: str | os.PathLike) -> PolicyRunner:
-        """Read an exported policy; errors name the file and the problem."""
+        """Read a one-member policy file; errors name the file and the problem (several
+        members: :func:`policies.controller.load_controller`)."""
         path = Path(path)
-        return cls.from_payload(load_weights(path, "policy file"), path)
+        members, _ = read_policy_file(path)
+        if len(members) != 1:
+            raise ValueError(f"{path}: an ensemble of {len(members)} policies, not one policy "
+                             "(policies.controller.load_controller reads it)")  # fmt: skip
+        return cls.from_payload(members[0], path)
 
     @classmethod
     def from_payload(cls, ck: object, path: str | os.PathLike) -> PolicyRunner:
-        """The policy of a loaded export (``path`` names it in errors)."""
-        if isinstance(ck, dict) and ck.get("format") == ENSEMBLE_FORMAT:
-            raise ValueError(f"{path}: an ensemble of {len(ck.get('members') or ())} policies, "
-                             "not one policy (policies.ensemble.load_policy reads it)")
-        if not isinstance(ck, dict) or ck.get("format") != FORMAT:
+        """The policy of one member of a policy file (``path`` names it in errors)."""
+        if not isinstance(ck, dict):
             raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
-        missing = [k for k in ("config", "actor", "obs_keys", "obs_mean", "obs_var") if k not in ck]
+        missing = [k for k in MEMBER_KEYS if k not in ck]
         if missing:
             raise ValueError(f"{path}: policy file lacks {missing}")
         try:
@@ -233,20 +242,20 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     """Write the inference file of a training run's checkpoint; returns its size in bytes.
 
     Weights are float16 with ``half`` (cast back on load), float32 without; ``precision``
-    (``"fp32"``, ``"fp16"`` or ``"int8"``, :func:`grip.kinematics.train.pack_weights`: one
+    (``"fp32"``, ``"fp16"`` or ``"int8"``, :func:`grip.nn.weights.pack_weights`: one
     float32 scale per weight row) overrides ``half`` and applies to the policy, value and
     discriminator networks alike. Normaliser statistics and the log std stay as they are.
     ``info`` (JSON) is kept in the file; the run's held-out sequences (``RUN/holdout.json``)
-    join it as ``info["holdout"]``, for ``grip eval-policy --split holdout``. The networks come
+    join it as ``info["holdout"]``, for ``grip policy eval --split holdout``. The networks come
     from the state dicts of ``checkpoint/model.zip``, never from its pickled entries
     (:func:`policies.checkpoint.read_ppo_zip`), built as the run's config says.
 
     Raises:
-        FileNotFoundError: ``run_dir`` is no train-policy run folder.
+        FileNotFoundError: ``run_dir`` is no 'grip policy train' run folder.
         ValueError: naming the file, for a corrupt or hostile checkpoint file (nothing in it
             runs) or one that does not fit the others.
     """
-    from grip.kinematics.train import pack_weights
+    from grip.nn.weights import pack_weights
     from policies.checkpoint import read_ppo_zip, read_vecnorm
 
     run_dir = Path(run_dir)
@@ -254,14 +263,14 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     cfg_path = run_dir / "config.json"
     if not (ck_dir / "model.zip").is_file() or not cfg_path.is_file():
         raise FileNotFoundError(f"{run_dir}: no checkpoint/model.zip and config.json (a "
-                                "train-policy run folder expected)")  # fmt: skip
-    cfg_d = read_json_file(cfg_path, "train-policy run config").get("config")
+                                "'grip policy train' run folder expected)")  # fmt: skip
+    cfg_d = read_json_file(cfg_path, "'grip policy train' run config").get("config")
     if not isinstance(cfg_d, dict):
-        raise ValueError(f"{cfg_path}: not a train-policy run config (no 'config' object)")
+        raise ValueError(f"{cfg_path}: not a 'grip policy train' run config (no 'config' object)")
     try:
         cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
     except (TypeError, KeyError, AttributeError) as e:
-        raise ValueError(f"{cfg_path}: not a train-policy run config ({e})") from e
+        raise ValueError(f"{cfg_path}: not a 'grip policy train' run config ({e})") from e
     ppo = read_ppo_zip(ck_dir / "model.zip")  # (never unpickled: policies.checkpoint)
     act, zpath = cfg.ppo.activation, ppo.path
     sizes, actor = _mlp_from_state(ppo.policy, "mlp_extractor.policy_net.", "action_net.", act,
@@ -272,7 +281,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         raise ValueError(f"{zpath}: no log_std in its policy state")
     precision = precision or ("fp16" if half else "fp32")
     info = dict(info or {})
-    holdout = run_dir / "holdout.json"  # grip train-policy's held-out clips (holdout_fraction)
+    holdout = run_dir / "holdout.json"  # grip policy train's held-out clips (holdout_fraction)
     if holdout.is_file():
         seqs = read_json_file(holdout, "held-out sequence list").get("sequences")
         if not isinstance(seqs, list) or not all(isinstance(q, str) for q in seqs):
@@ -295,7 +304,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
                          f"{zpath} take {sizes[0]}")  # fmt: skip
     amp_ck = load_weights(ck_dir / "amp.pt", "discriminator checkpoint")
     payload = {
-        "format": FORMAT, "version": VERSION, "config": json.dumps(cfg_d),
+        "config": json.dumps(cfg_d),
         "actor_sizes": sizes, "actor": pack_weights(actor.state_dict(), precision),
         "obs_keys": keys,
         "obs_mean": obs_mean, "obs_var": obs_var, "obs_count": count,
@@ -306,7 +315,63 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         "disc": pack_disc(amp_ck["disc"], precision),
         "info": json.dumps(info),
     }  # fmt: skip
+    return write_policy_file([payload], [str(run_dir)], out)
+
+
+def read_policy_file(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
+    """The members of a policy file and the names stored with them, in any layout ever written:
+    version 2 (a list of members), version 1 (one policy at the top level; named after the file)
+    and :data:`LEGACY_ENSEMBLE_FORMAT`. Only the first member of a file of several stores the
+    discriminator; the members are not checked further (:meth:`PolicyRunner.from_payload`).
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: naming the file, when it is no policy file or its list of members is
+            missing or unreadable.
+    """
+    path = Path(path)
+    ck = load_weights(path, "policy file")
+    fmt = ck.get("format") if isinstance(ck, dict) else None
+    if fmt == FORMAT and "members" not in ck:
+        return [ck], [str(path)]
+    if fmt not in (FORMAT, LEGACY_ENSEMBLE_FORMAT):
+        raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
+    members = ck.get("members")
+    least = 2 if fmt == LEGACY_ENSEMBLE_FORMAT else 1
+    if not isinstance(members, list) or len(members) < least:
+        raise ValueError(f"{path}: policy file without its list of member policies")
+    try:
+        names = [str(n) for n in json.loads(ck.get("names", "[]"))]
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{path}: policy file with unreadable member names ({e})") from e
+    if len(names) != len(members):
+        names = [f"member {i}" for i in range(len(members))]
+    return members, names
+
+
+def write_policy_file(members: list[dict], names: list[str], out: str | os.PathLike) -> int:
+    """Write ``members`` (policy payloads, as :func:`read_policy_file` returns them) and their
+    ``names`` as one policy file, atomically; returns its size in bytes."""
+    if not members or len(names) != len(members):
+        raise ValueError(f"{out}: a policy file needs one name per member, at least one member")
+    kept = [{k: v for k, v in m.items() if k not in ("format", "version")} for m in members]
+    payload = {"format": FORMAT, "version": VERSION, "members": kept,
+               "names": json.dumps(list(names))}  # fmt: skip
     buf = io.BytesIO()
     torch.save(payload, buf)
     atomic_write(out, lambda f: f.write(buf.getvalue()))
     return len(buf.getvalue())
+
+
+def repack(member: dict, precision: str) -> dict:
+    """``member`` with its actor, value network and discriminator networks stored at
+    ``precision`` (:func:`grip.nn.weights.pack_weights`); normalisers as they are."""
+    from grip.nn.weights import pack_weights, unpack_weights
+
+    out = dict(member)
+    for part in ("actor", "critic"):
+        if part in out:
+            out[part] = pack_weights(unpack_weights(out[part]), precision)
+    if "disc" in out:
+        out["disc"] = pack_disc(out["disc"], precision)
+    return out

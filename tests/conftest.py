@@ -13,7 +13,7 @@ TINY_POLICY = ["--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo
                "--set", "amp.replay_size=256", "--set", "stage1.timesteps=64",
                "--set", "stage1.categories=[]", "--set", "stage2.categories=[]",
                "--set", "stage2.timesteps=64"]  # fmt: skip
-"""``grip train-policy`` settings of a run of a few seconds."""
+"""``grip policy train`` settings of a run of a few seconds."""
 
 _WALK = ("cmu", "bvh", "07_05.bvh")
 
@@ -51,7 +51,7 @@ def tiny_policy_settings() -> list[str]:
 @pytest.fixture(scope="session")
 def tiny_policy_run(tmp_path_factory):
     """``(data, run)``: a dataset folder (its split only: the run's reference set is the bundled
-    sample) and a tiny ``grip train-policy`` run folder trained on it (:data:`TINY_POLICY`).
+    sample) and a tiny ``grip policy train`` run folder trained on it (:data:`TINY_POLICY`).
     Read-only: tests copy the run folder before changing it."""
     from envs.tracking_env import SAMPLE_REFERENCE
     from grip.cli.main import main
@@ -63,6 +63,6 @@ def tiny_policy_run(tmp_path_factory):
     run = root / "run"
     run.mkdir()
     shutil.copy(SAMPLE_REFERENCE, run / "reference_train.npz")  # (no KinematicsNet pass)
-    argv = ["train-policy", "--data", str(data), "--out", str(run), *TINY_POLICY]
+    argv = ["policy", "train", "--data", str(data), "--out", str(run), *TINY_POLICY]
     assert main(argv) == 0
     return data, run

@@ -294,9 +294,9 @@ def _load_reconstruction(p: Path) -> None:
 
 
 def _load_policy(p: Path) -> None:
-    from policies.runner import PolicyRunner
+    from policies.controller import load_controller
 
-    PolicyRunner.load(p)
+    load_controller(p)
 
 
 def _load_kin(p: Path) -> None:
@@ -446,18 +446,18 @@ def _zip_member_mutator(member: str, inner) -> Callable:
 
 
 def _fuzz_run_folder(run: Path, n: int, seed: int, marker: Path, work: Path) -> list[str]:
-    """Mutants of each file of a training run folder, read as ``grip policy-export`` reads
+    """Mutants of each file of a training run folder, read as ``grip policy export`` reads
     them (through the command, so that its clean errors count and a traceback does not)."""
     from grip.cli.main import main
 
     def export(_p: Path) -> None:
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
-            rc = main(["policy-export", str(ck), "--out", str(work / "p.pt")])
+            rc = main(["policy", "export", str(ck), "--out", str(work / "p.pt")])
         if rc == 2:  # a clean refusal: its message must name the file
             raise ValueError(err.getvalue())
         if rc != 0:
-            raise AssertionError(f"policy-export: exit status {rc}")
+            raise AssertionError(f"policy export: exit status {rc}")
 
     ck = work / "run"
     if ck.exists():

@@ -432,7 +432,7 @@ def test_eval_kin_skips_a_bad_file_and_exits_1(tmp_path, capsys) -> None:
     from grip.cli.main import main
 
     d, bad = _split_dataset(tmp_path)
-    assert main(["eval-kin", "--data", str(d), "--segment-frames", "100"]) == 1
+    assert main(["kin", "eval", "--data", str(d), "--segment-frames", "100"]) == 1
     out, err = capsys.readouterr()
     assert "PEL_MPJPE" in out or "MPJPE" in out
     assert f"grip: error: {bad}:" in err and "max_depth" in err
@@ -445,5 +445,6 @@ def test_eval_policy_skips_a_bad_file_and_exits_1(tmp_path, capsys) -> None:
     if not (SHIPPED_POLICY).is_file():
         pytest.skip("no shipped policy")
     d, bad = _split_dataset(tmp_path)
-    assert main(["eval-policy", "--data", str(d), "--segment-frames", "40", "--segments", "1"]) == 1
+    assert main(["policy", "eval", "--data", str(d), "--segment-frames", "40",
+                 "--segments", "1"]) == 1  # fmt: skip
     assert f"grip: error: {bad}:" in capsys.readouterr().err

@@ -61,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pip", type=Path, default=None,
                    help="PIP nets for method pip (default: the shipped ones)")
     p.add_argument("--sensors", default=None, metavar="NAME,NAME,...",
-                   help="sensor configurations of a 'grip train-kin --sweep' folder "
+                   help="sensor configurations of a 'grip kin train --sweep' folder "
                    "(imu<N>_press|nopress), GRIP Table 3; methods that cannot change sensors "
                    "are skipped")  # fmt: skip
     p.add_argument("--sweep", type=Path, default=None, metavar="DIR",
@@ -107,7 +107,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             for s in sensors:
                 sensor_set(s)
             if args.sweep is None:
-                raise ValueError("--sensors needs --sweep DIR (the 'grip train-kin --sweep' "
+                raise ValueError("--sensors needs --sweep DIR (the 'grip kin train --sweep' "
                                  "folder)")  # fmt: skip
         elif args.sweep is not None:
             raise ValueError("--sweep is only used with --sensors")

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import tempfile
 from pathlib import Path
+
+from grip.cli.common import positive_float
 
 # Subject options: flag -> (BodyParams field, metavar, help text).
 _BODY_OPTIONS: dict[str, tuple[str, str, str]] = {
@@ -18,25 +19,12 @@ _BODY_OPTIONS: dict[str, tuple[str, str, str]] = {
 }
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value <= 0.0:
-        raise argparse.ArgumentTypeError(f"{text} must be a positive number")
-    return value
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grip body export`` on the ``grip`` subparsers."""
-    p = sub.add_parser(
-        "body",
-        help="export the MuJoCo humanoid of a subject",
-        description="Tools for the project's body model (SMPL topology, own proportions).",
-    )
-    bsub = p.add_subparsers(dest="body_command", metavar="<action>")
-    bsub.required = True
+    from grip.cli.common import add_group
+
+    bsub = add_group(sub, "body", "export the MuJoCo humanoid of a subject",
+                     "Tools for the project's body model (SMPL topology, own proportions).")
     e = bsub.add_parser(
         "export",
         help="write the humanoid as an MJCF (MuJoCo XML) file",
@@ -53,8 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--out", required=True, type=Path, metavar="FILE.xml",
                    help="output file (written atomically; parent folders are created)")  # fmt: skip
     for flag, (_, metavar, text) in _BODY_OPTIONS.items():
-        e.add_argument(flag, type=_positive_float, default=None, metavar=metavar, help=text)
-    e.add_argument("--timestep", type=_positive_float, default=None, metavar="S",
+        e.add_argument(flag, type=positive_float, default=None, metavar=metavar, help=text)
+    e.add_argument("--timestep", type=positive_float, default=None, metavar="S",
                    help="physics step, s (default 0.005)")  # fmt: skip
     e.add_argument("--no-insole-sensors", action="store_true",
                    help="leave out the 32 insole touch sensors")  # fmt: skip

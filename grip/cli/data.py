@@ -12,14 +12,11 @@ from grip.cli.recordings import add_limit_arguments, limits_from_args
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "data",
-        help="build, inspect and plot PRISM-format datasets",
-        description="Build PRISM-format recordings from motion clips, summarise a dataset "
-        "folder (ours or real PRISM pickles) and plot one recording.",
-    )
-    dsub = p.add_subparsers(dest="data_command", metavar="<action>")
-    dsub.required = True
+    from grip.cli.common import add_group
+
+    dsub = add_group(sub, "data", "build, inspect and plot PRISM-format datasets",
+                     "Build PRISM-format recordings from motion clips, summarise a dataset "
+                     "folder (ours or real PRISM pickles) and plot one recording.")  # fmt: skip
 
     b = dsub.add_parser(
         "build",

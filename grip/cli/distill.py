@@ -1,4 +1,4 @@
-"""``grip distill-policy``: one network that acts like an ensemble (DAgger)."""
+"""``grip policy distill``: one network that acts like an ensemble (DAgger)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ DEFAULT_CONFIG = "configs/policy/distill.toml"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``grip policy distill`` on the ``grip policy`` subparsers."""
     p = sub.add_parser(
-        "distill-policy",
+        "distill",
         help="distil a policy ensemble into one network (DAgger on the training clips)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
@@ -23,13 +24,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "probability that halves every iteration (beta_decay), labels every observation\n"
             "with the teacher's action and fits the student to all labels so far. It takes\n"
             "one member's network shape, observation normaliser and weights, so RUN/policy.pt\n"
-            "is an ordinary policy file (grip eval-policy; grip train-policy --init fine-tunes\n"
+            "is an ordinary policy file (grip policy eval; grip policy train --init fine-tunes\n"
             "it). Checkpoints after every iteration; the same command resumes.\n"
             f"Settings: {DEFAULT_CONFIG} (--config, --set)."
         ),
-        epilog="example: grip distill-policy --teacher grip/assets/policy_default.pt "
+        epilog="example: grip policy distill --teacher grip/assets/policy_default.pt "
         "--data data/prism_synth --out runs/distill\n"
-        "         grip distill-policy --teacher a.pt --teacher b.pt --data data/prism_synth "
+        "         grip policy distill --teacher a.pt --teacher b.pt --data data/prism_synth "
         "--out runs/d --set iterations=4 --set init_member=1",
     )
     p.add_argument("--teacher", type=Path, action="append", default=None, metavar="POLICY",
@@ -54,13 +55,14 @@ def cmd_distill(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from envs.factory import make_tracking_env
     from grip.assets import SHIPPED_POLICY
     from grip.cli.errors import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
-    from grip.cli.policy import build_training_reference, changed_settings
+    from grip.cli.policy_runs import build_training_reference, changed_settings
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
-    from grip.kinematics.train import git_hash
+    from grip.core.runs import git_hash
     from policies.distill import DistillConfig, Distiller, plot_distill_curves
 
     cfg = load_run_config(args.config or REPO_ROOT / DEFAULT_CONFIG, "distill", DistillConfig(),
@@ -89,7 +91,8 @@ def cmd_distill(args: argparse.Namespace) -> int:
     build_training_reference(ref_path, args.data, split_paths(args.data, "train"), [kin],
                              cfg.reverse_categories, cfg.mirror_references)  # fmt: skip
     try:
-        dist = Distiller(cfg, teachers, out, ref_path, progress=tqdm, log=tqdm.write)
+        dist = Distiller(cfg, teachers, out, ref_path, make_tracking_env, progress=tqdm,
+                         log=tqdm.write)
     except ValueError as e:
         raise CliError(str(e)) from e
     record.update(git=git_hash(), data=str(args.data.resolve()), kin=str(kin.resolve()))

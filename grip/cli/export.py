@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from grip.cli.common import positive_float
 from grip.cli.recordings import add_limit_arguments, limits_from_args
 
 FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")
@@ -29,16 +29,6 @@ def _formats(text: str) -> tuple[str, ...]:
             f"unknown format(s) {', '.join(bad) or repr(text)}: choose from {', '.join(FORMATS)}"
         )
     return names
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value <= 0.0:
-        raise argparse.ArgumentTypeError(f"{text} must be a positive number")
-    return value
 
 
 def _frames(text: str) -> tuple[int, ...]:
@@ -86,15 +76,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gt", type=Path, default=None, metavar="RECORDING",
                    help="PRISM-format recording the reconstructions were made from: ground "
                         "truth, insole forces and contacts, and the subject's body")  # fmt: skip
-    p.add_argument("--fps-video", type=_positive_float, default=30.0, metavar="HZ",
+    p.add_argument("--fps-video", type=positive_float, default=30.0, metavar="HZ",
                    help="video frame rate (default 30)")  # fmt: skip
     p.add_argument("--width", type=int, default=640, metavar="PX",
                    help="video width, even (default 640)")  # fmt: skip
     p.add_argument("--height", type=int, default=480, metavar="PX",
                    help="video height, even (default 480)")  # fmt: skip
-    p.add_argument("--body-height", type=_positive_float, default=None, metavar="M",
+    p.add_argument("--body-height", type=positive_float, default=None, metavar="M",
                    help="subject stature, m (default: from --gt, else 1.70)")  # fmt: skip
-    p.add_argument("--body-mass", type=_positive_float, default=None, metavar="KG",
+    p.add_argument("--body-mass", type=positive_float, default=None, metavar="KG",
                    help="subject mass, kg (default: from --gt, else 70)")  # fmt: skip
     p.add_argument("--bvh-unit", choices=("cm", "m"), default="cm",
                    help="length unit of the BVH file (default cm)")  # fmt: skip
@@ -136,7 +126,7 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     from grip.cli.errors import CliError
     from grip.cli.recordings import skip_file
     from grip.core.reconstruction import Reconstruction, ReconstructionError
-    from grip.export import ExportError, check_ground_truth, fk_mismatch_m
+    from grip.export.common import ExportError, check_ground_truth, fk_mismatch_m
 
     video_cfg = None
     if "mp4" in args.formats:
@@ -168,7 +158,7 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
 
     gt = None
     if args.gt is not None:
-        from grip.export import ground_truth
+        from grip.kinematics.features import ground_truth
         from prism_tools.io import load_recording
 
         try:

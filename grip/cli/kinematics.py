@@ -1,4 +1,4 @@
-"""``grip train-kin``: train KinematicsNet on a dataset folder."""
+"""``grip kin train|eval|export``: KinematicsNet, and the TransPose / PIP kinematics nets."""
 
 from __future__ import annotations
 
@@ -8,114 +8,88 @@ from pathlib import Path
 
 from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
 
+BASELINE_NAMES: tuple[str, ...] = ("transpose", "pip")
+"""The baselines whose kinematics nets ``grip kin train --baseline`` trains."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "train-kin",
-        help="train KinematicsNet on a dataset built by 'grip data build'",
+    """Register ``grip kin`` and its subcommands on the ``grip`` subparsers."""
+    from grip.cli.common import add_group, add_output_arguments
+
+    ksub = add_group(sub, "kin", "train, evaluate and export KinematicsNet (or a baseline's "
+                     "kinematics nets)", "The kinematics estimators: KinematicsNet (GRIP's), and "
+                     "the TransPose and PIP networks the benchmark compares with.")  # fmt: skip
+    p = ksub.add_parser(
+        "train",
+        help="train KinematicsNet (or, with --baseline, TransPose / PIP) on a dataset",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Train the four-stage KinematicsNet (LP -> FP -> FA -> LV) on the train split of a\n"
             "dataset folder: stage-wise, then jointly, with MSE + forward-kinematics losses,\n"
             "input noise and random-yaw augmentation. Checkpoints every epoch to RUN/last.pt\n"
             "(best validation: RUN/best.pt); running the same command again resumes.\n"
+            "--baseline NAME trains a baseline's kinematics networks instead, adapted to 4 IMUs\n"
+            "(BASELINES_AND_METRICS.md section 2): TransPose's Pose-S1/S2/S3 and Trans-B1/B2,\n"
+            "or PIP's P_L, P_A, R_A, V_A, C_F with the learned RNN initialisation; --insoles\n"
+            "trains its '+I' variant (insole values appended to every input).\n"
             "TensorBoard: tensorboard --logdir RUN/tb"
         ),
-        epilog="example: grip train-kin --data data/prism_synth --out runs/kin\n"
-        "         grip train-kin --data data/prism_synth --out runs/kin_small "
+        epilog="example: grip kin train --data data/prism_synth --out runs/kin\n"
+        "         grip kin train --data data/prism_synth --out runs/kin_small "
         "--set hidden=128 --set train.joint_epochs=5\n"
-        "         grip train-kin --data data/prism_synth --out runs/sweep --sweep "
+        "         grip kin train --data data/prism_synth --out runs/sweep --sweep "
         "--config configs/kinematics/sweep.toml\n"
-        "         grip train-kin --data data/prism_synth --out runs/kin_ft "
-        "--init runs/kin/last.pt --config configs/kinematics/finetune.toml",
+        "         grip kin train --data data/prism_synth --out runs/kin_ft "
+        "--init runs/kin/last.pt --config configs/kinematics/finetune.toml\n"
+        "         grip kin train --baseline transpose --data data/prism_synth --out runs/tp4\n"
+        "         grip kin train --baseline pip --insoles --data data/prism_synth --out runs/pip4i",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
-    p.add_argument(
-        "--config",
-        type=Path,
-        default=None,
-        help="TOML overrides (default: configs/kinematics/default.toml if present)",
-    )
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override one setting, e.g. --set train.lr=3e-4 (repeatable)",
-    )
+    p.add_argument("--baseline", choices=BASELINE_NAMES, default=None,
+                   help="train this baseline's kinematics nets instead of KinematicsNet")
+    p.add_argument("--config", type=Path, default=None,
+                   help="TOML overrides (default: configs/kinematics/default.toml, with "
+                   "--baseline configs/baselines/NAME.toml, if present)")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting, e.g. --set train.lr=3e-4 (repeatable)")
     p.add_argument("--threads", type=int, default=0, help="torch threads (default: all cores)")
-    p.add_argument(
-        "--init",
-        type=Path,
-        default=None,
-        metavar="CKPT",
-        help="fine-tune: start from the weights and normaliser of this checkpoint (a run's "
-        "last.pt or an export with the same network and sensors) instead of random weights; "
-        "usually with --set train.stage_epochs=0 (ignored when OUT resumes)",
-    )
-    p.add_argument(
-        "--sweep",
-        action="store_true",
-        help="sensor sweep (GRIP Table 3): train one run per IMU count, with and "
-        "without insoles, in OUT/imu<N>_press|nopress (finished runs are skipped, "
-        "interrupted ones resume); evaluate with 'grip eval-kin --sweep OUT'",
-    )
-    p.add_argument(
-        "--imus",
-        default="2,3,4,6",
-        metavar="N,N,...",
-        help="IMU counts of --sweep (feet, +left wrist, +right wrist, +pelvis, +head; "
-        "default 2,3,4,6)",
-    )
+    p.add_argument("--insoles", action="store_true",
+                   help="with --baseline: the '+I' variant (same as net.insoles=true)")
+    p.add_argument("--init", type=Path, default=None, metavar="CKPT",
+                   help="fine-tune: start from the weights and normaliser of this checkpoint (a "
+                   "run's last.pt or an export with the same network and sensors) instead of "
+                   "random weights; usually with --set train.stage_epochs=0 (ignored when OUT "
+                   "resumes)")  # fmt: skip
+    p.add_argument("--sweep", action="store_true",
+                   help="sensor sweep (GRIP Table 3): train one run per IMU count, with and "
+                   "without insoles, in OUT/imu<N>_press|nopress (finished runs are skipped, "
+                   "interrupted ones resume); evaluate with 'grip kin eval --sweep OUT'")
+    p.add_argument("--imus", default="2,3,4,6", metavar="N,N,...",
+                   help="IMU counts of --sweep (feet, +left wrist, +right wrist, +pelvis, +head; "
+                   "default 2,3,4,6)")  # fmt: skip
     p.set_defaults(func=cmd_train)
-    add_eval_parser(sub)
-    add_export_parser(
-        sub,
-        "kin-export",
-        "KinematicsNet",
-        "the form in which the default model ships (grip/assets/kinematics_default.pt)",
-        "grip kin-export runs/kin/best.pt --out grip/assets/kinematics_default.pt",
-        "grip.kinematics.train:export_for_inference",
-    )
-
-
-def add_export_parser(
-    sub: argparse._SubParsersAction, name: str, what: str, shipped: str, example: str, exporter: str
-) -> None:
-    """A ``<name> CKPT --out FILE [--precision P]`` command writing a small inference copy of a
-    training checkpoint with ``exporter`` (``"module:function(src, dst, precision) -> bytes"``)."""
-    x = sub.add_parser(
-        name,
-        help=f"write a small inference-only copy of a {what} checkpoint",
-        description=f"Drop the optimiser state and store the weights as float16 (or int8 with "
-        f"a scale per row, or float32): {shipped}.",
-        epilog=f"example: {example}",
+    add_eval_parser(ksub)
+    x = ksub.add_parser(
+        "export",
+        help="write a small inference-only copy of a KinematicsNet or baseline checkpoint",
+        description="Drop the optimiser state and store the weights as float16 (or int8 with "
+        "a scale per row, or float32): the form in which the default models ship "
+        "(grip/assets/kinematics_default.pt, transpose4.pt, pip4.pt).",
+        epilog="example: grip kin export runs/kin/best.pt --out grip/assets/kinematics_default.pt\n"
+        "         grip kin export runs/tp4/best.pt --out grip/assets/transpose4.pt",
     )
     x.add_argument("checkpoint", type=Path, help="training checkpoint (RUN/best.pt)")
-    x.add_argument("--out", required=True, type=Path, help="output .pt")
-    x.add_argument(
-        "--precision",
-        choices=("fp32", "fp16", "int8"),
-        default="fp16",
-        help="weight storage (default fp16; int8 halves the file again)",
-    )
-    x.set_defaults(func=cmd_export, exporter=exporter)
+    add_output_arguments(x, "fp16", "weight storage (default fp16; int8 halves the file again)")
+    x.set_defaults(func=cmd_export)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    import importlib
+    from grip.cli.common import write_artifact
+    from grip.kinematics.train import export_for_inference
 
-    from grip.cli.errors import CliError
-
-    module, func = args.exporter.split(":")
-    export = getattr(importlib.import_module(module), func)
-    try:
-        size = export(args.checkpoint, args.out, precision=args.precision)
-    except (FileNotFoundError, ValueError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
-    return 0
+    return write_artifact(args.out, lambda: export_for_inference(args.checkpoint, args.out,
+                                                                 precision=args.precision))
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -123,8 +97,16 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     from grip.cli.errors import CliError
     from grip.cli.paths import load_run_config
-    from grip.kinematics.train import KinematicsRunConfig
+    from grip.kinematics.config import KinematicsRunConfig
 
+    if args.baseline is not None:
+        for flag, given in (("--init", args.init is not None), ("--sweep", args.sweep)):
+            if given:
+                raise CliError(f"{flag} is KinematicsNet's; it does not combine with --baseline")
+        return cmd_train_baseline(args)
+    if args.insoles:
+        raise CliError("--insoles picks a baseline's '+I' variant: give --baseline too (for "
+                       "KinematicsNet: --set features.insoles=true)")  # fmt: skip
     cfg = load_run_config(args.config, "kinematics", KinematicsRunConfig(), args.set)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -147,8 +129,46 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"[{i + 1}/{len(sets)}] {s.name}: {', '.join(s.sites)}"
               f"{' + insoles' if s.insoles else ''}")  # fmt: skip
         _train_one(args.data, args.out / s.name, run_cfg)
-    print(f"sweep finished; evaluate with: grip eval-kin --sweep {args.out} --data {args.data}")
+    print(f"sweep finished; evaluate with: grip kin eval --sweep {args.out} --data {args.data}")
     return 0
+
+
+def cmd_train_baseline(args: argparse.Namespace) -> int:
+    """Train the kinematics nets of baseline ``args.baseline`` (resumes ``args.out``)."""
+    import torch
+
+    from grip.cli.errors import CliError
+    from grip.cli.paths import REPO_ROOT, load_run_config
+    from grip.kinematics.baseline_config import default_run_config, n_inputs
+    from grip.kinematics.baseline_train import BaselineTrainer, load_baseline_sequences
+
+    config = args.config
+    if config is None:
+        candidate = REPO_ROOT / "configs" / "baselines" / f"{args.baseline}.toml"
+        config = candidate if candidate.is_file() else None
+    overrides = [*args.set, *(["net.insoles=true"] if args.insoles else [])]
+    cfg = load_run_config(config, "baselines", default_run_config(args.baseline), overrides)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    t0 = time.perf_counter()
+    try:
+        train = load_baseline_sequences(args.data, "train", cfg)
+        val = load_baseline_sequences(args.data, "test", cfg)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e)) from e
+    n_frames = sum(len(s.x) for s in train)
+    variant = " + insoles" if cfg.net.insoles else ""
+    print(f"{args.baseline}{variant}: {n_inputs(cfg)} inputs; loaded {len(train)} train / "
+          f"{len(val)} test sequences ({n_frames} train frames) in "
+          f"{time.perf_counter() - t0:.1f} s")  # fmt: skip
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        trainer = BaselineTrainer(cfg, train, val, out)
+    except ValueError as e:
+        raise CliError(str(e)) from e
+    info = {"method": args.baseline, "data": str(args.data.resolve()), "train_frames": n_frames}
+    return fit_run(trainer, cfg, out, info, epochs=cfg.train.epochs, postfix="epoch")
 
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
@@ -194,7 +214,7 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
 
 
 def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -> int:
-    """The training loop of ``grip train-kin`` and ``grip train-baseline``: resume ``trainer``
+    """The training loop of ``grip kin train`` (KinematicsNet and baselines): resume ``trainer``
     from ``OUT/last.pt`` when it exists, write the run config (with ``info``), fit with a
     progress bar (``postfix``: the progress key shown next to the loss) and TensorBoard scalars,
     and print the throughput and where the checkpoints are."""
@@ -238,8 +258,9 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
 
 
 def add_eval_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``grip kin eval`` on the ``grip kin`` subparsers."""
     p = sub.add_parser(
-        "eval-kin",
+        "eval",
         help="evaluate KinematicsNet on the test split of a dataset",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
@@ -249,7 +270,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
             "motion category, as a Markdown table, a plot and (with --json) the overall figures\n"
             "under PEL_MPJPE_mm, MPJRE_deg, leaf_vel_err_mps, frames."
         ),
-        epilog="example: grip eval-kin --model runs/kin/best.pt --data data/prism_synth "
+        epilog="example: grip kin eval --model runs/kin/best.pt --data data/prism_synth "
         "--json kin.json --out runs/kin/eval",
     )
     p.add_argument("--model", type=Path, default=None,
@@ -272,7 +293,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="DIR",
-        help="evaluate every run of a sensor sweep folder ('grip train-kin --sweep') "
+        help="evaluate every run of a sensor sweep folder ('grip kin train --sweep') "
         "and print a table like GRIP Table 3 instead",
     )
     add_limit_arguments(p)
@@ -360,7 +381,7 @@ def _eval_sweep(args: argparse.Namespace) -> int:
     runs = find_runs(args.sweep)
     if not runs:
         raise CliError(f"{args.sweep}: no sweep runs (imu<N>_press|nopress/best.pt); train them "
-                       "with 'grip train-kin --sweep --out DIR'")  # fmt: skip
+                       "with 'grip kin train --sweep --out DIR'")  # fmt: skip
     errors: list[tuple[str, str]] = []
     recs = _load_split(args.data, args.split, errors)
     results = []

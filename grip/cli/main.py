@@ -11,20 +11,26 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from grip.cli import (
-    baselines,
-    bench,
-    bench_env,
-    body,
-    data,
-    demo,
-    distill,
-    export,
-    kinematics,
-    policy,
-)
+from grip.cli import bench, body, data, demo, export, kinematics, policy
 from grip.cli import reconstruct as reconstruct_cmd
 from grip.cli.errors import CliError
+
+RENAMED: dict[str, str] = {
+    "train-kin": "grip kin train",
+    "eval-kin": "grip kin eval",
+    "kin-export": "grip kin export",
+    "train-baseline": "grip kin train --baseline NAME",
+    "baseline-export": "grip kin export",
+    "train-policy": "grip policy train",
+    "eval-policy": "grip policy eval",
+    "policy-export": "grip policy export",
+    "policy-ensemble": "grip policy combine",
+    "policy-average": "grip policy combine --average",
+    "policy-member": "grip policy combine --member K",
+    "distill-policy": "grip policy distill",
+    "bench-env": "python benchmarks/env_steps.py",
+}
+"""Commands of earlier versions and what replaced them (named in the error for the old name)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,13 +44,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
     sub.required = True
-    for module in (data, body, kinematics, baselines, policy, distill, reconstruct_cmd, bench,
-                   bench_env, demo, export):  # fmt: skip
+    for module in (data, body, kinematics, policy, reconstruct_cmd, bench, demo, export):
         module.add_parser(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in RENAMED:
+        print(f"grip: error: 'grip {argv[0]}' is now '{RENAMED[argv[0]]}' (see "
+              f"'grip --help')", file=sys.stderr)  # fmt: skip
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

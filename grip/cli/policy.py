@@ -1,4 +1,4 @@
-"""``grip train-policy``, ``grip eval-policy`` and ``grip policy-export``: DynamicsNet."""
+"""``grip policy train|eval|export|combine|distill``: DynamicsNet, the controller."""
 
 from __future__ import annotations
 
@@ -7,15 +7,26 @@ import json
 import time
 from pathlib import Path
 
+from grip.cli.policy_runs import (
+    RESUMABLE,
+    build_training_reference,
+    changed_settings,
+    training_files,
+)
 from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
-
-HOLDOUT_FILE = "holdout.json"
-"""Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "train-policy",
+    """Register ``grip policy`` and its subcommands on the ``grip`` subparsers."""
+    from grip.cli.common import add_group, add_output_arguments
+
+    psub = add_group(sub, "policy", "train, evaluate, export, combine and distil DynamicsNet "
+                     "policies", "The controller (DynamicsNet, PPO + AMP) that drives the MuJoCo "
+                     "humanoid to follow the KinematicsNet estimate, and its policy files: one "
+                     "file holds one policy or an ensemble of several "
+                     "(policies/controller.py).")  # fmt: skip
+    p = psub.add_parser(
+        "train",
         help="train the DynamicsNet controller (PPO + AMP) on a dataset",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
@@ -29,12 +40,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "extends a finished run). At the end RUN/policy.pt is exported.\n"
             "TensorBoard: tensorboard --logdir RUN/tb"
         ),
-        epilog="example: grip train-policy --data data/prism_synth --out runs/policy\n"
-        "         grip train-policy --data data/prism_synth --out runs/p "
+        epilog="example: grip policy train --data data/prism_synth --out runs/policy\n"
+        "         grip policy train --data data/prism_synth --out runs/p "
         "--set stage1.timesteps=500000\n"
-        "         grip train-policy --data data/prism_synth --out runs/grip_size "
+        "         grip policy train --data data/prism_synth --out runs/grip_size "
         "--set 'ppo.net_arch=[2048,1536,1024,1024,512,512]'\n"
-        "         grip train-policy --data data/prism_synth --out runs/p_ft "
+        "         grip policy train --data data/prism_synth --out runs/p_ft "
         "--init grip/assets/policy_default.pt --config configs/policy/finetune.toml",
     )
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
@@ -56,12 +67,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "configs/policy/finetune.toml (ignored when OUT resumes)")  # fmt: skip
     p.add_argument("--init-member", type=int, default=0, metavar="K",
                    help="with an ensemble file as --init: start from its member K (0 = the "
-                   "first, in the order 'grip policy-ensemble' joined them; training prints "
+                   "first, in the order 'grip policy combine' joined them; training prints "
                    "the member's name); later members take the file's discriminator")  # fmt: skip
     p.set_defaults(func=cmd_train)
 
-    e = sub.add_parser(
-        "eval-policy",
+    e = psub.add_parser(
+        "eval",
         help="evaluate a DynamicsNet policy on the test split (success rate, MPJPE, ...)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
@@ -73,8 +84,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "error (the keys of 'grip bench'), and the kinematics-only MPJPE on the same\n"
             "segments."
         ),
-        epilog="example: grip eval-policy --data data/prism_synth --json policy_eval.json\n"
-        "         grip eval-policy --policy runs/policy/policy.pt --data data/prism_synth "
+        epilog="example: grip policy eval --data data/prism_synth --json policy_eval.json\n"
+        "         grip policy eval --policy runs/policy/policy.pt --data data/prism_synth "
         "--category 'walk*' --category 'run*'",
     )
     e.add_argument("--policy", type=Path, action="append", default=None,
@@ -119,181 +130,70 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_limit_arguments(e)
     e.set_defaults(func=cmd_eval)
 
-    x = sub.add_parser(
-        "policy-export",
-        help="write the small inference file of a train-policy run",
-        description="Policy MLP (fp16), observation normaliser and AMP discriminator in one "
-        "file loaded with torch.load(weights_only=True): the form in which the default policy "
-        "ships (grip/assets/policy_default.pt).",
-        epilog="example: grip policy-export runs/policy --out grip/assets/policy_default.pt",
+    x = psub.add_parser(
+        "export",
+        help="write the small inference file of a 'grip policy train' run",
+        description="Policy MLP (fp16), observation normaliser, value network and AMP "
+        "discriminator in one file loaded with torch.load(weights_only=True): a policy file of "
+        "one member, the form every command that takes --policy reads.",
+        epilog="example: grip policy export runs/policy --out runs/policy_fp16.pt",
     )
-    x.add_argument("run", type=Path, help="train-policy run folder")
-    x.add_argument("--out", required=True, type=Path, help="output .pt")
-    x.add_argument("--precision", choices=("fp32", "fp16", "int8"), default="fp16",
-                   help="weights of the policy, value and discriminator networks: fp16 "
-                   "(default), fp32, or int8 with a float32 scale per row (about a third of "
-                   "the fp16 file; what an ensemble stores)")  # fmt: skip
-    x.add_argument("--fp32", action="store_true", help="the same as --precision fp32")
+    x.add_argument("run", type=Path, help="'grip policy train' run folder")
+    add_output_arguments(x, "fp16", "weights of the policy, value and discriminator networks: "
+                         "fp16 (default), fp32, or int8 with a float32 scale per row (about a "
+                         "third of the fp16 file; what an ensemble stores)")  # fmt: skip
     x.set_defaults(func=cmd_export)
 
-    a = sub.add_parser(
-        "policy-average",
-        help="average the weights of exported policies of one run",
-        description="Weight average of exported policies (a run's late exports, or exports of "
-        "its continuations): PPO's exports swing from one checkpoint to the next, their "
-        "average sits between the swings. Networks must match; each file's first layers are "
-        "rewritten for the last file's observation normaliser, whose normaliser, "
-        "discriminator and settings the result keeps (policies/average.py).",
-        epilog="example: grip policy-average runs/a.pt runs/b.pt --out runs/avg.pt",
+    c = psub.add_parser(
+        "combine",
+        help="join policy files into one: an ensemble, a weight average, or one member",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Write one policy file from the members of policy files (every file is a list of\n"
+            "one or more members; a single policy is an ensemble of one):\n"
+            "  default    an ensemble: the mean of the members' actions, each computed with its\n"
+            "             own observation normaliser, so members may come from separate runs;\n"
+            "             they must drive the humanoid alike (observations, action mode and\n"
+            "             scale, decision period, body); the first member's discriminator is\n"
+            "             the fall detector; value networks are left out ('grip policy train\n"
+            "             --init' with the file starts from one member)\n"
+            "  --average  the weight average of exports of one run (or its continuations):\n"
+            "             PPO's exports swing from one checkpoint to the next, their average\n"
+            "             sits between the swings; the last member's normaliser, discriminator\n"
+            "             and settings are kept (policies/average.py)\n"
+            "  --member K only member K (0 = the first, in the order given): its actor as\n"
+            "             stored, its normaliser, its file's discriminator, no value network"
+        ),
+        epilog="example: grip policy combine runs/a/policy.pt runs/b/policy.pt --out runs/ab.pt\n"
+        "         grip policy combine runs/a.pt runs/b.pt --average --out runs/avg.pt\n"
+        "         grip policy combine grip/assets/policy_default.pt --member 0 --out e.pt",
     )
-    a.add_argument("policies", nargs="+", type=Path, help="exported policy files (two or more)")
-    a.add_argument("--out", required=True, type=Path, help="output .pt")
-    a.set_defaults(func=cmd_average)
+    c.add_argument("policies", nargs="+", type=Path, help="policy files")
+    how = c.add_mutually_exclusive_group()
+    how.add_argument("--average", action="store_true",
+                     help="the weight average of all members instead of their ensemble")
+    how.add_argument("--member", type=int, default=None, metavar="K",
+                     help="write only member K of all those of the files")  # fmt: skip
+    add_output_arguments(c, None, "actor and discriminator weights: an ensemble stores int8 "
+                         "with a scale per row by default, the others as the files store "
+                         "them")  # fmt: skip
+    c.set_defaults(func=cmd_combine)
 
-    n = sub.add_parser(
-        "policy-ensemble",
-        help="join exported policies into one ensemble file (the mean of their actions)",
-        description="Write several exported policies into one file that acts as one policy: "
-        "the mean of the members' actions, each computed with the member's own observation "
-        "normaliser, so members may come from separate runs. They must drive the humanoid "
-        "alike (observations, action mode and scale, decision period, body); the first "
-        "member's discriminator is the fall detector. Value networks are left out (train-policy "
-        "--init with the file starts from its first member). Every command that takes --policy "
-        "reads the file "
-        "(policies/ensemble.py).",
-        epilog="example: grip policy-ensemble runs/a/policy.pt runs/b/policy.pt --out runs/ab.pt",
-    )
-    n.add_argument("policies", nargs="+", type=Path,
-                   help="exported policy (or ensemble) files, two policies or more")  # fmt: skip
-    n.add_argument("--out", required=True, type=Path, help="output .pt")
-    n.add_argument("--precision", choices=("fp32", "fp16", "int8"), default="int8",
-                   help="actor weights: int8 with a scale per row (default) or as exported")
-    n.set_defaults(func=cmd_ensemble)
+    from grip.cli import distill
 
-    m = sub.add_parser(
-        "policy-member",
-        help="write one member of an ensemble file as a policy file of its own",
-        description="Write member K of an ensemble file (0 = the first, in the order 'grip "
-        "policy-ensemble' joined them) as a single-policy file: its actor as stored, its "
-        "observation normaliser and the file's discriminator (the fall detector); no value "
-        "network. Evaluate it alone, or join it with others into a new ensemble.",
-        epilog="example: grip policy-member grip/assets/policy_default.pt 0 --out e.pt",
-    )
-    m.add_argument("ensemble", type=Path, help="ensemble file")
-    m.add_argument("member", type=int, help="member index K")
-    m.add_argument("--out", required=True, type=Path, help="output .pt")
-    m.set_defaults(func=cmd_member)
-
-
-RESUMABLE: tuple[str, ...] = (
-    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
-    "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
-    "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm", "ppo.target_kl",
-    "ppo.critic_warmup_steps",
-)  # fmt: skip
-"""Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
-run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
-
-
-def _flatten(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def changed_settings(old: dict, new: dict, defaults: dict | None = None,
-                     resumable: tuple[str, ...] = RESUMABLE) -> list[str]:  # fmt: skip
-    """Dotted keys whose values differ between two config dicts, except those starting with one
-    of ``resumable`` (train-policy's :data:`RESUMABLE` by default).
-
-    A key missing from ``old`` (a setting added to the project after the run began) takes its
-    value from ``defaults``, the current default config, if given: a new setting left at its
-    default does not block resuming an older run."""
-    a, b = _flatten(json.loads(json.dumps(old))), _flatten(json.loads(json.dumps(new)))
-    if defaults is not None:
-        d = _flatten(json.loads(json.dumps(defaults)))
-        a = {**{k: v for k, v in d.items() if k not in a}, **a}
-    keys = sorted(set(a) | set(b))
-    return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(resumable)]
-
-
-def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
-    """The training split's recording files less the clips that ``cfg.holdout_fraction`` holds
-    out, whose sequence names go to ``out/holdout.json`` (every call: the draw depends only on
-    the names, the fraction and the seed)."""
-    from grip.cli.errors import CliError
-    from grip.core.atomic import atomic_write_text
-    from grip.kinematics.dataset import holdout_names
-
-    if cfg.holdout_fraction <= 0:
-        return files
-    held = holdout_names([f.stem for f in files], cfg.holdout_fraction, cfg.seed)
-    kept = [f for f in files if f.stem not in held]
-    if not kept:
-        raise CliError(f"holdout_fraction={cfg.holdout_fraction} holds out every training "
-                       f"clip of {len(files)} sequence(s): nothing to train on")  # fmt: skip
-    payload = {"fraction": cfg.holdout_fraction, "seed": cfg.seed, "sequences": sorted(held)}
-    atomic_write_text(out / HOLDOUT_FILE, json.dumps(payload, indent=1))
-    print(f"held out {len(held)} of {len(files)} training sequences ({out / HOLDOUT_FILE})")
-    return kept
-
-
-def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins: list[Path],
-                             reverse_categories: tuple[str, ...] = (),
-                             mirror: bool = False) -> None:  # fmt: skip
-    """Write the training reference set ``ref_path`` (the recordings ``files`` of dataset
-    ``data`` with the estimates of each KinematicsNet checkpoint in ``kins``; training clips of
-    ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``)
-    unless it exists. Shared by ``grip train-policy`` and ``grip distill-policy``."""
-    from tqdm import tqdm
-
-    from grip.cli.errors import CliError
-    from grip.cli.recordings import load_recordings
-
-    if ref_path.is_file():
-        return
-    from grip.kinematics.inference import KinematicsEstimator
-    from grip.kinematics.reference import build_reference_set, merge_reference_sets
-
-    recs = load_recordings(files)
-    if reverse_categories:
-        from grip.cli.recordings import reversed_training_recordings
-
-        recs += reversed_training_recordings(data, files, reverse_categories)
-    sets = []
-    for kin in kins:
-        try:
-            est = KinematicsEstimator.from_checkpoint(kin)
-        except ValueError as e:
-            raise CliError(str(e)) from e
-        desc = f"KinematicsNet estimates ({kin.name})"
-        with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
-            sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin)))
-    try:
-        ref = merge_reference_sets(sets, source=str(ref_path))
-    except ValueError as e:
-        raise CliError(str(e)) from e
-    if mirror:
-        from grip.kinematics.reference import with_mirrored_clips
-
-        ref = with_mirrored_clips(ref)
-    ref.save(ref_path)
-    print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
+    distill.add_parser(psub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from envs.factory import make_tracking_env
     from grip.cli.errors import CliError
     from grip.cli.paths import load_run_config
     from grip.cli.recordings import kin_checkpoint, split_paths
     from grip.core.atomic import atomic_write_text
     from grip.core.limits import read_json_file
-    from grip.kinematics.train import git_hash
+    from grip.core.runs import git_hash
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer, run_config_dict
 
@@ -312,11 +212,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     prev = out / "config.json"
     if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
         try:
-            prev_cfg = read_json_file(prev, "train-policy run config")["config"]
+            prev_cfg = read_json_file(prev, "'grip policy train' run config")["config"]
             changed = changed_settings(prev_cfg, run_config_dict(cfg),
                                        run_config_dict(PolicyRunConfig()))  # fmt: skip
         except (ValueError, KeyError, TypeError, AttributeError) as e:
-            raise CliError(f"{prev}: not a train-policy run config ({str(e)[:300]})") from e
+            raise CliError(f"{prev}: not a 'grip policy train' run config ({str(e)[:300]})") from e
         if changed:
             raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
                            f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip
@@ -330,15 +230,15 @@ def cmd_train(args: argparse.Namespace) -> int:
                "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
     # what the run started from: this call's --init, or on resume what config.json recorded
     try:
-        began = read_json_file(prev, "train-policy run config") if resuming and prev.is_file() \
-            else {}
+        began = (read_json_file(prev, "'grip policy train' run config")
+                 if resuming and prev.is_file() else {})
     except ValueError as e:
         raise CliError(str(e)) from e
     if init is not None:
         began = {"init": str(init.resolve()), "init_member": args.init_member}
     payload.update({k: began[k] for k in ("init", "init_member") if began.get(k) is not None})
     try:
-        trainer = PolicyTrainer(cfg, out, ref_path, progress=tqdm, init=init,
+        trainer = PolicyTrainer(cfg, out, ref_path, make_tracking_env, progress=tqdm, init=init,
                                 init_member=args.init_member)  # fmt: skip
     except ValueError as e:
         raise CliError(str(e)) from e
@@ -366,58 +266,35 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from grip.cli.errors import CliError
+    from grip.cli.common import write_artifact
     from grip.core.limits import read_json_file
     from policies.runner import export_policy
 
-    try:
+    def write() -> int:
         state = read_json_file(args.run / "checkpoint" / "state.json", "training state")
         hist = state.get("history")
         last = hist[-1] if isinstance(hist, list) and hist and isinstance(hist[-1], dict) else {}
-        size = export_policy(args.run, args.out,
-                             precision="fp32" if args.fp32 else args.precision,
+        return export_policy(args.run, args.out, precision=args.precision,
                              info={"timesteps": last.get("timesteps"),
                                    "wall_s": state.get("wall_s")})  # fmt: skip
-    except (FileNotFoundError, ValueError, OSError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB)")
-    return 0
+
+    return write_artifact(args.out, write)
 
 
-def cmd_average(args: argparse.Namespace) -> int:
-    from grip.cli.errors import CliError
-    from policies.average import average_policies
+def cmd_combine(args: argparse.Namespace) -> int:
+    from grip.cli.common import write_artifact
+    from policies.controller import combine
 
-    try:
-        size = average_policies(args.policies, args.out)
-    except (FileNotFoundError, ValueError, OSError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB), the average of {len(args.policies)} policies")
-    return 0
+    def write() -> tuple[int, str]:
+        size, n = combine(args.policies, args.out, "average" if args.average else "ensemble",
+                          args.member, args.precision)  # fmt: skip
+        what = (f"member {args.member} of {', '.join(map(str, args.policies))}"
+                if args.member is not None
+                else f"the average of {len(args.policies)} policies" if args.average
+                else f"an ensemble of {n} policies")  # fmt: skip
+        return size, f", {what}"
 
-
-def cmd_ensemble(args: argparse.Namespace) -> int:
-    from grip.cli.errors import CliError
-    from policies.ensemble import write_ensemble
-
-    try:
-        size, n = write_ensemble(args.policies, args.out, args.precision)
-    except (FileNotFoundError, ValueError, OSError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB), an ensemble of {n} policies")
-    return 0
-
-
-def cmd_member(args: argparse.Namespace) -> int:
-    from grip.cli.errors import CliError
-    from policies.ensemble import write_member
-
-    try:
-        size = write_member(args.ensemble, args.member, args.out)
-    except (FileNotFoundError, ValueError, OSError) as e:
-        raise CliError(str(e)) from e
-    print(f"wrote {args.out} ({size / 1e6:.1f} MB), member {args.member} of {args.ensemble}")
-    return 0
+    return write_artifact(args.out, write)
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -428,22 +305,18 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
     from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
     from grip.kinematics.inference import KinematicsEstimator
-    from policies.ensemble import PolicyEnsemble
+    from policies.controller import load_controller
 
     limits_from_args(args)
     pols = args.policy or [SHIPPED_POLICY]
     for p in pols:
         if not Path(p).is_file():
-            raise CliError(f"{p}: no such policy file (train one with 'grip train-policy')")
+            raise CliError(f"{p}: no such policy file (train one with 'grip policy train')")
     pol = " + ".join(str(p) for p in pols)
     try:
-        runner = PolicyEnsemble.load(pols)
         est = KinematicsEstimator.from_checkpoint(kin_checkpoint(args.kin), tta=args.tta)
-        if args.mirror:
-            from policies.symmetry import MirrorAveragedPolicy
-
-            runner = MirrorAveragedPolicy(runner, est.cfg.features.sites,
-                                          est.cfg.features.insoles)  # fmt: skip
+        sensors = (est.cfg.features.sites, est.cfg.features.insoles)
+        runner = load_controller(pols, mirror=sensors if args.mirror else None)
     except ValueError as e:
         raise CliError(str(e)) from e
     if args.repeats < 1:

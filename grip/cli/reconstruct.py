@@ -176,7 +176,7 @@ def _work(job: tuple) -> list[dict]:
                 feats = g.estimator.cfg.features
                 msg += (f"; the models read the IMUs {list(feats.sites)}"
                         f"{' and both insoles' if feats.insoles else ''}, so a model trained "
-                        "for the sensors present is needed (grip train-kin --set "
+                        "for the sensors present is needed (grip kin train --set "
                         "features.sites=[...] --set features.insoles=false, and a policy on "
                         "its estimates)")  # fmt: skip
             rows.append({"file": str(f), "error": msg})
@@ -223,7 +223,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         remove_stale_temps,
         require_same_settings,
     )
-    from grip.eval.reconstruct import RecoveryConfig
+    from grip.pipeline import RecoveryConfig
 
     limits_from_args(args)  # also for the worker processes ($GRIP_LIMITS)
     formats = [f.strip() for f in args.formats.split(",") if f.strip()]

@@ -159,7 +159,7 @@ def kin_checkpoint(path: Path | None, flag: str = "--kin") -> Path:
 
     kin = Path(path) if path is not None else SHIPPED_KIN
     if not kin.is_file():
-        raise CliError(f"{kin}: no such KinematicsNet checkpoint (train one with 'grip train-kin' "
+        raise CliError(f"{kin}: no such KinematicsNet checkpoint (train one with 'grip kin train' "
                        f"and pass {flag} RUN/best.pt)")  # fmt: skip
     return kin
 
@@ -182,8 +182,8 @@ def add_tta_argument(parser) -> None:
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
                                  categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence
-    files (or file stems) ``files`` (``reverse_categories`` of ``grip train-policy`` and
-    ``grip train-kin``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that
+    files (or file stems) ``files`` (``reverse_categories`` of ``grip policy train`` and
+    ``grip kin train``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that
     select nothing."""
     from tqdm import tqdm
 

@@ -69,9 +69,9 @@ class MethodOptions:
         kin_checkpoint: KinematicsNet checkpoint; ``None``: the shipped one.
         sensors: Sensor configuration of a sweep (``"imu4_press"``, see
             :mod:`grip.kinematics.sweep`), ``None`` for the method's default sensors.
-        sweep_dir: Folder of ``grip train-kin --sweep`` holding ``<sensors>/best.pt``.
+        sweep_dir: Folder of ``grip kin train --sweep`` holding ``<sensors>/best.pt``.
         policy_checkpoint: GRIP policy export; ``None``: the shipped one.
-        transpose_checkpoint, pip_checkpoint: Baseline networks (``grip train-baseline``);
+        transpose_checkpoint, pip_checkpoint: Baseline networks (``grip kin train --baseline``);
             ``None``: the shipped ones (:data:`SHIPPED_BASELINES`).
     """
 
@@ -121,21 +121,21 @@ def sensor_set(name: str):
 
 
 def sweep_checkpoint(sweep_dir: Path | None, sensors: str) -> Path:
-    """``sweep_dir/<sensors>/best.pt`` (else ``last.pt``) of a ``grip train-kin --sweep`` folder.
+    """``sweep_dir/<sensors>/best.pt`` (else ``last.pt``) of a ``grip kin train --sweep`` folder.
 
     Raises:
         ValueError: No sweep folder given, unknown configuration, or no checkpoint there.
     """
     sensor_set(sensors)
     if sweep_dir is None:
-        raise ValueError(f"sensors {sensors!r} need the sweep folder of 'grip train-kin --sweep' "
+        raise ValueError(f"sensors {sensors!r} need the sweep folder of 'grip kin train --sweep' "
                          "(--sweep DIR)")  # fmt: skip
     for ck in ("best.pt", "last.pt"):
         p = Path(sweep_dir) / sensors / ck
         if p.is_file():
             return p
     raise ValueError(f"{Path(sweep_dir) / sensors}: no best.pt or last.pt (train the sweep with "
-                     f"'grip train-kin --sweep --out {sweep_dir}')")  # fmt: skip
+                     f"'grip kin train --sweep --out {sweep_dir}')")  # fmt: skip
 
 
 class KinematicsOnly:
@@ -274,7 +274,7 @@ class KinematicsPip:
         self.cfg = cfg
 
     def reconstruct(self, rec) -> Reconstruction:
-        from grip.baselines.pip_physics import backward_velocity
+        from grip.baselines.pip_dynamics import backward_velocity
         from grip.kinematics.baselines import insole_contact_prob
 
         t0 = time.perf_counter()
@@ -302,8 +302,8 @@ def _baseline_estimator(name: str, path: Path | None):
 
     p = Path(path or SHIPPED_BASELINES[name])
     if not p.is_file():
-        raise ValueError(f"{p}: no {name} checkpoint; train one with 'grip train-baseline {name} "
-                         f"--data DIR --out RUN' and pass RUN/best.pt")  # fmt: skip
+        raise ValueError(f"{p}: no {name} checkpoint; train one with 'grip kin train --baseline "
+                         f"{name} --data DIR --out RUN' and pass RUN/best.pt")  # fmt: skip
     return BaselineEstimator.from_checkpoint(p)
 
 

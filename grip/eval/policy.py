@@ -1,4 +1,4 @@
-"""Evaluation of a DynamicsNet policy on recordings (``grip eval-policy``).
+"""Evaluation of a DynamicsNet policy on recordings (``grip policy eval``).
 
 Each segment is one episode: the simulation starts from the ground truth at the segment's first
 frame (the GRIP protocol) and the policy follows the KinematicsNet estimate, without early
@@ -6,7 +6,7 @@ termination and without fall recovery. The fall detector of GRIP (pelvis below 0
 discriminator's probability below 0.7, BASELINES_AND_METRICS 5.4) ends a segment as a failure;
 metrics cover the frames simulated until then.
 
-The episode is :func:`grip.eval.reconstruct.simulate_clip` with recovery off, stopped at the
+The episode is :meth:`grip.pipeline.GripPipeline.play` with recovery off, stopped at the
 first fall. Metrics are ``grip bench``'s (:func:`grip.eval.bench.segment_metrics`: ``MPJPE_mm``,
 ``PEL_MPJPE_mm``, ``PA_MPJPE_mm``, ``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N``
 from MuJoCo's foot-ground contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
@@ -19,7 +19,7 @@ kinematics only. ``pelvis_min_m`` is each segment's lowest pelvis height, and
 failure, whatever the discriminator says): a lenient discriminator cannot hide a fall, and
 policies with different discriminators compare on one criterion.
 
-``blowups``: simulation blow-ups (:meth:`envs.tracking_env.GripTrackingEnv.step`), per segment
+``blowups``: simulation blow-ups (:meth:`grip.sim.humanoid.Humanoid.blown_up`), per segment
 and summed in the summary. A blow-up ends its segment as a failure (``fell``) before the
 blown-up frame: no frame of a blown-up state enters the metrics.
 """
@@ -30,14 +30,18 @@ import csv
 import io
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from grip.core import metrics as M
 from grip.core.reference import ReferenceSet
 from grip.eval.bench import segment_metrics as bench_metrics
-from grip.eval.reconstruct import RecoveryConfig, inference_env, simulate_clip
 from grip.kinematics.features import ground_truth
+from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
+
+if TYPE_CHECKING:
+    from policies.controller import Controller
 
 METRIC_KEYS: tuple[str, ...] = (
     "MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N", "success_rate", "kin_MPJPE_mm",
@@ -71,7 +75,7 @@ def segment_row(recon, clip, rec) -> dict:
 REFERENCES: tuple[str, ...] = ("estimate", "truth")
 
 
-def evaluate_policy(runner, estimator, recs: list, batch: int = 16,
+def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
                     progress: Callable[[int], object] | None = None,
                     reference: str = "estimate") -> list[dict]:  # fmt: skip
     """One row of metrics per recording (segment), with ``name`` and ``category``.
@@ -90,18 +94,16 @@ def evaluate_policy(runner, estimator, recs: list, batch: int = 16,
                            cfg.insoles, "<ground truth>")  # fmt: skip
     else:
         ref = build_reference_set(recs, estimator, batch=batch)
-    env = inference_env(runner, ref)
-    no_recovery = RecoveryConfig(enabled=False)
+    pipe = GripPipeline(runner, estimator, RecoveryConfig(enabled=False))
     rows = []
-    try:
-        for i, rec in enumerate(recs):
-            recon, _ = simulate_clip(env, runner, i, no_recovery, stop_at_fall=True)
-            rows.append({"name": rec.name, "category": rec.category or "unknown",
-                         **segment_row(recon, ref.clip(i), rec)})  # fmt: skip
-            if progress is not None:
-                progress(1)
-    finally:
-        env.close()
+    for i, rec in enumerate(recs):
+        clip = ref.clip(i)
+        recon, _ = pipe.play(clip, start_from_clip(clip), clip.body, clip.objects,
+                             stop_at_fall=True)  # fmt: skip
+        rows.append({"name": rec.name, "category": rec.category or "unknown",
+                     **segment_row(recon, clip, rec)})  # fmt: skip
+        if progress is not None:
+            progress(1)
     return rows
 
 
@@ -176,7 +178,7 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = ["name", "category", "fell", "pelvis_min_m", "frames", "blowups", *_MEAN_KEYS]
-    if rows and "replay" in rows[0]:  # grip eval-policy --repeats: which replay a row is of
+    if rows and "replay" in rows[0]:  # grip policy eval --repeats: which replay a row is of
         keys.insert(1, "replay")
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")

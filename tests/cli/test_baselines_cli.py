@@ -1,4 +1,4 @@
-"""``grip train-baseline`` / ``grip baseline-export`` on a tiny synthetic dataset (in-process)."""
+"""``grip kin train --baseline`` / ``grip kin export`` on a tiny synthetic dataset (in-process)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,8 @@ def one_thread():
 
 def test_train_baseline_runs_resumes_and_exports(dataset: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "pip"
-    args = ["train-baseline", "pip", "--data", str(dataset), "--out", str(run), *TINY_PIP]
+    args = ["kin", "train", "--baseline", "pip", "--data", str(dataset), "--out", str(run),
+            *TINY_PIP]  # fmt: skip
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "pip: 48 inputs" in out and "steps/s" in out
@@ -66,7 +67,7 @@ def test_train_baseline_runs_resumes_and_exports(dataset: Path, tmp_path: Path, 
     assert main([*args, "--insoles"]) == 2  # another configuration in the same folder
     assert "another configuration" in capsys.readouterr().err
     small = tmp_path / "pip_small.pt"
-    assert main(["baseline-export", str(run / "best.pt"), "--out", str(small)]) == 0
+    assert main(["kin", "export", str(run / "best.pt"), "--out", str(small)]) == 0
     assert "MB" in capsys.readouterr().out
     from grip.kinematics.baselines import BaselineEstimator
 
@@ -93,7 +94,7 @@ def _check_bench_method(name: str, checkpoint: Path, dataset: Path) -> None:
 
 def test_train_transpose_with_insoles(dataset: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "tp"
-    assert main(["train-baseline", "transpose", "--insoles", "--data", str(dataset),
+    assert main(["kin", "train", "--baseline", "transpose", "--insoles", "--data", str(dataset),
                  "--out", str(run), *TINY_TP]) == 0  # fmt: skip
     assert "transpose + insoles: 58 inputs" in capsys.readouterr().out
     cfg = json.loads((run / "config.json").read_text())
@@ -102,13 +103,14 @@ def test_train_transpose_with_insoles(dataset: Path, tmp_path: Path, capsys) -> 
 
 
 def test_clear_errors(dataset: Path, tmp_path: Path, capsys) -> None:
-    assert main(["train-baseline", "pip", "--data", str(tmp_path), "--out",
+    assert main(["kin", "train", "--baseline", "pip", "--data", str(tmp_path), "--out",
                  str(tmp_path / "r"), *TINY_PIP]) == 2  # fmt: skip
     assert "split.json" in capsys.readouterr().err
     bad = tmp_path / "broken.pt"
     bad.write_bytes(b"junk")
-    assert main(["baseline-export", str(bad), "--out", str(tmp_path / "o.pt")]) == 2
+    assert main(["kin", "export", str(bad), "--out", str(tmp_path / "o.pt")]) == 2
     err = capsys.readouterr().err
     assert "broken.pt" in err and "Traceback" not in err
     with pytest.raises(SystemExit):
-        main(["train-baseline", "dip", "--data", str(dataset), "--out", str(tmp_path / "x")])
+        main(["kin", "train", "--baseline", "dip", "--data", str(dataset), "--out",
+              str(tmp_path / "x")])  # fmt: skip

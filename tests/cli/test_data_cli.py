@@ -104,7 +104,7 @@ def test_info_scans_a_folder_of_prism_pickles(tmp_path: Path) -> None:
 
 def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "run"
-    args = ["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+    args = ["kin", "train", "--data", str(built), "--out", str(run), "--threads", "1",
             "--set", "hidden=16", "--set", "layers=1", "--set", "init_hidden=8",
             "--set", "train.window_frames=30", "--set", "train.batch_size=2",
             "--set", "train.steps_per_epoch=2", "--set", "train.stage_epochs=0",
@@ -143,7 +143,7 @@ def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path,
              "--set", "train.window_frames=30", "--set", "train.batch_size=2",
              "--set", "train.steps_per_epoch=2", "--set", "train.stage_epochs=0",
              "--set", "train.val_windows=2"]  # fmt: skip
-    base = ["train-kin", "--data", str(built)]
+    base = ["kin", "train", "--data", str(built)]
     assert main([*base, "--out", str(tmp_path / "a"), *small, "--set", "train.joint_epochs=1"]) == 0
     ft = [*base, "--out", str(tmp_path / "ft"), *small, "--init", str(tmp_path / "a" / "last.pt"),
           "--set", "train.joint_epochs=2", "--set", "train.lr_final=1e-5",
@@ -161,25 +161,25 @@ def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path,
 
 def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "run"
-    main(["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+    main(["kin", "train", "--data", str(built), "--out", str(run), "--threads", "1",
           "--set", "hidden=16", "--set", "layers=1", "--set", "init_hidden=8",
           "--set", "train.window_frames=30", "--set", "train.batch_size=2",
           "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
           "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"])  # fmt: skip
     js = tmp_path / "kin.json"
-    assert main(["eval-kin", "--model", str(run / "last.pt"), "--data", str(built),
+    assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
                  "--json", str(js), "--out", str(tmp_path / "ev")]) == 0  # fmt: skip
     fig = json.loads(js.read_text())
     for key in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "frames"):
         assert key in fig
     assert fig["frames"] > 0 and (tmp_path / "ev" / "categories.png").exists()
     assert fig["tta"] == "none"
-    assert main(["eval-kin", "--model", str(run / "last.pt"), "--data", str(built),
+    assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
                  "--tta", "mirror", "--json", str(js)]) == 0  # fmt: skip
     tta = json.loads(js.read_text())
     assert tta["tta"] == "mirror" and tta["frames"] == fig["frames"]
     assert tta["PEL_MPJPE_mm"] != pytest.approx(fig["PEL_MPJPE_mm"], rel=1e-4)
-    assert main(["eval-kin", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    assert main(["kin", "eval", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
     assert "none.pt" in capsys.readouterr().err
 
 
@@ -187,7 +187,7 @@ def test_sensor_sweep_trains_each_configuration_and_tabulates(
     built: Path, tmp_path: Path, capsys
 ) -> None:
     sweep = tmp_path / "sweep"
-    args = ["train-kin", "--data", str(built), "--out", str(sweep), "--threads", "1",
+    args = ["kin", "train", "--data", str(built), "--out", str(sweep), "--threads", "1",
             "--sweep", "--imus", "2,4",
             "--set", "hidden=8", "--set", "layers=1", "--set", "init_hidden=8",
             "--set", "train.window_frames=20", "--set", "train.batch_size=2",
@@ -200,7 +200,7 @@ def test_sensor_sweep_trains_each_configuration_and_tabulates(
     assert cfg["features"]["sites"] == ["L_Foot", "R_Foot"] and cfg["features"]["insoles"]
     js = tmp_path / "sweep.json"
     capsys.readouterr()
-    assert main(["eval-kin", "--sweep", str(sweep), "--data", str(built),
+    assert main(["kin", "eval", "--sweep", str(sweep), "--data", str(built),
                  "--json", str(js)]) == 0  # fmt: skip
     table = capsys.readouterr().out
     assert table.count("\n| 2 |") == 2 and table.count("\n| 4 |") == 2
@@ -209,21 +209,32 @@ def test_sensor_sweep_trains_each_configuration_and_tabulates(
     assert all(r["PA_MPJPE_mm"] <= r["PEL_MPJPE_mm"] + 1e-6 for r in res.values())
     # a run whose folder name lies about its sensors is refused
     (sweep / "imu2_press").rename(sweep / "imu3_press")
-    assert main(["eval-kin", "--sweep", str(sweep), "--data", str(built)]) == 2
+    assert main(["kin", "eval", "--sweep", str(sweep), "--data", str(built)]) == 2
     assert "imu3_press" in capsys.readouterr().err
-    assert main(["train-kin", "--data", str(built), "--out", str(sweep), "--sweep",
+    assert main(["kin", "train", "--data", str(built), "--out", str(sweep), "--sweep",
                  "--imus", "2,9"]) == 2  # fmt: skip
+
+
+def _benchmark(name: str):
+    """The module of ``benchmarks/<name>.py`` (a script folder, not a package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"benchmarks_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> None:
     run = tmp_path / "run"
-    main(["train-kin", "--data", str(built), "--out", str(run), "--threads", "1",
+    main(["kin", "train", "--data", str(built), "--out", str(run), "--threads", "1",
           "--set", "hidden=8", "--set", "layers=1", "--set", "init_hidden=8",
           "--set", "train.window_frames=20", "--set", "train.batch_size=2",
           "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
           "--set", "train.joint_epochs=1", "--set", "train.val_windows=2"])  # fmt: skip
     small = tmp_path / "kin16.pt"
-    assert main(["kin-export", str(run / "last.pt"), "--out", str(small)]) == 0
+    assert main(["kin", "export", str(run / "last.pt"), "--out", str(small)]) == 0
     assert small.stat().st_size < (run / "last.pt").stat().st_size
     ref = tmp_path / "ref.npz"
     assert main(["data", "reference", "--data", str(built), "--split", "all", "--kin", str(small),
@@ -233,14 +244,15 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
     rs = ReferenceSet.load(ref)
     assert len(rs) >= 1 and max(c.n_frames for c in rs.clips) <= 120
     js = tmp_path / "bench.json"
-    assert main(["bench-env", "--reference", str(ref), "--steps", "20", "--repeats", "1",
-                 "--amp-window", "0", "--json", str(js)]) == 0  # fmt: skip
+    env_steps = _benchmark("env_steps")
+    assert env_steps.main(["--reference", str(ref), "--steps", "20", "--repeats", "1",
+                           "--amp-window", "0", "--json", str(js)]) == 0  # fmt: skip
     res = json.loads(js.read_text())
     assert res["substeps"] == 2 and res["env_steps_per_s"] > 0 and res["raw_mj_steps_per_s"] > 0
     assert main(["data", "reference", "--out", str(ref)]) == 2  # neither files nor --data
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"garbage")
-    assert main(["bench-env", "--reference", str(bad), "--steps", "2"]) == 2
+    assert env_steps.main(["--reference", str(bad), "--steps", "2"]) == 2
     assert "bad.npz" in capsys.readouterr().err
 
 
@@ -249,7 +261,7 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
 def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys,
                                              tiny_policy_settings) -> None:  # fmt: skip
     run = tmp_path / "policy"
-    args = ["train-policy", "--data", str(built), "--out", str(run), *tiny_policy_settings]
+    args = ["policy", "train", "--data", str(built), "--out", str(run), *tiny_policy_settings]
     assert main(args) == 0
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["config"]["ppo"]["net_arch"] == [16] and "git" in cfg and "kin" in cfg
@@ -262,18 +274,19 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert main([*done, "--init-member", "1"]) == 2  # a member of no --init file
     assert "give --init too" in capsys.readouterr().err
     exported = tmp_path / "small.pt"
-    assert main(["policy-export", str(run), "--out", str(exported)]) == 0
+    assert main(["policy", "export", str(run), "--out", str(exported)]) == 0
     js = tmp_path / "eval.json"
-    assert main(["eval-policy", "--policy", str(exported), "--data", str(built), "--split", "all",
-                 "--segment-frames", "100", "--segments", "2", "--json", str(js),
+    assert main(["policy", "eval", "--policy", str(exported), "--data", str(built), "--split",
+                 "all", "--segment-frames", "100", "--segments", "2", "--json", str(js),
                  "--out", str(tmp_path / "ev")]) == 0  # fmt: skip
     res = json.loads(js.read_text())
     for key in ("success_rate", "MPJPE_mm", "PA_MPJPE_mm", "FS_mps", "FP_mm", "vGRF_N"):
         assert key in res
     assert res["segments"] == 2
-    assert main(["eval-policy", "--policy", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
+    assert main(["policy", "eval", "--policy", str(tmp_path / "none.pt"), "--data",
+                 str(built)]) == 2  # fmt: skip
     # replays under action noise: each one's success rate, their mean (the pooled rate) and sd
-    rep = ["eval-policy", "--policy", str(exported), "--data", str(built), "--split", "all",
+    rep = ["policy", "eval", "--policy", str(exported), "--data", str(built), "--split", "all",
            "--segment-frames", "100", "--segments", "2", "--json", str(js)]  # fmt: skip
     assert main([*rep, "--repeats", "3", "--action-noise", "1", "--out", str(tmp_path / "r")]) == 0
     res = json.loads(js.read_text())
@@ -286,40 +299,42 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert "--action-noise" in capsys.readouterr().err
     # an int8 export is smaller than the fp16 one and evaluates
     small = tmp_path / "int8.pt"
-    assert main(["policy-export", str(run), "--out", str(small), "--precision", "int8"]) == 0
+    assert main(["policy", "export", str(run), "--out", str(small), "--precision", "int8"]) == 0
     assert small.stat().st_size < exported.stat().st_size
-    # an ensemble: from repeated --policy, or from one grip policy-ensemble file
+    # an ensemble: from repeated --policy, or from one 'grip policy combine' file
     ens = tmp_path / "ens.pt"
-    assert main(["policy-ensemble", str(exported), str(run / "policy.pt"), "--out", str(ens),
+    assert main(["policy", "combine", str(exported), str(run / "policy.pt"), "--out", str(ens),
                  "--precision", "fp16"]) == 0  # (the exports' own precision: same actions)
     js2 = tmp_path / "eval2.json"
-    assert main(["eval-policy", "--policy", str(exported), "--policy", str(run / "policy.pt"),
+    assert main(["policy", "eval", "--policy", str(exported), "--policy", str(run / "policy.pt"),
                  "--data", str(built), "--split", "all", "--segment-frames", "100",
                  "--segments", "2", "--json", str(js2)]) == 0  # fmt: skip
-    assert main(["eval-policy", "--policy", str(ens), "--data", str(built), "--split", "all",
+    assert main(["policy", "eval", "--policy", str(ens), "--data", str(built), "--split", "all",
                  "--segment-frames", "100", "--segments", "2", "--json", str(js)]) == 0
     assert js.read_text() == js2.read_text()
-    assert main(["eval-policy", "--policy", str(ens), "--mirror", "--data", str(built), "--split",
-                 "all", "--segment-frames", "100", "--segments", "2", "--json", str(js2)]) == 0
+    assert main(["policy", "eval", "--policy", str(ens), "--mirror", "--data", str(built),
+                 "--split", "all", "--segment-frames", "100", "--segments", "2",
+                 "--json", str(js2)]) == 0  # fmt: skip
     assert json.loads(js2.read_text())["segments"] == 2
-    assert main(["policy-ensemble", str(exported), "--out", str(tmp_path / "one.pt")]) == 2
+    assert main(["policy", "combine", str(exported), "--out", str(tmp_path / "one.pt")]) == 2
     assert "at least two" in capsys.readouterr().err
     # a member written out alone acts as the ensemble's member (with the file's fall detector)
-    from policies.ensemble import load_policy
+    from policies.controller import load_controller
 
     one = tmp_path / "member1.pt"
-    assert main(["policy-member", str(ens), "1", "--out", str(one)]) == 0
-    alone, whole = load_policy(one), load_policy(ens)
+    assert main(["policy", "combine", str(ens), "--member", "1", "--out", str(one)]) == 0
+    alone, whole = load_controller(one), load_controller(ens)
     assert alone.disc is not None and alone.critic is None
     for a, b in zip(alone.actor.state_dict().values(), whole.members[1].actor.state_dict().values(),
                     strict=True):  # fmt: skip
         assert a.equal(b)
-    assert main(["policy-member", str(ens), "2", "--out", str(tmp_path / "m2.pt")]) == 2
+    assert main(["policy", "combine", str(ens), "--member", "2", "--out",
+                 str(tmp_path / "m2.pt")]) == 2  # fmt: skip
     assert "no member 2" in capsys.readouterr().err and not (tmp_path / "m2.pt").exists()
     # two KinematicsNets: the references hold every training recording once per estimator
     kin = str(SHIPPED_KIN)
     two = tmp_path / "policy_two_kin"
-    argv = [*args[:3], "--out", str(two), *args[5:], "--kin", kin, "--kin", kin,
+    argv = [*args[:4], "--out", str(two), *args[6:], "--kin", kin, "--kin", kin,
             "--set", "mirror_references=true"]  # fmt: skip
     assert main(argv) == 0
     one = ReferenceSet.load(run / "reference_train.npz")
@@ -367,7 +382,7 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
     split["train"], split["test"] = sorted(split["train"] + split["test"]), []
     (data / "split.json").write_text(json.dumps(split))
     run = tmp_path / "held"
-    args = ["train-policy", "--data", str(data), "--out", str(run), *tiny_policy_settings,
+    args = ["policy", "train", "--data", str(data), "--out", str(run), *tiny_policy_settings,
             "--set", "holdout_fraction=0.5"]  # fmt: skip
     assert main(args) == 0
     held = json.loads((run / "holdout.json").read_text())["sequences"]
@@ -376,19 +391,19 @@ def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
     ref = ReferenceSet.load(run / "reference_train.npz")
     assert len(ref.clips) == len(train) - len(held)  # one clip per training recording
     exported = tmp_path / "held.pt"
-    assert main(["policy-export", str(run), "--out", str(exported)]) == 0
+    assert main(["policy", "export", str(run), "--out", str(exported)]) == 0
     js = tmp_path / "held.json"
-    assert main(["eval-policy", "--policy", str(exported), "--data", str(data), "--split",
+    assert main(["policy", "eval", "--policy", str(exported), "--data", str(data), "--split",
                  "holdout", "--segment-frames", "100", "--json", str(js)]) == 0  # fmt: skip
     assert json.loads(js.read_text())["segments"] >= 1
     # a policy trained on every clip has no validation split: a clear error
-    assert main(["train-policy", "--data", str(data), "--out", str(tmp_path / "all"),
+    assert main(["policy", "train", "--data", str(data), "--out", str(tmp_path / "all"),
                  *tiny_policy_settings]) == 0  # fmt: skip
-    assert main(["eval-policy", "--policy", str(tmp_path / "all" / "policy.pt"), "--data",
+    assert main(["policy", "eval", "--policy", str(tmp_path / "all" / "policy.pt"), "--data",
                  str(data), "--split", "holdout"]) == 2  # fmt: skip
     assert "no clips were held out" in capsys.readouterr().err
     assert main([*args, "--set", "holdout_fraction=1.5"]) == 2  # out of range: refused
-    everything = ["train-policy", "--data", str(data), "--out", str(tmp_path / "none"),
+    everything = ["policy", "train", "--data", str(data), "--out", str(tmp_path / "none"),
                   *tiny_policy_settings, "--set", "holdout_fraction=0.99"]  # fmt: skip
     assert main(everything) == 2 and "nothing to train on" in capsys.readouterr().err
 
@@ -436,9 +451,9 @@ def test_time_reversed_motions_join_the_policy_references(
         time_reversed_recordings(bare, split["train"], [clip["category"]])
     with pytest.raises(ValueError, match="manifest"):
         time_reversed_recordings(tmp_path, split["train"], ["*"])
-    # grip train-policy: the reversed recordings join the references once (and their mirrors)
+    # grip policy train: the reversed recordings join the references once (and their mirrors)
     run = tmp_path / "rev"
-    args = ["train-policy", "--data", str(built), "--out", str(run), *tiny_policy_settings,
+    args = ["policy", "train", "--data", str(built), "--out", str(run), *tiny_policy_settings,
             "--set", f'reverse_categories=["{clip["category"]}"]']  # fmt: skip
     assert main(args) == 0
     names = [c.name for c in ReferenceSet.load(run / "reference_train.npz").clips]
@@ -446,7 +461,7 @@ def test_time_reversed_motions_join_the_policy_references(
     assert sum(n.endswith(tuple(f"-reversed_seq{i:03d}" for i in range(9))) for n in names) \
         == len(recs)  # fmt: skip
     assert "time-reversed recordings" in capsys.readouterr().out
-    assert main([*args[:4], str(tmp_path / "none"), *args[5:-1],
+    assert main([*args[:5], str(tmp_path / "none"), *args[6:-1],
                  'reverse_categories=["no-such-category"]']) == 2  # fmt: skip
     assert "no training clip" in capsys.readouterr().err
 
@@ -456,7 +471,7 @@ TINY_DISTILL = ["--set", "iterations=2", "--set", "decisions_per_iteration=64",
                 "--set", "reverse_categories=[]", "--set", "mirror_references=false",
                 "--set", "max_episode_frames=40", "--set", "epochs=30",
                 "--set", "batch_size=64", "--set", "learning_rate=1e-2"]  # fmt: skip
-"""A DAgger run of a few seconds (``grip distill-policy`` settings)."""
+"""A DAgger run of a few seconds (``grip policy distill`` settings)."""
 
 
 def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
@@ -465,27 +480,27 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     import numpy as np
     import torch
 
-    from policies.ensemble import load_policy
+    from policies.controller import load_controller
 
     pols = []
     for seed in (0, 1):  # two tiny policies that act differently: the teacher is their mean
         run = tmp_path / f"p{seed}"
-        assert main(["train-policy", "--data", str(built), "--out", str(run),
+        assert main(["policy", "train", "--data", str(built), "--out", str(run),
                      *tiny_policy_settings, "--set", f"seed={seed}"]) == 0  # fmt: skip
         pols.append(run / "policy.pt")
     # member 0 pushes every action by +0.4: the mean action is member 1's + 0.2
-    from grip.kinematics.train import pack_weights
+    from grip.nn.weights import pack_weights
     from policies.runner import linear_layers
 
     payload = torch.load(pols[0], weights_only=True)
-    shifted = load_policy(pols[0])
+    shifted = load_controller(pols[0])
     with torch.no_grad():
         linear_layers(shifted.actor)[-1].bias += 0.4
-    payload["actor"] = pack_weights(shifted.actor.state_dict(), "fp32")
+    payload["members"][0]["actor"] = pack_weights(shifted.actor.state_dict(), "fp32")
     pols[0] = tmp_path / "shifted.pt"
     torch.save(payload, pols[0])
     out = tmp_path / "distill"
-    args = ["distill-policy", "--teacher", str(pols[0]), "--teacher", str(pols[1]),
+    args = ["policy", "distill", "--teacher", str(pols[0]), "--teacher", str(pols[1]),
             "--data", str(built), "--out", str(out), *TINY_DISTILL, "--set", "init_member=1"]
     assert main(args) == 0
     state = json.loads((out / "checkpoint" / "state.json").read_text())
@@ -496,7 +511,7 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert hist[0]["onpolicy_mse"] > 0 and hist[-1]["fit_mse"] < 0.5 * hist[0]["onpolicy_mse"]
     assert sorted(p.name for p in (out / "data").iterdir()) == ["iter_000.npz", "iter_001.npz"]
     assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
-    student, teacher = load_policy(out / "policy.pt"), load_policy(pols[1])
+    student, teacher = load_controller(out / "policy.pt"), load_controller(pols[1])
     assert json.loads((out / "config.json").read_text())["config"]["init_member"] == 1
     assert student.info["distilled"]["iterations"] == 2 and student.disc is not None
     assert student.obs_keys == teacher.obs_keys and np.allclose(student._mean, teacher._mean)
@@ -505,7 +520,7 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert any(changed)
     with np.load(out / "data" / "iter_001.npz") as z:  # teacher labels of the student's states
         x, y = torch.from_numpy(z["x"]).float(), z["y"].astype(np.float32)
-    both = load_policy(pols[0]), teacher
+    both = load_controller(pols[0]), teacher
     with torch.no_grad():  # (x holds member 1's normalised inputs: member 1 acts on it directly)
         a1 = np.clip(both[1].actor(x).numpy(), -1, 1)
     assert np.abs(a1 - y).max() > 1e-3  # the label is not member 1's own action
@@ -526,23 +541,24 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert main([*args, "--set", "iterations=3", "--set", "action_noise=0.2"]) == 2
     # the distilled file plays like any policy; bad members and teachers are named
     js = tmp_path / "d.json"
-    assert main(["eval-policy", "--policy", str(out / "policy.pt"), "--data", str(built),
+    assert main(["policy", "eval", "--policy", str(out / "policy.pt"), "--data", str(built),
                  "--split", "all", "--segment-frames", "100", "--segments", "1",
                  "--json", str(js)]) == 0  # fmt: skip
     assert json.loads(js.read_text())["segments"] == 1
-    bad = ["distill-policy", "--teacher", str(pols[0]), "--data", str(built), "--out",
+    bad = ["policy", "distill", "--teacher", str(pols[0]), "--data", str(built), "--out",
            str(tmp_path / "d2"), *TINY_DISTILL]  # fmt: skip
     assert main([*bad, "--set", "init_member=3"]) == 2
     assert "init_member 3" in capsys.readouterr().err
-    assert main([*bad[:2], str(tmp_path / "none.pt"), *bad[3:]]) == 2
+    assert main([*bad[:3], str(tmp_path / "none.pt"), *bad[4:]]) == 2
     assert "none.pt" in capsys.readouterr().err
     assert main([*bad, "--set", "beta0=2"]) == 2
     assert main([*bad, "--set", "action_noise=-1"]) == 2
     # the data kept: the newest max_samples, across iterations
+    from envs.factory import make_tracking_env
     from policies.distill import DistillConfig, Distiller
 
     keep = Distiller(DistillConfig(decisions_per_iteration=64, max_samples=256), [pols[1]],
-                     tmp_path / "keep", out / "reference_train.npz")  # fmt: skip
+                     tmp_path / "keep", out / "reference_train.npz", make_tracking_env)  # fmt: skip
     keep._chunks = []
     for i in range(4):
         xa, ya = keep._add_data(np.full((100, 3), i, np.float16), np.full((100, 2), i, np.float16))
@@ -550,7 +566,7 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert len(keep._chunks) == 3  # iteration 0's samples are no longer needed
     # noise on the played actions and pushes move the rollouts off the teacher's own states
     noisy = tmp_path / "noisy"
-    assert main([*args[:8], str(noisy), *TINY_DISTILL, "--set", "init_member=1",
+    assert main([*args[:9], str(noisy), *TINY_DISTILL, "--set", "init_member=1",
                  "--set", "iterations=1", "--set", "action_noise=0.5",
                  "--set", "push_force_n=300", "--set", "push_every_s=0.1"]) == 0  # fmt: skip
     with np.load(out / "data" / "iter_000.npz") as a, np.load(noisy / "data" / "iter_000.npz") as b:

@@ -1,10 +1,10 @@
-"""Which setting changes `grip train-policy` accepts when it resumes a run."""
+"""Which setting changes `grip policy train` accepts when it resumes a run."""
 
 from __future__ import annotations
 
 import dataclasses
 
-from grip.cli.policy import changed_settings
+from grip.cli.policy_runs import changed_settings
 from policies.config import PolicyRunConfig
 from policies.train import run_config_dict
 

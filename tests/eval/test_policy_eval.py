@@ -1,4 +1,4 @@
-"""``grip eval-policy``'s rows and summary count simulation blow-ups and keep their frames out."""
+"""``grip policy eval``'s rows and summary count simulation blow-ups and keep their frames out."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 
 import grip.eval.policy as P
 from envs.config import TrackingEnvConfig
-from grip.eval.reconstruct import inference_env
 from grip.kinematics.features import FeatureConfig
+from grip.pipeline import GripPipeline
 from prism_tools.io import load_recording
 
 
@@ -19,22 +19,24 @@ class _BlowingRunner:
     env_cfg = TrackingEnvConfig(amp_window=2)
 
     def __init__(self, frame: int) -> None:
-        self.frame, self.env = frame, None
+        self.frame, self.player = frame, None
 
     def act(self, obs: dict) -> np.ndarray:
-        if self.env.frame + 1 == self.frame:
-            self.env.data.qvel[2] = 1e3
+        if self.player.t + 1 == self.frame:
+            self.player.h.data.qvel[2] = 1e3
         return np.zeros(69)
 
 
 def test_a_blow_up_fails_its_segment_and_is_counted(monkeypatch, tmp_path) -> None:
     runner = _BlowingRunner(60)
 
-    def env_of(r, ref):
-        r.env = inference_env(r, ref)
-        return r.env
+    player = GripPipeline.player
 
-    monkeypatch.setattr(P, "inference_env", env_of)
+    def player_of(self, *args, **kw):
+        runner.player = player(self, *args, **kw)
+        return runner.player
+
+    monkeypatch.setattr(GripPipeline, "player", player_of)
     rec = load_recording("grip/assets/sample_recording.npz").slice_frames(0, 120)
     est = type("Est", (), {"cfg": type("Cfg", (), {"features": FeatureConfig()})()})()
     (row,) = P.evaluate_policy(runner, est, [rec], reference="truth")

@@ -1,7 +1,7 @@
 """A tampered training run folder is read without running anything it holds.
 
 stable-baselines3's ``PPO.load`` unpickles (and so runs) every ``":serialized:"`` entry of the
-``data`` JSON in ``model.zip``. ``grip policy-export RUN`` and a resumed ``grip train-policy
+``data`` JSON in ``model.zip``. ``grip policy export RUN`` and a resumed ``grip policy train
 --out RUN`` read the folder through :mod:`policies.checkpoint` instead: those entries are
 ignored, and a tensor file holding pickled Python objects is refused with its name.
 """
@@ -57,7 +57,7 @@ def train_args(tiny_policy_settings):
     """``train_args(data, run, *extra)``: the argv of the tiny run's (resumed) training."""
 
     def argv(data: Path, run: Path, *extra: str) -> list[str]:
-        return ["train-policy", "--data", str(data), "--out", str(run), *tiny_policy_settings,
+        return ["policy", "train", "--data", str(data), "--out", str(run), *tiny_policy_settings,
                 *extra]  # fmt: skip
 
     return argv
@@ -112,7 +112,7 @@ def test_serialized_payloads_in_model_zip_are_never_run(trained, train_args, tmp
 
     _rewrite_zip(zpath, "data", tamper(marker))
     out = tmp_path / "policy.pt"
-    assert main(["policy-export", str(run), "--out", str(out)]) == 0
+    assert main(["policy", "export", str(run), "--out", str(out)]) == 0
     assert not marker.exists()
     from policies.runner import PolicyRunner
 
@@ -157,7 +157,7 @@ def test_hostile_files_in_a_run_folder_are_refused_naming_them(trained, train_ar
     else:
         (ck / "model.zip").write_bytes(b"PK\x03\x04 junk")
         name = "model.zip"
-    for argv in (["policy-export", str(run), "--out", str(tmp_path / "p.pt")],
+    for argv in (["policy", "export", str(run), "--out", str(tmp_path / "p.pt")],
                  train_args(data, run, "--set", "stage2.timesteps=128")):  # fmt: skip
         assert main(argv) == 2, argv[0]
         err = capsys.readouterr().err
@@ -174,6 +174,7 @@ def test_resume_continues_exactly_as_sb3_load_would(tmp_path):
 
     from stable_baselines3 import PPO
 
+    from envs.factory import make_tracking_env
     from policies.train import PolicyTrainer, load_vecnorm_state, run_config_dict
     from tests.policies.test_train import _tiny
 
@@ -181,7 +182,7 @@ def test_resume_continues_exactly_as_sb3_load_would(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     (run / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
-    PolicyTrainer(cfg, run, SAMPLE_REFERENCE).train()
+    PolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_tracking_env).train()
     longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=128))
 
     def sb3_restore(self) -> None:  # what PolicyTrainer did before (runs pickled entries)
@@ -194,7 +195,7 @@ def test_resume_continues_exactly_as_sb3_load_would(tmp_path):
     for how in ("safe", "sb3"):
         copy = tmp_path / how
         shutil.copytree(run, copy)
-        tr = PolicyTrainer(longer, copy, SAMPLE_REFERENCE)
+        tr = PolicyTrainer(longer, copy, SAMPLE_REFERENCE, make_tracking_env)
         if how == "sb3":
             tr._restore_model = sb3_restore.__get__(tr)
         tr.train()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from envs.config import TrackingEnvConfig
-from envs.terrain import heightmap_grid
+from envs.heightfield import heightmap_grid
 from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
 from grip.core.reference import ReferenceSet
 from grip.kinematics.reference import with_mirrored_clips

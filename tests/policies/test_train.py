@@ -8,10 +8,13 @@ import json
 import numpy as np
 import pytest
 
+from envs.factory import make_tracking_env
 from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+from grip.core.reference_sets import select_clips
 from policies.config import AmpConfig, PolicyRunConfig, PPOConfig, StageConfig
-from policies.runner import PolicyRunner, export_policy
-from policies.train import PolicyTrainer, run_config_dict, select_clips
+from policies.controller import Controller, combine, load_controller
+from policies.runner import PolicyRunner, export_policy, read_policy_file
+from policies.train import PolicyTrainer, run_config_dict
 
 
 def _tiny() -> PolicyRunConfig:
@@ -33,7 +36,7 @@ def run(tmp_path_factory):
     run = tmp_path_factory.mktemp("policy_run")
     cfg = _tiny()
     (run / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
-    tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE)
+    tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_tracking_env)
     tr.train()
     return run, tr
 
@@ -94,7 +97,7 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     shutil.copytree(path, copy)
     cfg = _tiny()
     longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=128))
-    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE)
+    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE, make_tracking_env)
     tr2.train()
     assert tr2.total_done() == 128 + 128
     assert len(tr2.history) > len(tr.history)
@@ -105,7 +108,7 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     slower = dataclasses.replace(
         longer, ppo=dataclasses.replace(cfg.ppo, learning_rate=1e-5, n_epochs=2, target_kl=0.02)
     )
-    tr3 = PolicyTrainer(slower, copy2, SAMPLE_REFERENCE)
+    tr3 = PolicyTrainer(slower, copy2, SAMPLE_REFERENCE, make_tracking_env)
     tr3.train()
     assert tr3.model.learning_rate == 1e-5 and tr3.model.n_epochs == 2
     assert tr3.model.target_kl == 0.02
@@ -124,7 +127,7 @@ def test_learning_rate_decays_over_the_end_of_the_last_stage(run, tmp_path):
     ppo = dataclasses.replace(cfg.ppo, learning_rate_decay_steps=128, learning_rate_final=0.0)
     longer = dataclasses.replace(cfg, ppo=ppo,
                                  stage2=dataclasses.replace(cfg.stage2, timesteps=192))  # fmt: skip
-    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE)
+    tr2 = PolicyTrainer(longer, copy, SAMPLE_REFERENCE, make_tracking_env)
     tr2.train()
     new = tr2.history[len(tr.history) :]
     assert [h["timesteps"] for h in new] == [128 + 128, 128 + 192]
@@ -137,16 +140,25 @@ def test_learning_rate_decays_over_the_end_of_the_last_stage(run, tmp_path):
         dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, learning_rate_decay_steps=-1))
 
 
+def _save_v1(payload: dict, path) -> None:
+    """Write one policy's payload in the layout of files exported before version 2 (the policy
+    at the top level), which must keep loading."""
+    import torch
+
+    torch.save({**payload, "format": "grip-policy", "version": 1}, path)
+
+
 def _two_policies(run, tmp_path, actor_noise: float, info: dict | None = None):
-    """The run's export ``a.pt`` and ``b.pt``: its actor plus noise, its normaliser shifted by
-    0.3 of the spread and the variance times 1.3 (so that neither file clips a test input near
-    the means); returns both paths and a's payload."""
+    """The run's export ``a.pt`` and ``b.pt`` (written in the layout before version 2): its
+    actor plus noise, its normaliser shifted by 0.3 of the spread and the variance times 1.3
+    (so that neither file clips a test input near the means); returns both paths and a's
+    payload."""
     import torch
 
     path, _ = run
     a = tmp_path / "a.pt"
     export_policy(path, a, half=False)
-    ck = torch.load(a, weights_only=True)
+    [ck], _ = read_policy_file(a)
     gen = torch.Generator().manual_seed(0)
     other = dict(ck)
     other["actor"] = {k: v + actor_noise * torch.randn(v.shape, generator=gen, dtype=v.dtype)
@@ -157,18 +169,16 @@ def _two_policies(run, tmp_path, actor_noise: float, info: dict | None = None):
     if info is not None:
         other["info"] = json.dumps(info)
     b = tmp_path / "b.pt"
-    torch.save(other, b)
+    _save_v1(other, b)
     return a, b, ck
 
 
 def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
     import torch
 
-    from policies.average import average_policies
-
     a, b, ck = _two_policies(run, tmp_path, actor_noise=0.05)
     avg = tmp_path / "avg.pt"
-    average_policies([a, b], avg)
+    assert combine([a, b], avg, how="average")[1] == 1
     ra, rb, rv = (PolicyRunner.load(f) for f in (a, b, avg))
     np.testing.assert_allclose(rv._mean, rb._mean)  # the last file's normaliser
     # the first layer's pre-activation is the mean of the two files' on the same raw input
@@ -185,17 +195,17 @@ def test_policy_average_rewrites_first_layers_for_one_normaliser(run, tmp_path):
                                (ra.actor[2].weight + rb.actor[2].weight).detach() / 2, atol=1e-6)
     # a file averaged with itself acts as it does
     self_avg = tmp_path / "self.pt"
-    average_policies([a, a], self_avg)
+    combine([a, a], self_avg, how="average")
     obs = {k: np.asarray(v, np.float64) for k, v in ra.obs_mean.items()}
     np.testing.assert_allclose(PolicyRunner.load(self_avg).act(obs), ra.act(obs), atol=1e-5)
     # other networks, and single files, are refused with the file's name
     bad = dict(ck)
     bad["actor_sizes"] = [*ck["actor_sizes"][:-1], 7]
-    torch.save(bad, tmp_path / "bad.pt")
-    with pytest.raises(ValueError, match=r"bad\.pt: actor_sizes"):
-        average_policies([tmp_path / "bad.pt", a], tmp_path / "x.pt")
+    _save_v1(bad, tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match=r"bad\.pt: inconsistent policy file"):
+        combine([tmp_path / "bad.pt", a], tmp_path / "x.pt", how="average")
     with pytest.raises(ValueError, match="at least two"):
-        average_policies([a], tmp_path / "x.pt")
+        combine([a], tmp_path / "x.pt", how="average")
     assert not (tmp_path / "x.pt").exists()
 
 
@@ -204,14 +214,15 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
 
     import torch
 
-    from policies.ensemble import PolicyEnsemble, load_policy, write_ensemble
+    from policies.ensemble import PolicyEnsemble
 
     # another network with its own normaliser and held-out clips: a policy trained apart
     a, b, ck = _two_policies(run, tmp_path, actor_noise=0.2, info={"holdout": ["x", "y"]})
     ra, rb = PolicyRunner.load(a), PolicyRunner.load(b)
     obs, info = GripTrackingEnv(ra.env_cfg).reset(seed=3)
     assert np.abs(ra.act(obs) - rb.act(obs)).max() > 0.01  # (the two do differ)
-    ens = PolicyEnsemble.load([a, b])
+    ens = load_controller([a, b])
+    assert isinstance(ens, PolicyEnsemble) and isinstance(ens, Controller)
     np.testing.assert_allclose(ens.act(obs), (ra.act(obs) + rb.act(obs)) / 2, atol=1e-5)
     batch = {k: np.stack([v, v]) for k, v in obs.items()}
     assert ens.act(batch).shape == (2, ra.act(obs).size)
@@ -220,37 +231,38 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
     assert ens.info["holdout"] == []  # a clip only b held out trained a
     # one file: actors and normalisers of both, one discriminator, no value networks
     f = tmp_path / "ens.pt"
-    size, n = write_ensemble([a, b], f)
+    size, n = combine([a, b], f)
     assert n == 2 and size == f.stat().st_size
-    loaded = load_policy(f)
+    loaded = load_controller(f)
     assert isinstance(loaded, PolicyEnsemble) and len(loaded.members) == 2
     err = np.abs(loaded.act(obs) - ens.act(obs)).max()  # int8 actors by default
     assert 0 < err < 0.1, err  # (a tiny noisy test network; the shipped one: README)
     exact = tmp_path / "exact.pt"
-    assert write_ensemble([a, b], exact, precision="fp32")[0] > size
-    np.testing.assert_allclose(load_policy(exact).act(obs), ens.act(obs), atol=1e-5)
+    assert combine([a, b], exact, precision="fp32")[0] > size
+    np.testing.assert_allclose(load_controller(exact).act(obs), ens.act(obs), atol=1e-5)
     assert loaded.members[0].disc is not None and loaded.members[1].disc is None
     # the fall detector is stored int8 too and gives the same probability within 0.05
     stored = torch.load(f, weights_only=True)["members"][0]["disc"]
     assert any(v.dtype == torch.int8 for v in stored.values())
     p_ref, p_int8 = ra.fall_probability(info["amp_obs"]), loaded.fall_probability(info["amp_obs"])
     assert np.abs(p_int8 - p_ref).max() < 0.05
-    assert load_policy(exact).fall_probability(info["amp_obs"]) == pytest.approx(p_ref, abs=1e-5)
+    assert load_controller(exact).fall_probability(info["amp_obs"]) == pytest.approx(p_ref,
+                                                                                     abs=1e-5)
     assert all(m.critic is None for m in loaded.members)
-    assert isinstance(load_policy(a), PolicyRunner)
+    assert isinstance(load_controller(a), PolicyRunner)
     # an ensemble file joins another file as its members
-    assert write_ensemble([f, a], tmp_path / "three.pt")[1] == 3
-    assert len(PolicyEnsemble.load([f, a]).members) == 3
+    assert combine([f, a], tmp_path / "three.pt")[1] == 3
+    assert len(load_controller([f, a]).members) == 3
     # refusals name the file: one policy alone, a member that drives the body otherwise, a
     # corrupt ensemble, and an ensemble where one policy is needed (fine-tuning)
     with pytest.raises(ValueError, match="at least two"):
-        write_ensemble([a], tmp_path / "x.pt")
+        combine([a], tmp_path / "x.pt")
     cfg = json.loads(ck["config"])
     cfg["env"]["action_scale"] = 0.25
     odd = dict(ck, config=json.dumps(cfg))
-    torch.save(odd, tmp_path / "odd.pt")
+    _save_v1(odd, tmp_path / "odd.pt")
     with pytest.raises(ValueError, match=r"odd\.pt: environment settings differ .*action_scale"):
-        write_ensemble([a, tmp_path / "odd.pt"], tmp_path / "x.pt")
+        combine([a, tmp_path / "odd.pt"], tmp_path / "x.pt")
     assert not (tmp_path / "x.pt").exists()
     wide = dict(ck, obs_mean=dict(ck["obs_mean"]), obs_var=dict(ck["obs_var"]))
     key = ck["obs_keys"][0]  # a policy of another sensor set: a longer first part
@@ -260,36 +272,44 @@ def test_policy_ensemble_plays_the_mean_action_and_round_trips_a_file(run, tmp_p
     w0 = sorted(k for k in ck["actor"] if k.endswith(".weight"))[0]
     wide["actor"][w0] = torch.cat([ck["actor"][w0], ck["actor"][w0][:, :3]], 1)
     wide["actor_sizes"] = [ck["actor_sizes"][0] + 3, *ck["actor_sizes"][1:]]
-    torch.save(wide, tmp_path / "wide.pt")
+    _save_v1(wide, tmp_path / "wide.pt")
     with pytest.raises(ValueError, match=r"wide\.pt: observations of \d+ values"):
-        PolicyEnsemble.load([a, tmp_path / "wide.pt"])
+        load_controller([a, tmp_path / "wide.pt"])
     rb.env_cfg = dc.replace(ra.env_cfg, reward=dc.replace(ra.env_cfg.reward, k_pos=1.0))
     PolicyEnsemble([ra, rb])  # reward settings may differ: inference computes no reward
     broken = torch.load(f, weights_only=True)
     broken["members"][1] = {"format": "grip-policy"}
     torch.save(broken, tmp_path / "broken.pt")
     with pytest.raises(ValueError, match=r"broken\.pt \(member 1.*lacks"):
-        load_policy(tmp_path / "broken.pt")
+        load_controller(tmp_path / "broken.pt")
     with pytest.raises(ValueError, match=r"ens\.pt: an ensemble of 2 policies"):
         PolicyRunner.load(f)
-    from policies.average import average_policies
-
-    with pytest.raises(ValueError, match=r"ens\.pt: an ensemble file"):
-        average_policies([f, a], tmp_path / "x.pt")
+    with pytest.raises(ValueError, match=r"ens\.pt \[0\]: critic_sizes None differs"):
+        combine([f, a], tmp_path / "x.pt", how="average")  # (an ensemble keeps no critics)
+    # one member alone: its actor as stored, the file's fall detector, no value network
+    assert combine([f], tmp_path / "m1.pt", member=1)[1] == 1
+    m1 = load_controller(tmp_path / "m1.pt")
+    assert isinstance(m1, PolicyRunner) and m1.critic is None and m1.disc is not None
+    np.testing.assert_allclose(m1.act(obs), loaded.members[1].act(obs), atol=1e-6)
+    with pytest.raises(ValueError, match="no member 2"):
+        combine([f], tmp_path / "m2.pt", member=2)
     # a warm start from an ensemble file begins from its first member (no value network)
-    tr = PolicyTrainer(_tiny(), tmp_path / "ft", SAMPLE_REFERENCE, init=exact)
+    tr = PolicyTrainer(_tiny(), tmp_path / "ft", SAMPLE_REFERENCE, make_tracking_env, init=exact)
     assert tr.init_members == 2 and tr._init_runner.critic is None
     np.testing.assert_allclose(tr._init_runner.act(obs), ra.act(obs), atol=1e-6)
     # or from a later member, which takes the file's discriminator (it stores one)
-    tr = PolicyTrainer(_tiny(), tmp_path / "ft1", SAMPLE_REFERENCE, init=exact, init_member=1)
+    tr = PolicyTrainer(_tiny(), tmp_path / "ft1", SAMPLE_REFERENCE, make_tracking_env,
+                       init=exact, init_member=1)
     np.testing.assert_allclose(tr._init_runner.act(obs), rb.act(obs), atol=1e-6)
     assert tr._init_runner.disc is not None and "member 1" in tr.init_name
     assert tr._init_runner.fall_probability(info["amp_obs"]) == pytest.approx(
         ra.fall_probability(info["amp_obs"]), abs=1e-5)  # fmt: skip
     with pytest.raises(ValueError, match=r"exact\.pt: no member 2 \(the file holds 2 policies"):
-        PolicyTrainer(_tiny(), tmp_path / "ft2", SAMPLE_REFERENCE, init=exact, init_member=2)
+        PolicyTrainer(_tiny(), tmp_path / "ft2", SAMPLE_REFERENCE, make_tracking_env,
+                      init=exact, init_member=2)
     with pytest.raises(ValueError, match=r"\.pt: no member 1 \(the file holds 1 policy"):
-        PolicyTrainer(_tiny(), tmp_path / "ft3", SAMPLE_REFERENCE, init=a, init_member=1)
+        PolicyTrainer(_tiny(), tmp_path / "ft3", SAMPLE_REFERENCE, make_tracking_env,
+                      init=a, init_member=1)
 
 
 def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
@@ -318,7 +338,7 @@ def test_export_matches_the_sb3_policy_and_loads_safely(run, tmp_path):
     # judges nearly as the fp32 file does (the tiny test network; the shipped one: README)
     small = tmp_path / "int8.pt"
     assert export_policy(path, small, precision="int8") < half.stat().st_size
-    stored = torch.load(small, weights_only=True)
+    [stored], _ = read_policy_file(small)
     for part in ("actor", "critic", "disc"):
         assert any(v.dtype == torch.int8 for v in stored[part].values()), part
     q = PolicyRunner.load(small)
@@ -442,7 +462,7 @@ def test_action_repeat_training_counts_frames_and_the_export_keeps_it(tmp_path):
         stage2=dataclasses.replace(base.stage2, timesteps=0),
     )  # fmt: skip
     (tmp_path / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
-    tr = PolicyTrainer(cfg, tmp_path, SAMPLE_REFERENCE)
+    tr = PolicyTrainer(cfg, tmp_path, SAMPLE_REFERENCE, make_tracking_env)
     tr.train()
     assert tr.total_done() == 64  # decisions
     ended = [h["ep_len"] for h in tr.history if "ep_len" in h]
@@ -479,7 +499,7 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
 
     # warm-up covering the whole run: the policy stays exactly the exported one
     frozen = PolicyTrainer(_warm_cfg(10_000), tmp_path / "frozen", SAMPLE_REFERENCE,
-                           init=exported)  # fmt: skip
+                           make_tracking_env, init=exported)  # fmt: skip
     frozen.train()
     pol = frozen.model.policy
     ours = [*_linears(pol.mlp_extractor.policy_net), pol.action_net]
@@ -493,7 +513,8 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
     h = [r for r in frozen.history if r["stage"] == "stage2"]
     assert h and h[0]["timesteps"] == 64  # stage 1 of 0 steps is skipped
     # before any update: the discriminator and the observation normaliser are the file's
-    fresh = PolicyTrainer(_warm_cfg(0), tmp_path / "fresh", SAMPLE_REFERENCE, init=exported)
+    fresh = PolicyTrainer(_warm_cfg(0), tmp_path / "fresh", SAMPLE_REFERENCE, make_tracking_env,
+                          init=exported)
     fresh.venv = fresh._build_env(fresh.cfg.stage2)
     fresh.model = fresh._new_model(fresh.venv)
     fresh.warm_start(src)
@@ -510,7 +531,8 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
     cfg = dataclasses.replace(cfg, amp=dataclasses.replace(cfg.amp, from_init=False),
                               ppo=dataclasses.replace(cfg.ppo, fixed_std=True,
                                                       log_std_init=-3.25))  # fmt: skip
-    own = PolicyTrainer(cfg, tmp_path / "own_disc", SAMPLE_REFERENCE, init=exported)
+    own = PolicyTrainer(cfg, tmp_path / "own_disc", SAMPLE_REFERENCE, make_tracking_env,
+                        init=exported)
     new_disc = {k: v.clone() for k, v in own.amp.disc.state_dict().items()}
     own.venv = own._build_env(own.cfg.stage2)
     own.model = own._new_model(own.venv)
@@ -527,7 +549,8 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
     (tmp_path / "free").mkdir()
     (tmp_path / "free" / "config.json").write_text(
         json.dumps({"config": run_config_dict(_warm_cfg(0))}))
-    free = PolicyTrainer(_warm_cfg(0), tmp_path / "free", SAMPLE_REFERENCE, init=exported)
+    free = PolicyTrainer(_warm_cfg(0), tmp_path / "free", SAMPLE_REFERENCE, make_tracking_env,
+                         init=exported)
     free.train()
     pol = free.model.policy
     ours = [*_linears(pol.mlp_extractor.policy_net), pol.action_net]
@@ -547,12 +570,14 @@ def test_warm_start_refuses_a_policy_of_another_size(run, tmp_path):
     export_policy(path, exported)
     cfg = _warm_cfg(0)
     wider = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, net_arch=(64, 32)))
-    tr = PolicyTrainer(wider, tmp_path / "wider", SAMPLE_REFERENCE, init=exported)
+    tr = PolicyTrainer(wider, tmp_path / "wider", SAMPLE_REFERENCE, make_tracking_env,
+                       init=exported)
     with pytest.raises(ValueError, match=r"p\.pt: its policy network has layers"):
         tr.train()
     with pytest.raises(ValueError, match=r"junk\.pt"):
         (tmp_path / "junk.pt").write_bytes(b"junk")
-        PolicyTrainer(cfg, tmp_path / "j", SAMPLE_REFERENCE, init=tmp_path / "junk.pt")
+        PolicyTrainer(cfg, tmp_path / "j", SAMPLE_REFERENCE, make_tracking_env,
+                      init=tmp_path / "junk.pt")
 
 
 def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_path):
@@ -568,7 +593,7 @@ def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_pa
     assert src.env_cfg.kinematic_obs == "OAV_Jrel"
     cfg = _warm_cfg(0)
     jhor = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jhor"))
-    tr = PolicyTrainer(jhor, tmp_path / "jhor", SAMPLE_REFERENCE, init=exported)
+    tr = PolicyTrainer(jhor, tmp_path / "jhor", SAMPLE_REFERENCE, make_tracking_env, init=exported)
     tr.venv = tr._build_env(tr.cfg.stage2)
     tr.model = tr._new_model(tr.venv)
     tr.warm_start(src)
@@ -592,7 +617,7 @@ def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_pa
     tr.venv.close()
 
     glo = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jglo"))
-    tr = PolicyTrainer(glo, tmp_path / "jglo", SAMPLE_REFERENCE, init=exported)
+    tr = PolicyTrainer(glo, tmp_path / "jglo", SAMPLE_REFERENCE, make_tracking_env, init=exported)
     with pytest.raises(ValueError, match=r"p\.pt: trained with env.kinematic_obs='OAV_Jrel'"):
         tr.train()
 
@@ -612,7 +637,7 @@ def test_training_environments_are_pushed_only_when_asked():
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, action_repeat=3))
     for force, pushed in ((0.0, False), (120.0, True)):
         c = dataclasses.replace(cfg, push_force_n=force, push_every_s=1.5, push_duration_s=0.1)
-        venv = make_vec_env(c, c.stage2, SAMPLE_REFERENCE, seed=0)
+        venv = make_vec_env(c, c.stage2, SAMPLE_REFERENCE, seed=0, make_env=make_tracking_env)
         kinds = chain(venv.envs[0])
         # inside the action repeat: waits and pushes count frames
         assert kinds == ([ActionRepeat, RandomPushes] if pushed else [ActionRepeat])

@@ -1,33 +1,21 @@
-"""``grip bench-env``: tracking-environment steps/s against raw ``mj_step`` of the same model."""
+"""Tracking-environment steps/s against raw ``mj_step`` of the same model.
+
+Times GripTrackingEnv.step (observations, reward, termination; zero actions in the default
+relative mode, reset when an episode ends) and, in the same run, raw mujoco.mj_step on the same
+compiled model from the same start state. The ratio env_steps_per_s x substeps /
+raw_mj_steps_per_s is the share of time left to physics (target >= 0.5: observation building
+and reward must not dominate).
+
+    python benchmarks/env_steps.py [--steps 3000] [--reference REF.npz] [--json out.json]
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+from collections.abc import Sequence
 from pathlib import Path
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "bench-env",
-        help="measure tracking-env steps/s against raw mj_step/s of the same model",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=(
-            "Time GripTrackingEnv.step (observations, reward, termination; zero actions in the\n"
-            "default relative mode, reset when an episode ends) and, in the same run, raw\n"
-            "mujoco.mj_step on the same compiled model from the same start state. The ratio\n"
-            "env_steps_per_s x substeps / raw_mj_steps_per_s is the share of time left to\n"
-            "physics (target >= 0.5: observation building and reward must not dominate)."
-        ),
-        epilog="example: grip bench-env --json bench_env.json",
-    )
-    p.add_argument("--steps", type=int, default=3000, help="env steps to time (default 3000)")
-    p.add_argument("--reference", type=Path, default=None,
-                   help="reference-set file (default: the bundled sample)")  # fmt: skip
-    p.add_argument("--repeats", type=int, default=5, help="best of N timings (default 5)")
-    p.add_argument("--amp-window", type=int, default=10,
-                   help="AMP frames kept for the discriminator (0: none; default 10)")  # fmt: skip
-    p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
-    p.set_defaults(func=cmd_bench_env)
 
 
 def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
@@ -82,23 +70,36 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
     }
 
 
-def cmd_bench_env(args: argparse.Namespace) -> int:
-    import json
-
-    from grip.cli.errors import CliError
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the benchmark; returns the exit status (2: bad arguments or an unreadable reference
+    set, named on stderr)."""
     from grip.core.atomic import atomic_write_text
     from grip.core.reference import ReferenceError
 
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--steps", type=int, default=3000, help="env steps to time (default 3000)")
+    ap.add_argument("--reference", type=Path, default=None,
+                    help="reference-set file (default: the bundled sample)")  # fmt: skip
+    ap.add_argument("--repeats", type=int, default=5, help="best of N timings (default 5)")
+    ap.add_argument("--amp-window", type=int, default=10,
+                    help="AMP frames kept for the discriminator (0: none; default 10)")
+    ap.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
+    args = ap.parse_args(argv)
     if args.steps < 1 or args.repeats < 1:
-        raise CliError("--steps and --repeats must be >= 1")
+        ap.error("--steps and --repeats must be >= 1")
     try:
         res = bench_env(args.steps, str(args.reference) if args.reference else None, args.repeats,
                         args.amp_window)  # fmt: skip
     except (OSError, ReferenceError) as e:
-        raise CliError(str(e)) from e
+        print(f"env_steps: error: {e}", file=sys.stderr)
+        return 2
     for k, v in res.items():
         print(f"{k:22s} {v:.4g}" if isinstance(v, float) else f"{k:22s} {v}")
     if args.json:
         atomic_write_text(args.json, json.dumps(res, indent=1))
         print(f"wrote {args.json}")
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
