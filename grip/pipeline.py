@@ -1,7 +1,9 @@
 """GRIP's inference pipeline: ``SensorStream -> KinematicsNet -> controller -> Humanoid``.
 
 No ground truth and no training task: the humanoid (:class:`grip.sim.humanoid.Humanoid`) starts
-from the calibration pose (:class:`grip.kinematics.features.Calibration`) and the policy follows
+from the calibration pose (:class:`grip.kinematics.features.Calibration`: the recording's first
+frames where it has ground truth, else the standing rest pose turned to the heading of the foot
+IMUs, :func:`grip.kinematics.features.standing_calibration`) and the policy follows
 the KinematicsNet estimate, observing it exactly as the training task does
 (:class:`envs.observations.EstimateFrames`); no reward is computed. Offline and streaming share
 :class:`Player`, which plays one control step at a time: offline runs KinematicsNet once over the
@@ -42,6 +44,7 @@ from envs.observations import EstimateFrames
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams
+from grip.core.checks import check
 from grip.core.metrics import global_to_local_rot
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import Estimate, ground_truth_arrays, pose_vector
@@ -71,8 +74,7 @@ class RecoveryConfig:
     fall_probability: float = 0.7
 
     def __post_init__(self) -> None:
-        if self.history_frames < 1:
-            raise ValueError("RecoveryConfig.history_frames must be >= 1")
+        check(self, (self.history_frames >= 1, "history_frames must be >= 1"))
 
 
 @dataclass(frozen=True, eq=False)

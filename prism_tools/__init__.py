@@ -7,7 +7,8 @@ gymnasium. Importing the package does not import scipy.
 from prism_tools.chunking import chunk_recording, make_split
 from prism_tools.errors import RecordingError
 from prism_tools.io import load_recording, save_recording
-from prism_tools.schema import Recording, validate
+from prism_tools.schema import Recording
+from prism_tools.validation import validate
 
 __all__ = [
     "Recording",

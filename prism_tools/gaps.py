@@ -1,7 +1,7 @@
 """Degraded mode for recordings with short sensor dropouts: filling short runs of NaN frames.
 
 Real recordings sometimes lose a sensor for a few frames; the stored values are then NaN (or
-inf) and :func:`~prism_tools.schema.validate` rejects the whole file. :func:`fill_gaps` repairs
+inf) and :func:`~prism_tools.validation.validate` rejects the whole file. :func:`fill_gaps` repairs
 short dropouts in the raw PRISM dict (as read by :func:`prism_tools.io.load_prism_dict`) before
 it is parsed, and reports every run it filled so that the repair stays visible;
 ``load_recording(path, fill_gaps=N)`` applies it and stores the report in

@@ -54,7 +54,10 @@ from grip.core.limits import (
 )
 from prism_tools.errors import RecordingError
 from prism_tools.gaps import fill_gaps as _fill_gaps
-from prism_tools.schema import EXTRAS_KEY, ForceUnit, Recording, validate
+from prism_tools.prism_dict import recording_from_prism_dict
+from prism_tools.schema import Recording
+from prism_tools.streams import EXTRAS_KEY, ForceUnit
+from prism_tools.validation import validate
 
 __all__ = [
     "RestrictedUnpickler",
@@ -414,7 +417,7 @@ def load_recording(
     Accepts both PRISM layouts, ``<root>/<subject>/<take>.pkl`` and flat ``subj001_take002.pkl``.
     For a file without this project's namespace (a real PRISM take), ``extras["take_name"]`` is set
     from the path (``"subj001_take002"``) and the insole force unit is decided from the data (see
-    :meth:`Recording.from_prism_dict`).
+    :func:`prism_tools.prism_dict.recording_from_prism_dict`).
 
     Degraded mode (``fill_gaps > 0``): short sensor dropouts (runs of at most ``fill_gaps``
     frames holding NaN/inf in the ``imu``, ``imu_gt`` and ``insole`` streams) are filled before
@@ -463,7 +466,7 @@ def _recording_from_dict(d: dict[str, Any], path: Path, force_unit: ForceUnit, f
     if fill_gaps > 0:
         d, filled = _fill_gaps(d, fill_gaps, source=str(path))
     try:
-        rec = Recording.from_prism_dict(
+        rec = recording_from_prism_dict(
             d, source=str(path), force_unit=force_unit, limits=limits
         )
     except RecordingError as e:

@@ -22,7 +22,8 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.spatial.transform import Rotation
 
-from prism_tools.schema import (
+from prism_tools.schema import Recording
+from prism_tools.streams import (
     DEFAULT_FPS,
     FEET,
     IMU_PARTS,
@@ -34,7 +35,6 @@ from prism_tools.schema import (
     ImuStream,
     InsoleCombined,
     InsoleStream,
-    Recording,
     SceneObject,
     Slam,
     SmplParams,
@@ -114,12 +114,12 @@ def make_recording(
     Args:
         n_frames: Number of frames ``F >= 2`` (the first 100 are a still stance).
         seed: Seed of the only random generator used (``np.random.default_rng(seed)``).
-        parts: IMU parts to include (subset of :data:`~prism_tools.schema.IMU_PARTS`); ``imu``
+        parts: IMU parts to include (subset of :data:`~prism_tools.streams.IMU_PARTS`); ``imu``
             and ``imu_gt`` hold these. Both insoles are always present.
         with_objects: Add a ``BoxSmall`` scene object.
 
     Returns:
-        A recording that passes :func:`~prism_tools.schema.validate`, with extras
+        A recording that passes :func:`~prism_tools.validation.validate`, with extras
         ``{"category": "walk", "source_clip": "synthetic", "noise_seed": seed}``.
     """
     if n_frames < 2:
@@ -281,16 +281,8 @@ def make_recording(
         fps=fps,
         synth_imu_frames=synth,
     )
-    return Recording(
-        subject=subject,
-        data_info=data_info,
-        smpl_params=smpl,
-        imu=imu,
-        imu_gt=imu_gt,
-        insole=insole,
-        insole_combined=combined,
-        slam=slam,
-        objects=objects,
-        fps=fps,
-        extras={"category": "walk", "source_clip": "synthetic", "noise_seed": seed},
-    )
+    extras = {"category": "walk", "source_clip": "synthetic", "noise_seed": seed}
+    return Recording.from_streams(
+        subject, data_info, imu, insole, combined, extras,
+        smpl_params=smpl, imu_gt=imu_gt, slam=slam, objects=objects,
+    )  # fmt: skip

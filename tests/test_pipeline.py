@@ -44,3 +44,34 @@ def test_calibration_gives_the_ground_truths_start() -> None:
                    s.calibration.root_pos[0])  # fmt: skip
     for k in ("est_rot", "est_angvel", "est_hinge", "est_hinge_vel", "est_root_pos"):
         np.testing.assert_array_equal(getattr(est, k), getattr(clip, k), err_msg=k)
+
+
+def test_without_ground_truth_the_start_is_the_standing_pose_at_the_feet_heading() -> None:
+    import dataclasses
+
+    from grip.core.body import CANONICAL_TO_WORLD
+    from grip.core.mjcf import standing_qpos
+    from grip.core.rotations import quat_to_matrix
+    from grip.kinematics.features import recording_body, sensor_heading
+
+    psi = 0.6
+    yaw = np.array([[np.cos(psi), -np.sin(psi), 0.0], [np.sin(psi), np.cos(psi), 0.0],
+                    [0.0, 0.0, 1.0]])  # fmt: skip
+    rec = make_recording(60, seed=6)
+    imu = {p: dataclasses.replace(s, ori_world=np.array(s.ori_world)) for p, s in rec.imu.items()}
+    for foot in ("L_Foot", "R_Foot"):
+        imu[foot].ori_world[0] = yaw @ CANONICAL_TO_WORLD
+    rec = dataclasses.replace(rec, imu=imu, smpl_params=None, imu_gt={})
+    assert np.isclose(sensor_heading(np.stack([imu["L_Foot"].ori_world[0]] * 2)), psi)
+    s = sensor_stream(rec)
+    assert np.isnan(s.calibration.imu_ori).all()  # no imu_gt: orientations used as recorded
+    start = start_from_calibration(s.calibration, s.body, s.fps)
+    q = standing_qpos(recording_body(rec))
+    np.testing.assert_allclose(start.qpos[:3], q[:3], atol=1e-12)
+    np.testing.assert_allclose(quat_to_matrix(start.qpos[3:7]), yaw @ CANONICAL_TO_WORLD,
+                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(start.qpos[7:], 0.0, atol=1e-9)
+    assert not start.qvel.any()
+    first = first_state(s.calibration, s.body)
+    assert all(np.isfinite(v).all() for v in first.values()) and not first["lv"].any()
+    np.testing.assert_array_equal(stream_features(s), input_features(rec))

@@ -37,7 +37,7 @@ import numpy as np
 
 from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
-from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, load_checked_npz
 from grip.core.metrics import global_to_local_rot
 
 FORMAT = "grip-reconstruction"
@@ -182,21 +182,7 @@ class Reconstruction(PoseTrack):
         :func:`grip.core.limits.active_limits`)."""
         path = Path(path)
         limits = limits or active_limits()
-        try:
-            check_npz(path, limits)
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except LimitExceeded as e:
-            raise ReconstructionError(f"{path}: {e}") from None
-        except Exception as e:  # any failure of zipfile/numpy: a corrupt or hostile file
-            raise ReconstructionError(f"{path}: not a readable .npz file "
-                                      f"({type(e).__name__}: {str(e)[:300]})") from None
-        try:
-            meta = safe_json_loads(str(data.pop("__meta__")), limits, "'__meta__'")
-        except LimitExceeded as e:
-            raise ReconstructionError(f"{path}: {e}") from None
-        except (KeyError, ValueError) as e:
-            raise ReconstructionError(f"{path}: missing or corrupt '__meta__' ({e})") from None
+        data, meta = load_checked_npz(path, limits, ReconstructionError)
         if (not isinstance(meta, dict) or meta.get("format") != FORMAT
                 or meta.get("version") != VERSION):  # fmt: skip
             raise ReconstructionError(f"{path}: not a {FORMAT} file of version {VERSION}")

@@ -38,7 +38,7 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams, build_body
 from grip.core.fk import forward_kinematics, integrate_root
-from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
+from grip.core.limits import InputLimits, LimitExceeded, active_limits, load_checked_npz
 from grip.core.rotations import (
     angular_velocity,
     angular_velocity_at,
@@ -506,21 +506,7 @@ class ReferenceSet:
         """
         path = Path(path)
         limits = limits or active_limits()
-        try:
-            check_npz(path, limits)
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except LimitExceeded as e:
-            raise ReferenceError(f"{path}: {e}") from None
-        except Exception as e:  # any failure of zipfile/numpy: a corrupt or hostile file
-            raise ReferenceError(f"{path}: not a readable .npz reference file "
-                                 f"({type(e).__name__}: {str(e)[:300]})") from None
-        try:
-            meta = safe_json_loads(str(data["__meta__"]), limits, "'__meta__'")
-        except LimitExceeded as e:
-            raise ReferenceError(f"{path}: {e}") from None
-        except (KeyError, ValueError) as e:
-            raise ReferenceError(f"{path}: missing or corrupt '__meta__' ({e})") from None
+        data, meta = load_checked_npz(path, limits, ReferenceError, ".npz reference file")
         if not isinstance(meta, dict) or meta.get("format") != "grip-reference":
             raise ReferenceError(f"{path}: not a grip reference file")
         if meta.get("version") != FORMAT_VERSION:

@@ -31,8 +31,9 @@ def dataset_summary(root: str | os.PathLike, scan_limit: int | None = None) -> d
         A JSON-ready dict: ``recordings``, ``frames``, ``hours``, ``fps``, ``categories``
         (category -> {"recordings", "frames"}), ``splits`` (when known), ``clips_failed``,
         ``size_bytes`` and ``source`` ("manifest" or "scan"); a scan adds ``files`` (files
-        tried) and ``unreadable`` (``{"file", "error"}`` of each file refused: corrupt,
-        hostile or above the input limits of :mod:`grip.core.limits`).
+        tried), ``unreadable`` (``{"file", "error"}`` of each file refused: corrupt,
+        hostile or above the input limits of :mod:`grip.core.limits`) and ``sensors_only``
+        (recordings without ground truth: no ``smpl_params``).
     """
     root = Path(root)
     if not root.is_dir():
@@ -122,7 +123,7 @@ def _summary_from_scan(root: Path, limit: int | None) -> dict:
     if limit is not None:
         files = files[:limit]
     cats: dict[str, dict[str, int]] = {}
-    frames = 0
+    frames = sensors_only = 0
     errors = []
     fps_seen: set[float] = set()
     for p in files:
@@ -138,6 +139,7 @@ def _summary_from_scan(root: Path, limit: int | None) -> dict:
         entry["recordings"] += 1
         entry["frames"] += rec.n_frames
         frames += rec.n_frames
+        sensors_only += not rec.has_ground_truth
         fps_seen.add(float(rec.fps))
     n = sum(c["recordings"] for c in cats.values())
     fps = fps_seen.pop() if len(fps_seen) == 1 else None
@@ -151,6 +153,7 @@ def _summary_from_scan(root: Path, limit: int | None) -> dict:
         "hours": frames / (fps or 100.0) / 3600.0,
         "categories": dict(sorted(cats.items())),
         "unreadable": errors,
+        "sensors_only": sensors_only,
         "size_bytes": folder_size_bytes(root),
     }
 
@@ -165,6 +168,8 @@ def format_summary(s: dict) -> str:
         f"- frames: {s['frames']} ({s['hours']:.2f} h at {s['fps'] or '?'} Hz)",
         f"- size on disk: {s['size_bytes'] / 1e6:.1f} MB",
     ]  # fmt: skip
+    if s.get("sensors_only"):
+        lines.append(f"- without ground truth (sensors only, no smpl_params): {s['sensors_only']}")
     if s.get("insole_zmp_outside_fraction") is not None:
         lines.append(f"- synthesised frames whose ZMP lies > 3 cm outside the insole cells: "
                      f"{100 * s['insole_zmp_outside_fraction']:.1f} %")  # fmt: skip

@@ -22,7 +22,7 @@ def recording_skeleton(rec) -> np.ndarray:
     from grip.core.fk import forward_kinematics
     from grip.core.rotations import axis_angle_to_matrix
 
-    sp = rec.smpl_params
+    sp = rec.require_ground_truth("the skeleton plot")
     height = rec.subject.height_m or 1.70
     mass = rec.subject.weight_kg or 70.0
     body = build_body(BodyParams(height_m=float(height), mass_kg=float(mass)))
@@ -36,7 +36,8 @@ def plot_recording(rec, out_png: str | os.PathLike, title: str | None = None) ->
 
     Panels: free acceleration of the four main IMUs, their orientation (angle from the first
     frame), vertical force of each insole with its contact states, the 16-cell pressure of both
-    insoles over time, both CoP paths in the insole frame, and the skeleton at a few instants.
+    insoles over time, both CoP paths in the insole frame, and the skeleton at a few instants
+    (a note instead for a recording without ground truth).
     """
     import matplotlib
 
@@ -120,6 +121,12 @@ def plot_recording(rec, out_png: str | os.PathLike, title: str | None = None) ->
     ax.set_title("Centre of pressure, insole frame")
     ax.legend(fontsize=8)
 
+    if rec.smpl_params is None:
+        ax = fig.add_subplot(gs[2, 2])
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no ground truth\n(sensors only): no skeleton", ha="center",
+                va="center", fontsize=11)  # fmt: skip
+        return _save(fig, out_png)
     ax = fig.add_subplot(gs[2, 2], projection="3d")
     joints = recording_skeleton(rec)
     snaps = np.linspace(0, f - 1, min(6, f)).astype(int)
@@ -142,6 +149,13 @@ def plot_recording(rec, out_png: str | os.PathLike, title: str | None = None) ->
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("Skeleton (ground truth) at 6 instants")
+    return _save(fig, out_png)
+
+
+def _save(fig, out_png: Path) -> Path:
+    """Write the figure atomically (a temporary file moved over ``out_png``) and close it."""
+    import matplotlib.pyplot as plt
+
     out_png.parent.mkdir(parents=True, exist_ok=True)
     tmp = out_png.with_name(f".{out_png.stem}.tmp.png")
     fig.savefig(tmp, dpi=90)

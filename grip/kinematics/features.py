@@ -130,11 +130,13 @@ class SensorFrame:
     insole: np.ndarray | None = None
 
 
-def sensor_frames(rec, cfg: FeatureConfig = FeatureConfig()) -> Iterator[SensorFrame]:
-    """The frames of a recording one at a time, as :class:`FeatureStream` takes them.
+def site_arrays(rec, cfg: FeatureConfig = FeatureConfig()) -> tuple[np.ndarray, np.ndarray]:
+    """A recording's IMUs at the configured sites, float64: ``acc (T, S, 3)`` world-frame free
+    acceleration (filtered or raw as :attr:`FeatureConfig.use_filtered_acc`), m/s^2, and
+    ``ori (T, S, 3, 3)`` sensor -> world.
 
     Raises:
-        KeyError: naming the missing site or foot.
+        KeyError: naming the missing site.
     """
     for site in cfg.sites:
         if site not in rec.imu:
@@ -145,6 +147,16 @@ def sensor_frames(rec, cfg: FeatureConfig = FeatureConfig()) -> Iterator[SensorF
                    axis=1)  # fmt: skip
     ori = np.stack([np.asarray(rec.imu[s].ori_world, dtype=np.float64) for s in cfg.sites],
                    axis=1)  # fmt: skip
+    return acc, ori
+
+
+def sensor_frames(rec, cfg: FeatureConfig = FeatureConfig()) -> Iterator[SensorFrame]:
+    """The frames of a recording one at a time, as :class:`FeatureStream` takes them.
+
+    Raises:
+        KeyError: naming the missing site or foot.
+    """
+    acc, ori = site_arrays(rec, cfg)
     ins = insole_features(rec) if cfg.insoles else None
     for t in range(acc.shape[0]):
         yield SensorFrame(acc[t], ori[t], None if ins is None else ins[t])
@@ -210,7 +222,9 @@ class SensorStream:
 def recording_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibration:
     """The :class:`Calibration` of a recording: its ground-truth pose of frames 0 and 1
     (``smpl_params``; frame 0 twice for a one-frame recording) and
-    :func:`calibration_orientations`."""
+    :func:`calibration_orientations`; without ground truth :func:`standing_calibration`."""
+    if rec.smpl_params is None:
+        return standing_calibration(rec, cfg)
     n = min(rec.n_frames, 2)
     sp = rec.smpl_params
     poses = np.asarray(sp.poses, dtype=np.float64)[:n].reshape(-1, sk.N_JOINTS, 3)
@@ -222,22 +236,60 @@ def recording_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibrat
     return Calibration(local, root, calibration_orientations(rec, cfg))
 
 
+HEADING_SITES: tuple[str, ...] = ("L_Foot", "R_Foot")
+"""IMU sites whose frame-0 orientation gives the heading of a recording without ground truth
+(the feet stand flat in GRIP's calibration; other sites are used when neither foot has one)."""
+
+
+def sensor_heading(ori0: np.ndarray) -> float:
+    """Heading of a subject standing in the rest pose, from sensor orientations.
+
+    In the standing rest pose facing world +y (:func:`grip.core.mjcf.standing_qpos`) every
+    segment's forward axis (canonical z) points along +y; a sensor aligned with its segment
+    (PRISM's calibrated ``ori_world``) turned by ``psi`` about the vertical points it along
+    ``(-sin psi, cos psi)``. The headings of the given sensors are averaged on the circle.
+
+    Args:
+        ori0: ``(S, 3, 3)`` sensor orientations at the calibration frame, sensor -> world.
+
+    Returns:
+        ``psi``, rad, counter-clockwise about world z from facing +y.
+    """
+    fwd = np.asarray(ori0, dtype=np.float64)[:, :, 2]  # (S, 3) canonical z in the world
+    psi = np.arctan2(-fwd[:, 0], fwd[:, 1])
+    return float(np.arctan2(np.sin(psi).mean(), np.cos(psi).mean()))
+
+
+def standing_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibration:
+    """The :class:`Calibration` of a recording without ground truth: GRIP's calibration pose,
+    the subject standing still in the rest T-pose (:func:`grip.core.mjcf.standing_qpos`, pelvis
+    above the origin) turned to the heading of the foot IMUs at frame 0 (:data:`HEADING_SITES`,
+    :func:`sensor_heading`), at rest (frames 0 and 1 the same pose);
+    :func:`calibration_orientations` as with ground truth (NaN without ``imu_gt``: the recorded
+    orientations are used as they are, already aligned with their segments as PRISM's are)."""
+    from grip.core.mjcf import standing_qpos
+    from grip.core.reference import local_rot_from_qpos
+
+    sites = [s for s in HEADING_SITES if s in rec.imu] or [s for s in cfg.sites if s in rec.imu]
+    psi = sensor_heading(np.stack([rec.imu[s].ori_world[0] for s in sites])) if sites else 0.0
+    c, s = np.cos(psi), np.sin(psi)
+    yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    q = standing_qpos(recording_body(rec))
+    local = local_rot_from_qpos(q[None])[0]
+    local[0] = yaw @ local[0]
+    root = yaw @ q[:3]
+    return Calibration(np.repeat(local[None], 2, axis=0), np.repeat(root[None], 2, axis=0),
+                       calibration_orientations(rec, cfg))  # fmt: skip
+
+
 def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig()) -> SensorStream:
-    """The :class:`SensorStream` of a PRISM-format recording (its ground truth is only read
-    for the calibration, :func:`recording_calibration`).
+    """The :class:`SensorStream` of a PRISM-format recording (its ground truth, when it has
+    one, is only read for the calibration, :func:`recording_calibration`).
 
     Raises:
         KeyError: naming a missing site or foot.
     """
-    for site in cfg.sites:
-        if site not in rec.imu:
-            raise KeyError(f"recording {rec.name}: no IMU at site {site!r} "
-                           f"(has {sorted(rec.imu)})")  # fmt: skip
-    key = "acc_world_filt" if cfg.use_filtered_acc else "acc_world_raw"
-    acc = np.stack([np.asarray(getattr(rec.imu[s], key), dtype=np.float64) for s in cfg.sites],
-                   axis=1)  # fmt: skip
-    ori = np.stack([np.asarray(rec.imu[s].ori_world, dtype=np.float64) for s in cfg.sites],
-                   axis=1)  # fmt: skip
+    acc, ori = site_arrays(rec, cfg)
     objects = None
     if rec.objects:
         objects = {n: (np.asarray(o.vertices), np.asarray(o.faces)) for n, o in rec.objects.items()}
@@ -449,8 +501,12 @@ def recording_body(rec) -> BodyParams:
 
 
 def targets(rec) -> Targets:
-    """Ground-truth targets from ``smpl_params`` on the subject's body model."""
-    sp = rec.smpl_params
+    """Ground-truth targets from ``smpl_params`` on the subject's body model.
+
+    Raises:
+        prism_tools.RecordingError: The recording has no ground truth (naming its file).
+    """
+    sp = rec.require_ground_truth("training and evaluation (the ground-truth targets)")
     local = axis_angle_to_matrix(np.asarray(sp.poses, dtype=np.float64).reshape(-1, 24, 3))
     root = np.asarray(sp.trans, dtype=np.float64) + np.asarray(sp.root_offset, dtype=np.float64)
     body = build_body(recording_body(rec))
@@ -470,7 +526,7 @@ def targets(rec) -> Targets:
 @dataclass(frozen=True, eq=False)
 class GroundTruth(PoseTrack):
     """Ground truth of one recording in the world frame, on the subject's body model: what
-    every evaluation (``grip bench``, ``grip eval-policy``, the exports' summary) compares with.
+    every evaluation (``grip bench``, ``grip policy eval``, the exports' summary) compares with.
 
     Attributes:
         name: Recording name.
@@ -513,9 +569,14 @@ class GroundTruth(PoseTrack):
 def ground_truth(rec) -> GroundTruth:
     """The :class:`GroundTruth` of a PRISM-format recording: ``smpl_params`` posed on the
     subject's body (:func:`targets`: root-relative joints plus the pelvis at
-    ``trans + root_offset``) and its insoles."""
+    ``trans + root_offset``) and its insoles.
+
+    Raises:
+        prism_tools.RecordingError: The recording has no ground truth (naming its file).
+    """
     from grip.core.body import GRAVITY
 
+    rec.require_ground_truth("a comparison with the ground truth (metrics, bench, --gt)")
     tg = targets(rec)
     body = recording_body(rec)
     force = contacts = None

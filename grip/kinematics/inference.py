@@ -19,7 +19,13 @@ from grip.core.fk import integrate_root, joints_from_global
 from grip.core.rotations import sixd_to_matrix
 from grip.kinematics.config import run_config_from_dict
 from grip.kinematics.dataset import TARGET_KEYS, Normalizer
-from grip.kinematics.features import TTA_MODES, input_features, recording_body, targets
+from grip.kinematics.features import (
+    TTA_MODES,
+    first_state,
+    input_features,
+    recording_body,
+    recording_calibration,
+)
 from grip.kinematics.model import KinematicsNet
 from grip.nn.symmetry import (
     mirror_features,
@@ -41,11 +47,12 @@ class KinematicEstimate:
         joint_pos: ``(T, 24, 3)`` root-relative joints of the estimated pose: forward
             kinematics of ``global_rot`` on the subject's body, as TransPose and PIP evaluate
             their poses (posed SMPL with the true shape); closer to the truth than the FP
-            stage's own joints (``grip eval-kin --joints fp`` measures those; README, issue 3).
+            stage's own joints (``grip kin eval --joints fp`` measures those; README, issue 3).
         global_rot: ``(T, 24, 3, 3)`` global joint rotations (the FA stage).
         velocity: ``(T, 6, 3)`` world velocities of the leaves and the pelvis, m/s (LV).
         root_pos: ``(T, 3)`` pelvis trajectory integrated from the estimated pelvis velocity,
-            starting at the first frame's ground-truth root position.
+            starting at the calibration pose's root (the first frame's ground truth, when the
+            recording has it).
         fp_joint_pos: ``(T, 24, 3)`` root-relative joints as the FP stage estimates them (an
             intermediate the later stages read; not constrained to the body's bone lengths).
     """
@@ -179,21 +186,19 @@ class KinematicsEstimator:
 
     # ------------------------------------------------------------------ offline
     def _first(self, recs) -> dict[str, torch.Tensor]:
-        firsts = []
-        for rec in recs:
-            t = targets(rec.slice_frames(0, 2) if rec.n_frames > 2 else rec)
-            firsts.append({
-                "lp": t.leaf_pos[0].reshape(-1), "fp": t.joint_pos[0].reshape(-1),
-                "fa": t.rot6d[0].reshape(-1), "lv": t.velocity[0].reshape(-1) * 0.0,
-            })  # fmt: skip
-        return {k: torch.from_numpy(np.stack([f[k] for f in firsts]).astype(np.float32))
-                for k in TARGET_KEYS}  # fmt: skip
+        """First-frame states of the recordings' calibration poses (:func:`first_state` of
+        :func:`recording_calibration`: the ground truth of frame 0, or without it the standing
+        pose at the sensors' heading)."""
+        cfg = self.cfg.features
+        firsts = [first_state(recording_calibration(r, cfg), recording_body(r)) for r in recs]
+        return {k: torch.from_numpy(np.stack([f[k] for f in firsts])) for k in TARGET_KEYS}
 
     def predict(self, recs) -> list[KinematicEstimate]:
         """Estimates for a list of recordings, run as one padded batch per call.
 
-        The first frame's ground truth (the calibration pose) initialises the LSTMs; the initial
-        velocities are taken as zero, as at the start of a real recording.
+        The calibration pose (the first frame's ground truth, or without it the standing pose:
+        :func:`recording_calibration`) initialises the LSTMs; the initial velocities are taken
+        as zero, as at the start of a real recording.
         """
         feats = [input_features(r, self.cfg.features) for r in recs]
         t_max = max(len(f) for f in feats)
@@ -221,8 +226,7 @@ class KinematicsEstimator:
 
     def _estimate(self, o: dict[str, np.ndarray], rec, n: int) -> KinematicEstimate:
         joint_pos, global_rot, vel = decode_outputs(o, n, build_body(recording_body(rec)).offsets)
-        root0 = np.asarray(rec.smpl_params.trans[0], dtype=np.float64) + np.asarray(
-            rec.smpl_params.root_offset, dtype=np.float64)  # fmt: skip
+        root0 = recording_calibration(rec, self.cfg.features).root_pos[0]
         return KinematicEstimate(
             leaf_pos=o["lp"].reshape(n, 5, 3),
             joint_pos=joint_pos,

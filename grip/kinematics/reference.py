@@ -20,7 +20,7 @@ from grip.kinematics.features import FeatureConfig, input_features, recording_bo
 
 def gt_qpos(rec) -> np.ndarray:
     """``(T, 76)`` ground-truth ``[root_pos, root_quat_wxyz, 69 hinges (SMPL order)]``."""
-    sp = rec.smpl_params
+    sp = rec.require_ground_truth("a training reference clip")
     local = axis_angle_to_matrix(np.asarray(sp.poses, dtype=np.float64).reshape(-1, 24, 3))
     root = np.asarray(sp.trans, dtype=np.float64) + np.asarray(sp.root_offset, dtype=np.float64)
     return pose_vector(local, root)
@@ -96,7 +96,7 @@ def build_reference_set(
 
 def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>") -> ReferenceSet:
     """One reference set holding the clips of several, e.g. the same recordings estimated by
-    several KinematicsNets (``grip train-policy --kin A --kin B``): the controller then trains
+    several KinematicsNets (``grip policy train --kin A --kin B``): the controller then trains
     on references with the errors of each estimator. Clip names of the k-th set (k >= 1) get
     the suffix ``#k`` so that every clip keeps a unique name.
 

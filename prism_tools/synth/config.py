@@ -12,6 +12,8 @@ import json
 from dataclasses import dataclass, field
 from typing import Literal
 
+from grip.core.checks import check, check_fields
+
 __all__ = [
     "ImuSynthConfig",
     "InsoleSynthConfig",
@@ -46,12 +48,14 @@ class ImuSynthConfig:
 
     def __post_init__(self) -> None:
         n = self.acc_smoothing_frames
-        if n != "auto" and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
-            raise ValueError(f"acc_smoothing_frames must be a positive int or 'auto', got {n!r}")
-        if self.acc_smoothing_s <= 0:
-            raise ValueError(f"acc_smoothing_s must be > 0, got {self.acc_smoothing_s}")
-        if self.filt_cutoff_hz <= 0 or self.filt_order < 1:
-            raise ValueError("filt_cutoff_hz must be > 0 and filt_order >= 1")
+        check(
+            self,
+            (n == "auto" or (not isinstance(n, bool) and isinstance(n, int) and n >= 1),
+             f"acc_smoothing_frames must be a positive int or 'auto', got {n!r}"),
+            (self.acc_smoothing_s > 0, f"acc_smoothing_s must be > 0, got {self.acc_smoothing_s}"),
+            (self.filt_cutoff_hz > 0 and self.filt_order >= 1,
+             "filt_cutoff_hz must be > 0 and filt_order >= 1"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -103,18 +107,19 @@ class InsoleSynthConfig:
     max_newton_iters: int = 50
 
     def __post_init__(self) -> None:
-        if self.smoothing_window_s <= 0 or self.smoothing_polyorder < 2:
-            raise ValueError("smoothing_window_s must be > 0 and smoothing_polyorder >= 2")
-        if not 0 <= self.contact_height_full_m < self.contact_height_zero_m:
-            raise ValueError("need 0 <= contact_height_full_m < contact_height_zero_m")
-        if self.contact_float_tolerance_m < 0:
-            raise ValueError("contact_float_tolerance_m must be >= 0")
-        if not 0 <= self.contact_speed_full_m_s < self.contact_speed_zero_m_s:
-            raise ValueError("need 0 <= contact_speed_full_m_s < contact_speed_zero_m_s")
-        if len(self.cell_prior) != 16 or min(self.cell_prior) <= 0:
-            raise ValueError("cell_prior must hold 16 positive values")
-        if self.zmp_penalty_per_m2 <= 0:
-            raise ValueError("zmp_penalty_per_m2 must be > 0")
+        check(
+            self,
+            (self.smoothing_window_s > 0 and self.smoothing_polyorder >= 2,
+             "smoothing_window_s must be > 0 and smoothing_polyorder >= 2"),
+            (0 <= self.contact_height_full_m < self.contact_height_zero_m,
+             "need 0 <= contact_height_full_m < contact_height_zero_m"),
+            (self.contact_float_tolerance_m >= 0, "contact_float_tolerance_m must be >= 0"),
+            (0 <= self.contact_speed_full_m_s < self.contact_speed_zero_m_s,
+             "need 0 <= contact_speed_full_m_s < contact_speed_zero_m_s"),
+            (len(self.cell_prior) == 16 and min(self.cell_prior, default=0) > 0,
+             "cell_prior must hold 16 positive values"),
+            (self.zmp_penalty_per_m2 > 0, "zmp_penalty_per_m2 must be > 0"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -162,12 +167,9 @@ class NoiseConfig:
     insole_drop_prob: float = 0.002
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not v >= 0:
-                raise ValueError(f"NoiseConfig.{f.name} must be >= 0, got {v!r}")
-        if self.imu_drop_prob >= 1 or self.insole_drop_prob >= 1:
-            raise ValueError("drop probabilities must be < 1")
+        check_fields(self, lambda v: v >= 0, "must be >= 0")
+        check(self, (self.imu_drop_prob < 1 and self.insole_drop_prob < 1,
+                     "drop probabilities must be < 1"))  # fmt: skip
 
     @classmethod
     def off(cls) -> NoiseConfig:

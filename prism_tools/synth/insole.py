@@ -35,7 +35,7 @@ from scipy import signal
 from grip.core import skeleton as sk
 from grip.core.body import GRAVITY, BodyModel
 from grip.core.fk import body_points
-from prism_tools.schema import contacts_from_cells
+from prism_tools.streams import contacts_from_cells
 from prism_tools.synth.config import InsoleSynthConfig, NoiseConfig
 from prism_tools.synth.force_distribution import distribute_force
 from prism_tools.synth.imu import central_velocity, second_difference

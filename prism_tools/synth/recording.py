@@ -20,16 +20,15 @@ import numpy as np
 from grip.core import skeleton as sk
 from grip.core.body import BodyModel
 from grip.core.rotations import quat_to_axis_angle
-from prism_tools.schema import (
+from prism_tools.schema import Recording
+from prism_tools.streams import (
     DataInfo,
     ImuGt,
     ImuStream,
     InsoleCombined,
     InsoleStream,
-    Recording,
     SmplParams,
     SubjectInfo,
-    validate,
 )
 from prism_tools.synth.config import NoiseConfig, SynthConfig, config_to_json
 from prism_tools.synth.imu import ImuKinematics, ImuReadings, measure_imu, synthesize_imu
@@ -39,6 +38,7 @@ from prism_tools.synth.insole import (
     measure_insoles,
     synthesize_insoles,
 )
+from prism_tools.validation import validate
 
 if TYPE_CHECKING:  # prism_tools must not import grip.motion at run time (STYLE.md layering)
     from grip.motion.motion import Motion
@@ -171,7 +171,7 @@ def recording_from_motion(
         noise: Apply ``cfg.noise``; False gives ground-truth readings.
 
     Returns:
-        The recording (passes :func:`prism_tools.schema.validate`).
+        The recording (passes :func:`prism_tools.validation.validate`).
     """
     cfg = cfg or SynthConfig()
     syn = synthesize_sensors(motion, cfg, seed, noise=noise)
@@ -223,18 +223,7 @@ def recording_from_motion(
         "insole_max_zmp_error_m": float(ins.zmp_error_m.max(initial=0.0)),
         "insole_solver_fallback_frames": int(ins.fallback_frames.size),
     }
-    rec = Recording(
-        subject=subject,
-        data_info=data_info,
-        smpl_params=smpl,
-        imu=imu,
-        imu_gt=imu_gt,
-        insole=insole,
-        insole_combined=combined,
-        slam=None,
-        objects=None,
-        fps=float(motion.fps),
-        extras=extras,
-    )
+    rec = Recording.from_streams(subject, data_info, imu, insole, combined, extras,
+                                 smpl_params=smpl, imu_gt=imu_gt)  # fmt: skip
     validate(rec)
     return rec

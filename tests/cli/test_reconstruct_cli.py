@@ -126,3 +126,23 @@ def test_resume_with_other_settings_is_refused(takes, tmp_path, capsys):
     assert main([*base[:-1], "12", "--overwrite"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["max_frames"] == 12 and summary["recordings"][0]["frames"] == 12
+
+
+def test_a_recording_without_ground_truth_is_reconstructed(tmp_path, capsys):
+    """Real sensors and no motion capture: the humanoid starts from the standing pose at the
+    feet's heading and every frame comes out."""
+    from grip.core.reconstruction import Reconstruction
+    from prism_tools.io import save_recording
+
+    rec = load_recording(SAMPLE)
+    path = tmp_path / "sensors_only.npz"
+    save_recording(dataclasses.replace(rec, smpl_params=None, imu_gt={}), path)
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(path), "--out", str(out)]) == 0
+    recon = Reconstruction.load(out / "sensors_only.npz")
+    assert recon.n_frames == rec.n_frames
+    assert np.isfinite(recon.joint_pos).all()
+    # what needs the ground truth says so, naming the file
+    assert main(["export", str(out / "sensors_only.npz"), "--gt", str(path), "--formats", "png",
+                 "--out", str(tmp_path / "exp")]) != 0  # fmt: skip
+    assert f"{path}: " in capsys.readouterr().err

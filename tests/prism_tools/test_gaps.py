@@ -13,6 +13,7 @@ import pytest
 from prism_tools import Recording, RecordingError, load_recording, save_recording
 from prism_tools.gaps import fill_gaps, missing_runs
 from prism_tools.io import atomic_write
+from prism_tools.prism_dict import recording_from_prism_dict
 from prism_tools.synthetic import make_recording
 
 F = 150
@@ -83,7 +84,7 @@ def test_linear_ramp_gap_restored_exactly(rec: Recording, dtype: type) -> None:
     assert filled.dtype == dtype and filled.shape == (F, 3)
     np.testing.assert_array_equal(filled, ramp)
     assert report == [{"key": "imu.L_Wrist.acc_world_filt", "first": 10, "last": 12}]
-    Recording.from_prism_dict(out)  # now valid
+    recording_from_prism_dict(out)  # now valid
 
 
 def test_orientation_gap_is_slerped(rec: Recording) -> None:
@@ -138,7 +139,7 @@ def test_start_and_end_gaps_hold_nearest_frame(rec: Recording) -> None:
         ("insole.L_Foot.force", F - 3, F - 1),
         ("insole.combined.CoP_world", F - 1, F - 1),
     ]
-    Recording.from_prism_dict(out)
+    recording_from_prism_dict(out)
 
 
 def test_long_gap_left_untouched(rec: Recording) -> None:
@@ -154,7 +155,7 @@ def test_long_gap_left_untouched(rec: Recording) -> None:
     assert np.isfinite(got[40:42]).all()
     assert report == [{"key": "imu.L_Wrist.acc_world_filt", "first": 40, "last": 41}]
     with pytest.raises(RecordingError, match=r"imu\.L_Wrist\.acc_world_filt: 18 non-finite"):
-        Recording.from_prism_dict(out, source="x.pkl")
+        recording_from_prism_dict(out, source="x.pkl")
 
 
 def test_input_dict_unchanged(rec: Recording) -> None:

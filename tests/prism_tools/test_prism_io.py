@@ -14,7 +14,7 @@ import pytest
 
 from prism_tools import Recording, RecordingError, load_recording, save_recording
 from prism_tools.io import RestrictedUnpickler, load_prism_dict, take_name_from_path
-from prism_tools.schema import EXTRAS_KEY, GRAVITY
+from prism_tools.streams import EXTRAS_KEY, GRAVITY
 from prism_tools.synthetic import make_recording
 
 

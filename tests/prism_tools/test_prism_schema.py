@@ -1,4 +1,4 @@
-"""Tests for prism_tools.schema: validate(), PRISM dict conversion, force-unit detection."""
+"""Tests for the recording schema: validate(), PRISM dict conversion, force-unit detection."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from prism_tools import Recording, RecordingError, validate
-from prism_tools.schema import (
+from prism_tools.prism_dict import detect_force_unit, recording_from_prism_dict
+from prism_tools.streams import (
     EXTRAS_KEY,
     FEET,
     GRAVITY,
     IMU_PARTS,
     INSOLE_BACK_CELLS,
     INSOLE_FRONT_CELLS,
-    detect_force_unit,
 )
 from prism_tools.synthetic import make_recording
 
@@ -123,7 +123,7 @@ def test_prism_dict_layout(rec: Recording) -> None:
 
 
 def test_from_prism_dict_round_trip(rec: Recording) -> None:
-    back = Recording.from_prism_dict(rec.to_prism_dict())
+    back = recording_from_prism_dict(rec.to_prism_dict())
     assert back.extras == rec.extras  # declared unit: no detection, nothing added
     for part in rec.imu:
         np.testing.assert_array_equal(back.imu[part].ori_world, rec.imu[part].ori_world)
@@ -134,12 +134,12 @@ def test_missing_key_names_path_and_source(rec: Recording) -> None:
     d = rec.to_prism_dict()
     del d["imu"]["L_Wrist"]["ori_world"]
     with pytest.raises(RecordingError) as exc:
-        Recording.from_prism_dict(d, source="subj001/take002.pkl")
+        recording_from_prism_dict(d, source="subj001/take002.pkl")
     assert str(exc.value) == "subj001/take002.pkl: imu.L_Wrist.ori_world: missing key"
     d = rec.to_prism_dict()
     del d["info"]["subj_info"]["weight"]
     with pytest.raises(RecordingError, match=r"^info\.subj_info\.weight: missing key"):
-        Recording.from_prism_dict(d)
+        recording_from_prism_dict(d)
 
 
 def _as_real_prism(rec: Recording, force_scale: float) -> dict[str, Any]:
@@ -155,7 +155,7 @@ def _as_real_prism(rec: Recording, force_scale: float) -> dict[str, Any]:
 
 
 def test_force_unit_n_per_kg_detected_and_converted(rec: Recording) -> None:
-    back = Recording.from_prism_dict(_as_real_prism(rec, GRAVITY))
+    back = recording_from_prism_dict(_as_real_prism(rec, GRAVITY))
     assert back.extras["force_unit_detected"] == "n_per_kg"
     assert back.extras["force_scale"] == pytest.approx(1 / GRAVITY)
     assert "divided by 9.81" in back.extras["force_unit_note"]
@@ -171,14 +171,14 @@ def test_force_unit_n_per_kg_detected_and_converted(rec: Recording) -> None:
 
 
 def test_force_unit_body_weight_detected_unchanged(rec: Recording) -> None:
-    back = Recording.from_prism_dict(_as_real_prism(rec, 1.0))
+    back = recording_from_prism_dict(_as_real_prism(rec, 1.0))
     assert back.extras["force_unit_detected"] == "body_weight"
     assert back.extras["force_scale"] == 1.0
     np.testing.assert_array_equal(back.insole["L_Foot"].force, rec.insole["L_Foot"].force)
 
 
 def test_force_unit_explicit_overrides_detection(rec: Recording) -> None:
-    back = Recording.from_prism_dict(_as_real_prism(rec, 1.0), force_unit="n_per_kg")
+    back = recording_from_prism_dict(_as_real_prism(rec, 1.0), force_unit="n_per_kg")
     assert back.extras["force_unit_detected"] == "n_per_kg"
     np.testing.assert_allclose(back.insole["R_Foot"].force, rec.insole["R_Foot"].force / GRAVITY)
 
@@ -198,7 +198,7 @@ def test_real_prism_normalisations(rec: Recording) -> None:
     d["insole"]["L_Foot"]["contacts"] = d["insole"]["L_Foot"]["contacts"].astype(np.float32)
     d["info"]["data_info"]["synth_imu_frames"] = {"L_Wrist": [3, 4, 5], "R_Wrist": []}
     d["info"]["data_info"]["camera"] = "extra"
-    back = Recording.from_prism_dict(d)
+    back = recording_from_prism_dict(d)
     assert back.subject.height_m == pytest.approx(1.72)
     assert "centimetres" in back.extras["height_unit_note"]
     assert type(back.subject.weight_kg) is float

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from prism_tools import validate
-from prism_tools.schema import FEET, GRAVITY, contacts_from_cells
+from prism_tools.streams import FEET, GRAVITY, contacts_from_cells
 from prism_tools.synthetic import CONTACT_THRESHOLD_BW, make_recording
 
 

@@ -17,7 +17,6 @@ from grip.core.body import CANONICAL_TO_WORLD, GRAVITY, BodyModel, BodyParams, b
 from grip.core.rotations import axis_angle_to_quat, matrix_to_quat, rot_x, rot_z
 from grip.motion.motion import Motion
 from prism_tools.io import load_recording, save_recording
-from prism_tools.schema import validate
 from prism_tools.synth import (
     ImuKinematics,
     ImuSynthConfig,
@@ -38,6 +37,7 @@ from prism_tools.synth import (
 from prism_tools.synth.force_distribution import _nnls_distribute
 from prism_tools.synth.imu import resolve_acc_smoothing_frames, second_difference
 from prism_tools.synth.noise import apply_drops, corrupt_imu, corrupt_insole_cells, drop_mask
+from prism_tools.validation import validate
 
 FPS = 100.0
 BODY = build_body()
