@@ -79,16 +79,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, skip_file, split_paths
-    from grip.eval.bench import (
-        BenchError,
-        list_segments,
-        markdown_table,
-        prepare_runs,
-        run_bench,
-        select_segments,
-        write_outputs,
-    )
+    from grip.eval.bench import write_outputs
     from grip.eval.methods import MethodOptions, parse_method_names, sensor_set
+    from grip.eval.report import method_table
+    from grip.eval.runner import prepare_runs, run_bench
+    from grip.eval.segments import BenchError, list_segments, select_segments
 
     limits_from_args(args)
     if args.workers < 1:
@@ -147,7 +142,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             raise CliError(str(e)) from e
     title = f"Benchmark on {args.data} ({args.split} split)"
     summary = write_outputs(args.out, rows, runs, segs, title)
-    print(markdown_table(summary))
+    print(method_table(summary))
     if failed:
         print(f"{failed} segment(s) failed in this run; see {args.out / 'table.md'}")
     print(f"wrote {args.out}/results.json, results.csv, segments.csv, table.md and plots "

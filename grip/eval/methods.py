@@ -255,7 +255,19 @@ def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float,
     return out
 
 
-class KinematicsPip:
+class _OnPipPhysics:
+    """A method that ends in PIP's physics optimiser (:func:`_pip_physics`) on an estimator's
+    output: no other sensors, cannot fall."""
+
+    supports_sensors = False
+    can_fall = False
+
+    def __init__(self, estimator, cfg=None) -> None:
+        self.estimator = estimator
+        self.cfg = cfg
+
+
+class KinematicsPip(_OnPipPhysics):
     """PIP's physics optimiser (:mod:`grip.baselines.pip_physics`) on KinematicsNet's estimate.
 
     The optimiser's inputs: local rotations from the FA estimate, joint velocities from the
@@ -266,12 +278,6 @@ class KinematicsPip:
     """
 
     name = "kin+pip"
-    supports_sensors = False
-    can_fall = False
-
-    def __init__(self, estimator, cfg=None) -> None:
-        self.estimator = estimator
-        self.cfg = cfg
 
     def reconstruct(self, rec) -> Reconstruction:
         from grip.baselines.pip_dynamics import backward_velocity
@@ -339,17 +345,11 @@ class TransPose:
         )  # fmt: skip
 
 
-class Pip:
+class Pip(_OnPipPhysics):
     """PIP-4 (BASELINES_AND_METRICS 2.3 and 1): PIP's networks (learned RNN initialisation from
     the first frame) feed its physics optimiser, contacts from its contact net."""
 
     name = "pip"
-    supports_sensors = False
-    can_fall = False
-
-    def __init__(self, estimator, cfg=None) -> None:
-        self.estimator = estimator
-        self.cfg = cfg
 
     def reconstruct(self, rec) -> Reconstruction:
         t0 = time.perf_counter()

@@ -7,7 +7,7 @@ discriminator's probability below 0.7, BASELINES_AND_METRICS 5.4) ends a segment
 metrics cover the frames simulated until then.
 
 The episode is :meth:`grip.pipeline.GripPipeline.play` with recovery off, stopped at the
-first fall. Metrics are ``grip bench``'s (:func:`grip.eval.bench.segment_metrics`: ``MPJPE_mm``,
+first fall. Metrics are ``grip bench``'s (:func:`grip.eval.scoring.segment_metrics`: ``MPJPE_mm``,
 ``PEL_MPJPE_mm``, ``PA_MPJPE_mm``, ``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N``
 from MuJoCo's foot-ground contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
 (KinematicsNet pose on the integrated root) over the same frames, and where the world error comes
@@ -26,17 +26,17 @@ blown-up frame: no frame of a blown-up state enters the metrics.
 
 from __future__ import annotations
 
-import csv
-import io
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from grip.core import metrics as M
 from grip.core.reference import ReferenceSet
-from grip.eval.bench import segment_metrics as bench_metrics
+from grip.eval.report import category_summary, csv_text, weighted_means
+from grip.eval.report import markdown_table as table
+from grip.eval.runner import play_segments
+from grip.eval.scoring import segment_metrics as bench_metrics
+from grip.eval.segments import Segment
 from grip.kinematics.features import ground_truth
 from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
 
@@ -82,19 +82,45 @@ def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
 
     ``reference``: what the controller follows: ``"estimate"`` (KinematicsNet's, the method) or
     ``"truth"`` (the ground-truth motion, a perfect KinematicsNet: separates the controller's
-    own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0).
+    own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0). ``batch``:
+    recordings per KinematicsNet forward pass; ``progress``: called after each episode.
     """
-    from grip.kinematics.reference import build_reference_set, oracle_reference_clip
+    pipe = _pipeline(runner, estimator, reference)
+    return _episodes(pipe, _reference_set(estimator, recs, batch, reference), recs, progress)
 
+
+def evaluate_segments(runner: Controller, estimator, segments: Sequence[Segment],
+                      batch: int = 16, progress: Callable[[int], object] | None = None,
+                      reference: str = "estimate") -> list[dict]:  # fmt: skip
+    """:func:`evaluate_policy` on :mod:`grip.eval.segments` (read ``batch`` at a time by
+    :func:`grip.eval.runner.play_segments`): one row per segment, with its segment keys."""
+    pipe = _pipeline(runner, estimator, reference)
+
+    def score(recs: list) -> list[dict]:
+        ref = _reference_set(estimator, recs, batch, reference)
+        return _episodes(pipe, ref, recs, progress)
+
+    return play_segments(segments, score, batch)
+
+
+def _pipeline(runner: Controller, estimator, reference: str) -> GripPipeline:
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {list(REFERENCES)}, got {reference!r}")
+    return GripPipeline(runner, estimator, RecoveryConfig(enabled=False))
+
+
+def _reference_set(estimator, recs: list, batch: int, reference: str) -> ReferenceSet:
+    from grip.kinematics.reference import build_reference_set, oracle_reference_clip
+
     if reference == "truth":
         cfg = estimator.cfg.features
-        ref = ReferenceSet([oracle_reference_clip(r, cfg) for r in recs], tuple(cfg.sites),
-                           cfg.insoles, "<ground truth>")  # fmt: skip
-    else:
-        ref = build_reference_set(recs, estimator, batch=batch)
-    pipe = GripPipeline(runner, estimator, RecoveryConfig(enabled=False))
+        return ReferenceSet([oracle_reference_clip(r, cfg) for r in recs], tuple(cfg.sites),
+                            cfg.insoles, "<ground truth>")  # fmt: skip
+    return build_reference_set(recs, estimator, batch=batch)
+
+
+def _episodes(pipe: GripPipeline, ref: ReferenceSet, recs: list,
+              progress: Callable[[int], object] | None) -> list[dict]:  # fmt: skip
     rows = []
     for i, rec in enumerate(recs):
         clip = ref.clip(i)
@@ -108,18 +134,13 @@ def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
 
 
 def _summary(rows: list[dict]) -> dict[str, float]:
-    frames = np.array([r["frames"] for r in rows], dtype=float)
-    out: dict[str, float] = {}
-    for k in _MEAN_KEYS:
-        v = np.array([r[k] for r in rows], dtype=float)
-        ok = np.isfinite(v)
-        out[k] = float(np.average(v[ok], weights=frames[ok])) if ok.any() else float("nan")
+    out: dict[str, float] = weighted_means(rows, _MEAN_KEYS)
     out["success_rate"] = M.success_rate([r["fell"] for r in rows])
     low = RecoveryConfig().fall_height_m
     out["success_rate_height"] = M.success_rate([r["fell"] or r["pelvis_min_m"] < low
                                                  for r in rows])  # fmt: skip
     out["segments"] = len(rows)
-    out["frames"] = int(frames.sum())
+    out["frames"] = int(sum(r["frames"] for r in rows))
     out["blowups"] = int(sum(r.get("blowups", 0) for r in rows))
     return out
 
@@ -128,42 +149,29 @@ def summarize_rows(rows: list[dict]) -> dict:
     """Frame-weighted means overall and per category (success rate per segment)."""
     if not rows:
         raise ValueError("no segments were evaluated")
-    cats = sorted({r["category"] for r in rows})
-    return {
-        "overall": _summary(rows),
-        "categories": {c: _summary([r for r in rows if r["category"] == c]) for c in cats},
-    }
-
-
-def replay_spread(passes: list[list[dict]]) -> dict[str, object]:
-    """The success rate of each replay of the same segments (``passes``: one row list per
-    replay, e.g. with other action-noise seeds), their mean and sample standard deviation (0
-    for one replay), in percent."""
-    rates = [M.success_rate([r["fell"] for r in rows]) for rows in passes]
-    sd = float(np.std(rates, ddof=1)) if len(rates) > 1 else 0.0
-    return {"success_rate_replays": rates, "success_rate_mean": float(np.mean(rates)),
-            "success_rate_sd": sd}  # fmt: skip
+    return category_summary(rows, _summary)
 
 
 _TWO_DIGITS = ("root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio")
+_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("success_rate", "success %"), ("success_rate_height", "by height %"),
+    ("MPJPE_mm", "MPJPE mm"), ("kin_MPJPE_mm", "kinematics-only MPJPE mm"),
+    ("PA_MPJPE_mm", "PA-MPJPE mm"), ("FS_mps", "FS m/s"), ("FP_mm", "FP mm"),
+    ("vGRF_N", "vGRF N"), ("root_err_m", "root err. m"), ("kin_root_err_m", "kin. root err. m"),
+    ("travel_ratio", "travel"), ("kin_travel_ratio", "kin. travel"), ("segments", "segments"),
+)  # fmt: skip
+
+
+def _fmt(key: str, v) -> str:
+    return (f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if key in _TWO_DIGITS
+            else f"{v:.3f}" if key == "FS_mps" else f"{v:.1f}")  # fmt: skip
 
 
 def markdown_table(summary: dict) -> str:
-    cols = ("success_rate", "success_rate_height", "MPJPE_mm", "kin_MPJPE_mm", "PA_MPJPE_mm",
-            "FS_mps", "FP_mm", "vGRF_N", "root_err_m", "kin_root_err_m", "travel_ratio",
-            "kin_travel_ratio", "segments")  # fmt: skip
-    head = ("| category | success % | by height % | MPJPE mm | kinematics-only MPJPE mm "
-            "| PA-MPJPE mm | FS m/s | FP mm | vGRF N | root err. m | kin. root err. m | travel "
-            "| kin. travel | segments |")  # fmt: skip
-    lines = [head, "|" + "---|" * (len(cols) + 1)]
+    """The per-category table (and the overall row) of :func:`summarize_rows`."""
     items = [*summary["categories"].items(), ("**all**", summary["overall"])]
-    for name, s in items:
-        cells = []
-        for c in cols:
-            v = s[c]
-            cells.append(f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if c in _TWO_DIGITS
-                         else f"{v:.3f}" if c == "FS_mps" else f"{v:.1f}")  # fmt: skip
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    body = [[name, *[_fmt(k, s[k]) for k, _ in _COLUMNS]] for name, s in items]
+    lines = [table(["category", *[h for _, h in _COLUMNS]], body, ["---"] * (len(_COLUMNS) + 1))]
     n = summary["overall"].get("blowups", 0)
     if n:
         lines.append(f"\n{n} simulation blow-up(s): each ended its segment as a failure "
@@ -180,9 +188,5 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
     keys = ["name", "category", "fell", "pelvis_min_m", "frames", "blowups", *_MEAN_KEYS]
     if rows and "replay" in rows[0]:  # grip policy eval --repeats: which replay a row is of
         keys.insert(1, "replay")
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore")
-    w.writeheader()
-    w.writerows(rows)
-    atomic_write_text(out_dir / "segments.csv", buf.getvalue())
+    atomic_write_text(out_dir / "segments.csv", csv_text(rows, keys, lineterminator="\r\n"))
     atomic_write_text(out_dir / "summary.md", markdown_table(summary) + "\n")

@@ -1,4 +1,5 @@
-"""Evaluation of KinematicsNet on a dataset split: metrics per segment, category and overall."""
+"""KinematicsNet's metrics per segment (``grip kin eval``; its report over a dataset's segments is
+:mod:`grip.eval.kinematics`), and the same on recordings in memory."""
 
 from __future__ import annotations
 
@@ -75,64 +76,7 @@ def evaluate_recordings(
     joints: str = "pose",
 ) -> list[dict]:
     """:func:`predict_segments` scored: one metrics dict per segment (with ``name`` and
-    ``category``)."""
+    ``category``), the rows :func:`grip.eval.kinematics.aggregate` takes."""
     pairs = predict_segments(est, recs, segment_frames, batch, progress)
     return [{"name": rec.name, "category": rec.category or "unknown",
              **segment_metrics(out, rec, joints)} for rec, out in pairs]  # fmt: skip
-
-
-def aggregate(rows: list[dict]) -> dict:
-    """Frame-weighted means overall and per category.
-
-    Returns:
-        ``{"overall": {...}, "categories": {category: {...}}}``.
-    """
-
-    def mean(rs: list[dict]) -> dict:
-        w = np.array([r["frames"] for r in rs], dtype=np.float64)
-        out = {k: float(np.average([r[k] for r in rs], weights=w)) for k in METRIC_KEYS}
-        out["frames"] = int(w.sum())
-        out["segments"] = len(rs)
-        return out
-
-    cats: dict[str, list[dict]] = {}
-    for r in rows:
-        cats.setdefault(r["category"], []).append(r)
-    return {"overall": mean(rows), "categories": {c: mean(v) for c, v in sorted(cats.items())}}
-
-
-def markdown_table(agg: dict) -> str:
-    """The per-category table (and the overall row) in Markdown."""
-    head = ("| category | segments | frames | PEL-MPJPE (mm) | MPJRE (deg) | leaf vel. (m/s) "
-            "| root transl. (m) |\n|---|---:|---:|---:|---:|---:|---:|")  # fmt: skip
-
-    def row(name: str, m: dict) -> str:
-        return (
-            f"| {name} | {m['segments']} | {m['frames']} | {m['PEL_MPJPE_mm']:.1f} | "
-            f"{m['MPJRE_deg']:.2f} | {m['leaf_vel_err_mps']:.3f} | {m['trans_err_m']:.3f} |"
-        )
-
-    lines = [head] + [row(c, m) for c, m in agg["categories"].items()]
-    lines.append(row("**all**", agg["overall"]))
-    return "\n".join(lines)
-
-
-def plot_categories(agg: dict, out_png) -> None:
-    """Bar chart of PEL-MPJPE and MPJRE per category."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    cats = list(agg["categories"])
-    fig, axes = plt.subplots(1, 2, figsize=(14, max(4, 0.3 * len(cats))), constrained_layout=True)
-    for ax, key, label in ((axes[0], "PEL_MPJPE_mm", "PEL-MPJPE (mm)"),
-                           (axes[1], "MPJRE_deg", "MPJRE (deg)")):  # fmt: skip
-        ax.barh(cats, [agg["categories"][c][key] for c in cats], color="tab:blue")
-        ax.axvline(agg["overall"][key], color="k", ls="--", lw=1, label="all")
-        ax.set_xlabel(label)
-        ax.invert_yaxis()
-        ax.legend()
-    fig.suptitle("KinematicsNet error per motion category (test split)")
-    fig.savefig(out_png, dpi=90)
-    plt.close(fig)

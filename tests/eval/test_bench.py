@@ -1,5 +1,6 @@
-"""``grip bench``: segment listing, metrics of one segment, the runner (failures, resume, worker
-crashes), the method registry, the kinematics-only method and the command line."""
+"""``grip bench`` and its shared pieces (:mod:`grip.eval.segments`, :mod:`grip.eval.runner`,
+:mod:`grip.eval.report`): segment listing, metrics of one segment, the runner (failures, resume,
+worker crashes), the method registry, the kinematics-only method and the command line."""
 
 from __future__ import annotations
 
@@ -18,6 +19,9 @@ from grip.cli.main import main
 from grip.core import metrics as M
 from grip.core.reconstruction import Reconstruction
 from grip.eval import bench as B
+from grip.eval import report, scoring
+from grip.eval import runner as R
+from grip.eval import segments as S
 from grip.eval.methods import (
     KinematicsOnly,
     MethodOptions,
@@ -27,6 +31,7 @@ from grip.eval.methods import (
     parse_method_names,
     sensor_set,
 )
+from grip.kinematics import features as F
 from prism_tools.chunking import make_split, save_split
 from prism_tools.io import save_recording
 from prism_tools.synthetic import make_recording
@@ -53,8 +58,8 @@ def dataset(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def segments(dataset: Path) -> list[B.Segment]:
-    return B.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES)
+def segments(dataset: Path) -> list[S.Segment]:
+    return S.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES)
 
 
 # ------------------------------------------------------------------------------ fake methods
@@ -81,7 +86,7 @@ class Oracle:
         self.calls.append(rec.name)
         if rec.name in self.fail_on:
             raise RuntimeError(f"solver diverged on {rec.name}")
-        gt = B.ground_truth(rec)
+        gt = F.ground_truth(rec)
         grf = np.zeros((rec.n_frames, 2, 3))
         grf[..., 2] = gt.insole_force_n + self.grf_offset_n
         falls = np.array([[rec.n_frames - 5, rec.n_frames - 2]]) if self.fall else None
@@ -91,8 +96,8 @@ class Oracle:
                               **({"falls": falls} if self.fall else {}))  # fmt: skip
 
 
-def _run(label: str, factory) -> B.MethodRun:
-    return B.MethodRun(label, "oracle", factory, MethodOptions())
+def _run(label: str, factory) -> R.MethodRun:
+    return R.MethodRun(label, "oracle", factory, MethodOptions())
 
 
 def _oracle_factory(options: MethodOptions) -> Oracle:
@@ -107,27 +112,27 @@ def test_list_segments_cuts_full_segments_and_names_them(segments, dataset) -> N
                    "take2_f000100"]  # fmt: skip
     assert all(s.n_frames == FRAMES for s in segments)
     assert [s.category for s in segments] == ["walk", "walk", "run", "walk", "walk"]
-    only_run = B.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES, ["r*"])
+    only_run = S.list_segments(sorted((dataset / "sequences").glob("*.npz")), FRAMES, ["r*"])
     assert [s.id for s in only_run] == ["take1_f000000"]
-    with pytest.raises(B.BenchError, match="no 300-frame segment"):
-        B.list_segments([dataset / "sequences" / "take1.npz"], 300)
+    with pytest.raises(S.BenchError, match="no 300-frame segment"):
+        S.list_segments([dataset / "sequences" / "take1.npz"], 300)
 
 
 def test_list_segments_names_an_unreadable_file(tmp_path) -> None:
     bad = tmp_path / "broken.npz"
     bad.write_bytes(b"not a zip")
-    with pytest.raises(B.BenchError, match=r"broken\.npz"):
-        B.list_segments([bad], FRAMES)
+    with pytest.raises(S.BenchError, match=r"broken\.npz"):
+        S.list_segments([bad], FRAMES)
 
 
 def test_select_segments_spreads_over_categories_deterministically() -> None:
     cats = ["a"] * 5 + ["b"] + ["c"] * 2
-    segs = [B.Segment(f"s{i}", Path(f"f{i}"), 0, 10, c) for i, c in enumerate(cats)]
-    picked = B.select_segments(segs, 4)
+    segs = [S.Segment(f"s{i}", Path(f"f{i}"), 0, 10, c) for i, c in enumerate(cats)]
+    picked = S.select_segments(segs, 4)
     assert [s.id for s in picked] == ["s0", "s1", "s5", "s6"]  # a, a, b, c in input order
     assert sorted({s.category for s in picked}) == ["a", "b", "c"]
-    assert B.select_segments(segs, 4) == picked
-    assert B.select_segments(segs, 0) == segs and B.select_segments(segs, 99) == segs
+    assert S.select_segments(segs, 4) == picked
+    assert S.select_segments(segs, 0) == segs and S.select_segments(segs, 99) == segs
 
 
 # ------------------------------------------------------------------------ segment metrics
@@ -137,8 +142,8 @@ def seg_rec():
 
 
 def test_ground_truth_reconstruction_has_zero_errors(seg_rec) -> None:
-    gt = B.ground_truth(seg_rec)
-    m, per_joint = B.segment_metrics(Oracle().reconstruct(seg_rec), gt, can_fall=True)
+    gt = F.ground_truth(seg_rec)
+    m, per_joint = scoring.segment_metrics(Oracle().reconstruct(seg_rec), gt, can_fall=True)
     for k in ("MPJPE_mm", "PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2", "vGRF_N"):
         assert m[k] == pytest.approx(0.0, abs=1e-6), k
     assert m["success_rate"] == 100.0
@@ -151,9 +156,9 @@ def test_ground_truth_reconstruction_has_zero_errors(seg_rec) -> None:
 
 
 def test_hand_made_errors(seg_rec) -> None:
-    gt = B.ground_truth(seg_rec)
+    gt = F.ground_truth(seg_rec)
     shifted = Oracle(shift=(0.1, 0.0, 0.0), grf_offset_n=10.0).reconstruct(seg_rec)
-    m, per_joint = B.segment_metrics(shifted, gt, can_fall=True)
+    m, per_joint = scoring.segment_metrics(shifted, gt, can_fall=True)
     assert m["MPJPE_mm"] == pytest.approx(100.0)
     np.testing.assert_allclose(per_joint["MPJPE_mm"], 100.0)
     for k in ("PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2"):
@@ -164,24 +169,25 @@ def test_hand_made_errors(seg_rec) -> None:
     rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     turned = Oracle().reconstruct(seg_rec)
     turned.global_rot = turned.global_rot @ rz
-    m, _ = B.segment_metrics(turned, gt, can_fall=False)
+    m, _ = scoring.segment_metrics(turned, gt, can_fall=False)
     assert m["MPJRE_deg"] == pytest.approx(90.0) and m["MPJPE_mm"] == pytest.approx(0.0)
     assert math.isnan(m["success_rate"])  # a method that cannot fall has no success rate
 
-    m, _ = B.segment_metrics(Oracle(fall=True).reconstruct(seg_rec), gt, can_fall=True)
+    m, _ = scoring.segment_metrics(Oracle(fall=True).reconstruct(seg_rec), gt, can_fall=True)
     assert m["success_rate"] == 0.0
     no_forces = Oracle().reconstruct(seg_rec)
     no_forces.grf = None
-    assert math.isnan(B.segment_metrics(no_forces, gt, can_fall=True)[0]["vGRF_N"])
+    assert math.isnan(scoring.segment_metrics(no_forces, gt, can_fall=True)[0]["vGRF_N"])
 
 
 def test_contacts_and_insole_force_fall_back_without_insoles(seg_rec) -> None:
-    gt = B.ground_truth(seg_rec)
+    gt = F.ground_truth(seg_rec)
     np.testing.assert_array_equal(
-        gt.foot_contacts, np.stack([seg_rec.insole[f].contacts.any(axis=1) for f in B._FEET], 1)
+        gt.foot_contacts,
+        np.stack([seg_rec.insole[f].contacts.any(axis=1) for f in scoring.FEET], 1),
     )
     bare = dataclasses.replace(seg_rec, insole={}, insole_combined=None)
-    gt_bare = B.ground_truth(bare)
+    gt_bare = F.ground_truth(bare)
     np.testing.assert_array_equal(
         gt_bare.foot_contacts, M.contacts_from_motion(gt.joint_pos[:, [10, 11]], 100.0)
     )
@@ -198,7 +204,7 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
     oracle = Oracle(fail_on={"take1"}, calls=calls)
     runs = [_run("oracle", lambda o: oracle)]
     out = tmp_path / "bench"
-    rows = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    rows = R.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
     assert len(calls) == len(segments) == len(rows)
     status = {r["segment"]: r["status"] for r in rows}
     assert status.pop("take1_f000000") == "error" and set(status.values()) == {"ok"}
@@ -210,7 +216,7 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
     assert summary["oracle"]["failed"] == 1 and summary["oracle"]["segments"] == 4
     assert summary["oracle"]["MPJPE_mm"] == pytest.approx(0.0, abs=1e-6)
     results = json.loads((out / "results.json").read_text())
-    assert set(results["oracle"]) == {*B.RESULT_KEYS, "failed"}
+    assert set(results["oracle"]) == {*report.RESULT_KEYS, "failed"}
     assert results["oracle"]["success_rate"] == 100.0 and results["oracle"]["segments"] == 4
     table = (out / "table.md").read_text()
     assert "| oracle | 0.00 |" in table and "| 4 | 1 |" in table
@@ -219,29 +225,29 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
 
     # Resume: nothing runs again, the failure is kept (until retry_failed).
     calls.clear()
-    again = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    again = R.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
     assert calls == [] and [r["status"] for r in again] == [r["status"] for r in rows]
     (out / "segments" / "oracle" / "take2_f000100.json").unlink()
-    B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    R.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
     assert calls == ["take2"]
     calls.clear()
     oracle.fail_on.clear()
-    fixed = B.run_bench(runs, segments, out, built={"oracle": oracle}, retry_failed=True,
+    fixed = R.run_bench(runs, segments, out, built={"oracle": oracle}, retry_failed=True,
                         log=lambda s: None)  # fmt: skip
     assert calls == ["take1"] and {r["status"] for r in fixed} == {"ok"}
-    assert B.load_rows(out, runs, segments)[2]["status"] == "ok"
+    assert R.load_rows(out, runs, segments)[2]["status"] == "ok"
 
 
 def test_resume_refuses_other_settings(segments, tmp_path) -> None:
     out = tmp_path / "bench"
-    B.run_bench([_run("oracle", _oracle_factory)], segments[:1], out, log=lambda s: None)
-    other = B.MethodRun("oracle", "oracle", _oracle_factory,
+    R.run_bench([_run("oracle", _oracle_factory)], segments[:1], out, log=lambda s: None)
+    other = R.MethodRun("oracle", "oracle", _oracle_factory,
                         MethodOptions(kin_checkpoint=tmp_path / "other.pt"))  # fmt: skip
-    with pytest.raises(B.BenchError, match="other settings"):
-        B.run_bench([other], segments[:1], out, log=lambda s: None)
+    with pytest.raises(S.BenchError, match="other settings"):
+        R.run_bench([other], segments[:1], out, log=lambda s: None)
     moved = dataclasses.replace(segments[0], start=50, stop=150)
-    with pytest.raises(B.BenchError, match="other data"):
-        B.run_bench([_run("oracle", _oracle_factory)], [moved], out, log=lambda s: None)
+    with pytest.raises(S.BenchError, match="other data"):
+        R.run_bench([_run("oracle", _oracle_factory)], [moved], out, log=lambda s: None)
 
 
 def test_methods_without_falls_or_forces_report_nan_and_table_says_na(segments, tmp_path) -> None:
@@ -250,7 +256,7 @@ def test_methods_without_falls_or_forces_report_nan_and_table_says_na(segments, 
 
     runs = [_run("stiff", factory), _run("oracle", _oracle_factory)]
     out = tmp_path / "b"
-    rows = B.run_bench(runs, segments[:2], out, log=lambda s: None)
+    rows = R.run_bench(runs, segments[:2], out, log=lambda s: None)
     summary = B.write_outputs(out, rows, runs, segments[:2], plots=True)
     assert math.isnan(summary["stiff"]["success_rate"])
     assert json.loads((out / "results.json").read_text())["stiff"]["success_rate"] is None
@@ -263,7 +269,7 @@ def test_methods_without_falls_or_forces_report_nan_and_table_says_na(segments, 
 
 CRASHY = """
 import os
-from grip.eval.bench import ground_truth
+from grip.kinematics.features import ground_truth
 from grip.core.reconstruction import Reconstruction
 
 
@@ -291,12 +297,12 @@ def test_a_worker_that_dies_fails_only_its_segment(segments, tmp_path, monkeypat
     mod_dir.mkdir()
     (mod_dir / "bench_crashy_method.py").write_text(textwrap.dedent(CRASHY))
     monkeypatch.syspath_prepend(str(mod_dir))
-    monkeypatch.setattr(B, "_start_method", lambda: "spawn")  # children inherit sys.path
+    monkeypatch.setattr(R, "_start_method", lambda: "spawn")  # children inherit sys.path
     import bench_crashy_method
 
-    run = B.MethodRun("crashy", "crashy", bench_crashy_method.factory, MethodOptions())
+    run = R.MethodRun("crashy", "crashy", bench_crashy_method.factory, MethodOptions())
     segs = segments[:3]  # take0 x 2, take1
-    rows = B.run_bench([run], segs, tmp_path / "b", workers=2, log=lambda s: None)
+    rows = R.run_bench([run], segs, tmp_path / "b", workers=2, log=lambda s: None)
     by_seg = {r["segment"]: r for r in rows}
     assert by_seg["take1_f000000"]["status"] == "error"
     assert "worker process died" in by_seg["take1_f000000"]["error"]
@@ -326,20 +332,20 @@ def test_prepare_runs_skips_methods_without_sensor_support(segments, tmp_path) -
 
     registry = {"oracle": _oracle_factory, "sensing": sensing}
     messages: list[str] = []
-    runs, built = B.prepare_runs(["oracle", "sensing"], MethodOptions(),
+    runs, built = R.prepare_runs(["oracle", "sensing"], MethodOptions(),
                                  ["imu2_nopress", "imu4_press"], registry,
                                  log=messages.append)  # fmt: skip
     assert [r.label for r in runs] == ["sensing@imu2_nopress", "sensing@imu4_press"]
     assert built["sensing@imu4_press"].sensors == "imu4_press"
     assert messages == ["oracle: does not support --sensors; skipped"]
     out = tmp_path / "sweep"
-    rows = B.run_bench(runs, segments[:1], out, built=built, log=lambda s: None)
+    rows = R.run_bench(runs, segments[:1], out, built=built, log=lambda s: None)
     B.write_outputs(out, rows, runs, segments[:1], plots=False)
     table = (out / "table.md").read_text()
     assert "GRIP Table 3" in table
     assert "| sensing | 2 | no | 0.00 |" in table and "| sensing | 4 | yes | 0.00 |" in table
-    with pytest.raises(B.BenchError, match="no method to run"):
-        B.prepare_runs(["oracle"], MethodOptions(), ["imu4_press"], registry, log=print)
+    with pytest.raises(S.BenchError, match="no method to run"):
+        R.prepare_runs(["oracle"], MethodOptions(), ["imu4_press"], registry, log=print)
 
 
 # ------------------------------------------------------------------------ kinematics only
@@ -348,9 +354,9 @@ def test_kinematics_method_starts_at_the_true_root(seg_rec) -> None:
     assert isinstance(method, KinematicsOnly) and not method.can_fall
     recon = method.reconstruct(seg_rec)
     assert recon.n_frames == FRAMES and recon.grf is None and recon.ms_per_frame > 0
-    gt = B.ground_truth(seg_rec)
+    gt = F.ground_truth(seg_rec)
     np.testing.assert_allclose(recon.joint_pos[0, 0], gt.joint_pos[0, 0], atol=1e-6)
-    m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
+    m, _ = scoring.segment_metrics(recon, gt, can_fall=method.can_fall)
     assert all(math.isfinite(m[k]) for k in ("MPJPE_mm", "PEL_MPJPE_mm", "MPJRE_deg", "FS_mps"))
     assert math.isnan(m["vGRF_N"]) and math.isnan(m["success_rate"])
 
@@ -379,7 +385,7 @@ def test_cli_bench_kinematics_writes_results_and_resumes(dataset, tmp_path, caps
     out1 = tmp_path / "one"
     assert main([*args, "--out", str(out1), "--workers", "1", "--segments", "3"]) == 0
     res = json.loads((out1 / "results.json").read_text())
-    assert set(res["kinematics"]) == {*B.RESULT_KEYS, "failed"}
+    assert set(res["kinematics"]) == {*report.RESULT_KEYS, "failed"}
     assert res["kinematics"]["segments"] == 3 and res["kinematics"]["failed"] == 0
     assert res["kinematics"]["vGRF_N"] is None and res["kinematics"]["success_rate"] is None
     assert res["kinematics"]["MPJPE_mm"] > 0
@@ -427,18 +433,19 @@ def test_pip_physics_on_kinematicsnet_gives_forces_and_less_foot_sliding(seg_rec
     method = make_method("kin+pip", MethodOptions())
     recon = method.reconstruct(seg_rec)
     assert recon.method == "kin+pip" and recon.n_frames == FRAMES and not method.can_fall
-    gt = B.ground_truth(seg_rec)
-    m, _ = B.segment_metrics(recon, gt, can_fall=False)
+    gt = F.ground_truth(seg_rec)
+    m, _ = scoring.segment_metrics(recon, gt, can_fall=False)
     assert math.isfinite(m["vGRF_N"]) and recon.residual.shape == (FRAMES, 6)
-    kin, _ = B.segment_metrics(kinematics_method(MethodOptions()).reconstruct(seg_rec), gt, False)
+    kin_recon = kinematics_method(MethodOptions()).reconstruct(seg_rec)
+    kin, _ = scoring.segment_metrics(kin_recon, gt, False)
     assert m["FS_mps"] < kin["FS_mps"]
 
 
 def test_vgrf_leaves_out_frames_without_forces() -> None:
     pred = np.array([[100.0, 200.0], [np.nan, np.nan], [110.0, 190.0]])
     ins = np.array([[90.0, 200.0], [500.0, 500.0], [110.0, 200.0]])
-    assert B.vgrf_error_n(pred, ins) == pytest.approx(5.0)
-    assert math.isnan(B.vgrf_error_n(np.full((2, 2), np.nan), ins[:2]))
+    assert scoring.vgrf_error_n(pred, ins) == pytest.approx(5.0)
+    assert math.isnan(scoring.vgrf_error_n(np.full((2, 2), np.nan), ins[:2]))
 
 
 @pytest.mark.parametrize("name", ["transpose", "pip"])
@@ -451,13 +458,13 @@ def test_shipped_baselines_start_at_the_true_first_frame(name) -> None:
     rec = load_recording(SAMPLE_RECORDING).slice_frames(0, FRAMES)
     method = make_method(name, MethodOptions())
     recon = method.reconstruct(rec)
-    gt = B.ground_truth(rec)
+    gt = F.ground_truth(rec)
     assert recon.n_frames == FRAMES and np.isfinite(recon.joint_pos).all()
     np.testing.assert_allclose(recon.joint_pos[0, 0], gt.joint_pos[0, 0], atol=1e-6)
     if name == "pip":
         np.testing.assert_allclose(recon.global_rot[0], gt.global_rot[0], atol=1e-6)
         assert recon.notes["qp_failures"] < FRAMES // 10
-    m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
+    m, _ = scoring.segment_metrics(recon, gt, can_fall=method.can_fall)
     assert m["MPJRE_deg"] < 60
 
 
@@ -465,7 +472,7 @@ def test_blow_ups_are_counted_per_segment_and_in_the_results(segments, tmp_path)
     oracle = Oracle(blowups=2)
     runs = [_run("oracle", lambda o: oracle)]
     out = tmp_path / "bench"
-    rows = B.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
+    rows = R.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
     assert [r["blowups"] for r in rows] == [2] * len(segments)
     B.write_outputs(out, rows, runs, segments, "test", plots=False)
     results = json.loads((out / "results.json").read_text())
