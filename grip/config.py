@@ -2,7 +2,8 @@
 
 ``load_config(path, cls, overrides)`` reads a TOML file whose tables mirror the dataclass
 nesting, applies dotted ``key=value`` overrides (``train.lr=3e-4``), and returns a new instance.
-Unknown keys are errors that name the file and the key.
+Unknown keys are errors that name the file and the key, and so are the rules each dataclass
+checks in its ``__post_init__`` (:func:`grip.core.checks.check`).
 """
 
 from __future__ import annotations
@@ -95,3 +96,68 @@ def load_config(path: str | os.PathLike | None, default: Any,
     if nested:
         cfg = apply_dict(cfg, nested, "--set " + " ".join(overrides))
     return cfg
+
+
+REMOVED_ANY_VALUE: Any = object()
+"""``RemovedSetting.off`` of a setting that did nothing while its feature was off (any value)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RemovedSetting:
+    """A setting that was deleted from a config and may still sit in stored configs.
+
+    Attributes:
+        key: Dotted path (``"ppo.target_kl"``).
+        off: The value with which the feature was off (stored configs holding it load as if the
+            key was absent); :data:`REMOVED_ANY_VALUE`: any value, for a companion setting
+            without effect while another one kept the feature off.
+        feature: What the setting turned on, for the refusal's message.
+        commit: The commit that still has the feature.
+    """
+
+    key: str
+    off: Any
+    feature: str
+    commit: str
+
+
+def drop_removed(data: dict, removed: Sequence[RemovedSetting], where: str) -> dict:
+    """A copy of the nested settings ``data`` without the ``removed`` settings.
+
+    A removed key whose value is its ``off`` value is dropped silently; one that turned its
+    feature on is refused: the settings cannot be reproduced by this version.
+
+    Raises:
+        ConfigError: Naming ``where``, the key, the feature and the commit that has it.
+    """
+    for r in removed:
+        *parents, leaf = r.key.split(".")
+        node: Any = data
+        for p in parents:
+            node = node.get(p) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or leaf not in node:
+            continue
+        value = node[leaf]
+        if isinstance(value, list):  # JSON and TOML give lists where the field held a tuple
+            value = tuple(value)
+        if r.off is not REMOVED_ANY_VALUE and value != r.off:
+            raise ConfigError(f"{where}: {r.key} = {node[leaf]!r} turns on {r.feature}, which "
+                              f"was removed (commit {r.commit} has it)")  # fmt: skip
+    return _without(data, [r.key for r in removed])
+
+
+def _without(data: dict, keys: Sequence[str]) -> dict:
+    out = dict(data)
+    for key in keys:
+        *parents, leaf = key.split(".")
+        node = out
+        for p in parents:
+            child = node.get(p)
+            if not isinstance(child, dict):
+                node = None
+                break
+            node[p] = child = dict(child)
+            node = child
+        if node is not None:
+            node.pop(leaf, None)
+    return out

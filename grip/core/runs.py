@@ -2,10 +2,12 @@
 worker processes that end with their parent, temporary files a killed run left behind, and
 what every run folder records (:func:`git_hash`, :func:`history_wall_s`).
 
-``grip data build`` and ``grip reconstruct`` both resume into an output folder. Each records the
-settings its outputs were made with and refuses to go on with other ones
-(:func:`require_same_settings`, :func:`record_settings`), so a folder never mixes outputs of two
-settings. Their worker pools start every worker with :func:`exit_with_parent`.
+``grip data build``, ``grip reconstruct`` and every trainer's run folder
+(:class:`grip.core.rundir.RunDir`) resume into an output folder. Each records the settings its
+outputs were made with and refuses to go on with other ones, except those it lets change
+(:func:`changed_settings`, :func:`require_same_settings`, :func:`record_settings`), so a folder
+never mixes outputs of two settings. Worker pools start every worker with
+:func:`exit_with_parent`.
 """
 
 from __future__ import annotations
@@ -59,44 +61,92 @@ def _normalised(settings: Mapping[str, Any]) -> dict[str, Any]:
     return json.loads(json.dumps(dict(settings)))
 
 
-def settings_diff(old: Mapping[str, Any], new: Mapping[str, Any],
-                  common_only: bool = False) -> list[str]:  # fmt: skip
-    """``"key: old -> new"`` for every setting that differs.
+def flatten_settings(settings: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested settings as one level of dotted keys (``{"ppo": {"lr": 1}}`` ->
+    ``{"ppo.lr": 1}``); lists and other values stay as they are."""
+    out: dict[str, Any] = {}
+    for k, v in settings.items():
+        if isinstance(v, Mapping):
+            out.update(flatten_settings(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _compared(old: Mapping[str, Any], new: Mapping[str, Any], common_only: bool,
+              may_change: tuple[str, ...],
+              defaults: Mapping[str, Any] | None) -> tuple[dict, dict, list[str]]:  # fmt: skip
+    """Both settings flattened (``old`` completed from ``defaults``) and the keys that differ."""
+    a = flatten_settings(_normalised(old))
+    b = flatten_settings(_normalised(new))
+    if defaults is not None:
+        a = {**{k: v for k, v in flatten_settings(_normalised(defaults)).items() if k not in a},
+             **a}  # fmt: skip
+    keys = set(a) & set(b) if common_only else set(a) | set(b)
+    missing = object()
+    changed = [k for k in sorted(keys) if a.get(k, missing) != b.get(k, missing)
+               and not (may_change and k.startswith(may_change))]  # fmt: skip
+    return a, b, changed
+
+
+def changed_settings(old: Mapping[str, Any], new: Mapping[str, Any],
+                     defaults: Mapping[str, Any] | None = None, may_change: tuple[str, ...] = (),
+                     common_only: bool = False) -> list[str]:  # fmt: skip
+    """The dotted keys whose values differ between two (nested) settings.
 
     Args:
         old: Settings recorded with the existing outputs.
         new: Settings of this run.
+        defaults: The current default settings: a key missing from ``old`` (a setting added
+            to the project after the outputs were made) takes its value from here, so a new
+            setting left at its default does not block a resume.
+        may_change: Dotted key prefixes that may differ (``"ppo.learning_rate"``, ``"stage2."``).
         common_only: Compare only keys both hold (outputs of an older version that recorded
             fewer settings).
 
     Returns:
-        One line per differing key, sorted by key; empty when the settings agree.
+        The differing keys, sorted.
     """
-    old, new = _normalised(old), _normalised(new)
-    keys = set(old) & set(new) if common_only else set(old) | set(new)
+    return _compared(old, new, common_only, may_change, defaults)[2]
+
+
+def settings_diff(old: Mapping[str, Any], new: Mapping[str, Any], common_only: bool = False,
+                  may_change: tuple[str, ...] = (),
+                  defaults: Mapping[str, Any] | None = None) -> list[str]:  # fmt: skip
+    """``"key: old -> new"`` for every setting that differs (:func:`changed_settings`).
+
+    Returns:
+        One line per differing dotted key, sorted by key; empty when the settings agree.
+    """
+    a, b, changed = _compared(old, new, common_only, may_change, defaults)
     missing = "(not set)"
-    return [f"{k}: {old.get(k, missing)} -> {new.get(k, missing)}"
-            for k in sorted(keys) if old.get(k, missing) != new.get(k, missing)]  # fmt: skip
+    return [f"{k}: {a.get(k, missing)} -> {b.get(k, missing)}" for k in changed]
 
 
 def require_same_settings(old: Mapping[str, Any], new: Mapping[str, Any], where: str | Path,
-                          hint: str, common_only: bool = False) -> None:  # fmt: skip
+                          hint: str, common_only: bool = False, *,
+                          may_change: tuple[str, ...] = (),
+                          defaults: Mapping[str, Any] | None = None,
+                          what: str = "this folder was made with different settings",
+                          ) -> None:  # fmt: skip
     """Refuse to resume with settings other than the recorded ones.
 
     Args:
         old: Settings recorded with the existing outputs.
         new: Settings of this run.
         where: The file that recorded ``old`` (named in the message).
-        hint: What the user can do instead, e.g. ``"use another --out or the same options"``.
-        common_only: See :func:`settings_diff`.
+        hint: What the user can do instead, e.g. ``"use another --out or the same options"``
+            (empty: nothing is added).
+        common_only, may_change, defaults: See :func:`changed_settings`.
+        what: What the message says is wrong.
 
     Raises:
-        SettingsMismatch: Naming ``where`` and every differing setting.
+        SettingsMismatch: ``"{where}: {what} ({key: old -> new; ...}); {hint}"``.
     """
-    diff = settings_diff(old, new, common_only)
+    diff = settings_diff(old, new, common_only, may_change, defaults)
     if diff:
-        raise SettingsMismatch(f"{where}: this folder was made with different settings "
-                               f"({'; '.join(diff)}); {hint}")  # fmt: skip
+        raise SettingsMismatch(f"{where}: {what} ({'; '.join(diff)})"
+                               + (f"; {hint}" if hint else ""))  # fmt: skip
 
 
 def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str) -> None:

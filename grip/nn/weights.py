@@ -3,17 +3,19 @@
 A state dict is stored at a precision (:func:`pack_weights`) and restored as float32
 (:func:`unpack_weights`) by KinematicsNet exports, policy files and distilled students alike.
 Checkpoints hold only tensors and plain containers, so :func:`load_checkpoint` reads them with
-``torch.load(..., weights_only=True)``: a hostile file cannot run code. Imports torch and
-:mod:`grip.core` only.
+``torch.load(..., weights_only=True)``: a hostile file cannot run code; :func:`save_checkpoint`
+writes one atomically. Imports torch and :mod:`grip.core` only.
 """
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
 import torch
 
+from grip.core.atomic import atomic_write
 from grip.core.loaderrors import describe_load_error
 
 CHECKPOINT_VERSION = 1
@@ -23,6 +25,16 @@ PRECISIONS: tuple[str, ...] = ("fp32", "fp16", "int8")
 """Weight storage of inference exports (:func:`pack_weights`)."""
 
 _SCALE = "@scale"
+
+
+def save_checkpoint(path: str | os.PathLike, obj: dict) -> int:
+    """``torch.save(obj)`` written atomically to ``path`` (whole or not at all, even if the
+    run is killed); returns the file size, bytes."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    data = buf.getvalue()
+    atomic_write(path, lambda f: f.write(data))
+    return len(data)
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict:
