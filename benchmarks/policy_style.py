@@ -34,7 +34,7 @@ from grip.core import skeleton as sk
 from grip.core.reference_sets import load_reference, select_clips
 from policies.amp import RealSampler
 from policies.controller import load_controller
-from policies.train import stage2_rollout_env
+from policies.vec_env import stage2_rollout_env
 
 
 def policy_windows(runner, ref_path: str, cats: tuple[str, ...], n_envs: int, steps: int,

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from grip.core.checks import check
 from grip.core.mjcf import MjcfConfig
 
-KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jhor")
-"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel);
-``OAV_Jhor`` (ours) is J_rel with the pelvis row (always 0 there) holding the horizontal error
-against the integrated root."""
+KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel")
+"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel)."""
 
 ACTION_MODES: tuple[str, ...] = ("relative", "absolute")
 REWARD_FORMS: tuple[str, ...] = ("mean_sq", "norm")
@@ -152,7 +151,8 @@ class TrackingEnvConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
-        checks = (
+        check(
+            self,
             (self.action_mode in ACTION_MODES, f"action_mode must be one of {ACTION_MODES}"),
             (self.kinematic_obs in KINEMATIC_OBS, f"kinematic_obs must be one of {KINEMATIC_OBS}"),
             (self.reward.form in REWARD_FORMS, f"reward.form must be one of {REWARD_FORMS}"),
@@ -167,9 +167,6 @@ class TrackingEnvConfig:
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),
         )
-        for ok, msg in checks:
-            if not ok:
-                raise ValueError(f"TrackingEnvConfig: {msg}")
 
     @property
     def control_dt_s(self) -> float:

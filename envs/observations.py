@@ -65,8 +65,7 @@ def observation_parts(
     rotation by another (this runs at every control step).
 
     Args:
-        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4), or
-            ``"OAV_Jhor"`` (not GRIP's: ``J_rel`` plus the horizontal root error, below).
+        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4).
         h: ``(3, 3)`` heading matrix of the simulated pelvis (:func:`heading_matrix`).
         sim_pvw: ``(3, J, 3)`` simulated world joint positions (m), linear (m/s) and angular
             (rad/s) velocities.
@@ -77,18 +76,14 @@ def observation_parts(
             (:data:`grip.core.skeleton.VELOCITY_JOINTS`), m/s.
         est_leaf_angvel: ``(4, 3)`` estimated world angular velocities of :data:`IMU_JOINTS`,
             rad/s.
-        est_root_pos: ``(3,)`` root integrated from the estimated pelvis velocity (J_glo,
-            J_hor), m.
+        est_root_pos: ``(3,)`` root integrated from the estimated pelvis velocity (J_glo), m.
 
     Returns:
         ``kinematic (kinematic_dim(variant),)`` = [d_theta (4x6): rotation from simulated to
         estimated orientation, theta_leaf (4x6): estimated orientation, d_omega (4x3)] at the
         IMU bodies, then [d_v (6x3)] (not in ``OA``), then [d_p (24x3), p (24x3)] (``J``
         variants; d_p root-relative for ``J_rel``, global via the integrated root for
-        ``J_glo``; for ``J_hor`` root-relative, except the pelvis row (always 0 in ``J_rel``),
-        which holds the horizontal part of ``est_root_pos - root``: the ground the body has
-        lost or gained on the integrated root, without the vertical drift of integrating a
-        vertical velocity; p = the estimated root-relative joints);
+        ``J_glo``; p = the estimated root-relative joints);
         ``self (SELF_DIM,)`` = [pelvis height (1), joints 1..23 minus the pelvis (69), linear
         velocities (72), angular velocities (72), rotations 6D (144)].
     """
@@ -101,10 +96,6 @@ def observation_parts(
         rows += [est_pos - rel, est_pos]
     elif variant == "OAV_Jglo":
         rows += [(est_root_pos + est_pos) - pos, est_pos]
-    elif variant == "OAV_Jhor":
-        d_p = est_pos - rel
-        d_p[0] = (est_root_pos[0] - pos[0, 0], est_root_pos[1] - pos[0, 1], 0.0)
-        rows += [d_p, est_pos]
     vecs = np.concatenate(rows) @ h
     e_leaf = est_leaf_rot
     d_rot = e_leaf @ np.swapaxes(sim_rot[_IMU], -1, -2)

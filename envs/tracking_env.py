@@ -319,8 +319,8 @@ class GripTrackingEnv(gym.Env):
 
     def push_pelvis(self, force: np.ndarray) -> None:
         """Apply a world-frame force (N, ``(3,)``) at the pelvis' centre of mass for the
-        following steps, until called again (zeros end it; a reset clears it). Training
-        perturbations (:class:`envs.wrappers.RandomPushes`)."""
+        following steps, until called again (zeros end it; a reset clears it): perturbations
+        (``experiments/random_pushes.py``)."""
         f = np.asarray(force, dtype=np.float64).reshape(3)
         if not np.isfinite(f).all():
             raise ValueError(f"push force must be 3 finite values, got {force!r}")

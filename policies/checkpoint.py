@@ -13,7 +13,7 @@ as plain MLPs). ``vecnorm.npz`` is read with ``allow_pickle=False`` (:func:`read
 ``amp.pt`` with :func:`policies.runner.load_weights`.
 
 Every reader of a run folder goes through here; any run folder written by ``grip
-train-policy`` (older ones included) reads this way.
+policy train`` (older ones included) reads this way.
 """
 
 from __future__ import annotations

@@ -11,6 +11,8 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from envs.config import TrackingEnvConfig
+from grip.config import REMOVED_ANY_VALUE, ConfigError, RemovedSetting, apply_dict, drop_removed
+from grip.core.checks import check
 
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
@@ -39,11 +41,6 @@ class AmpConfig:
         updates_per_rollout: Discriminator updates after each PPO rollout.
         replay_size: Policy samples kept for the discriminator (oldest replaced first).
         reward_scale: Multiplies the AMP reward before its weight (PHC: 2 with BCE).
-        from_init: With ``train-policy --init``: start from the file's discriminator (true) or
-            from a fresh one (false; the fall detector is then the run's new discriminator).
-            The shipped file's judges PPO's sampled, jittery windows fake from the first
-            rollout (style reward ~0.25); a fresh one pays more (~0.7) but did not train a
-            better policy (README, "What the discriminator sees").
     """
 
     window: int = 10
@@ -57,7 +54,6 @@ class AmpConfig:
     updates_per_rollout: int = 8
     replay_size: int = 20000
     reward_scale: float = 1.0
-    from_init: bool = True
 
 
 @dataclass(frozen=True)
@@ -69,8 +65,6 @@ class PPOConfig:
             :data:`GRIP_NET_ARCH`.
         activation: :data:`ACTIVATIONS` (GRIP: SiLU).
         log_std_init: Initial log standard deviation of the Gaussian actions (PHC: -2.9).
-        fixed_std: Keep the standard deviation at its initial value (PHC) instead of learning it;
-            a warm start (``--init``) then plays ``log_std_init`` instead of the file's.
         n_envs: Environments; stepped in parallel processes with ``vec_env = "subproc"``.
         vec_env: ``"subproc"`` (one process per environment) or ``"dummy"`` (all in the learner).
         n_steps: Steps per environment per rollout.
@@ -83,13 +77,11 @@ class PPOConfig:
             decay to the new end. Against the swings of a long run's last exports (README).
         learning_rate_final: The learning rate at the end of the decay.
         gamma, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm: PPO as in SB3.
-        target_kl: Stop a rollout's update epochs early once the approximate KL divergence
-            passes 1.5 x this (SB3); 0 = off.
         normalize_reward: Scale rewards by a running return std (SB3 VecNormalize).
         clip_obs: Normalised observations are clipped to +- this.
         critic_warmup_steps: Steps (decisions, counted from the start of the run) during which
             only the value network learns and the policy stays as it is: for a run warm-started
-            from an exported policy without a value network (``grip train-policy --init``),
+            from an exported policy without a value network (``grip policy train --init``),
             whose fresh critic would otherwise feed the policy meaningless advantages.
         threads: Torch threads of the learner (0: all cores).
         device: Torch device of the learner (``"cpu"``, ``"cuda"``, ``"auto"``).
@@ -98,7 +90,6 @@ class PPOConfig:
     net_arch: tuple[int, ...] = (512, 256, 256)
     activation: str = "silu"
     log_std_init: float = -1.6
-    fixed_std: bool = False
     n_envs: int = 8
     vec_env: str = "subproc"
     n_steps: int = 256
@@ -113,7 +104,6 @@ class PPOConfig:
     ent_coef: float = 0.0
     vf_coef: float = 0.5
     max_grad_norm: float = 1.0
-    target_kl: float = 0.0
     normalize_reward: bool = True
     clip_obs: float = 10.0
     critic_warmup_steps: int = 0
@@ -169,7 +159,7 @@ class StageConfig:
 
 @dataclass(frozen=True)
 class PolicyRunConfig:
-    """Everything ``grip train-policy`` needs (written to ``config.json``)."""
+    """Everything ``grip policy train`` needs (written to ``config.json``)."""
 
     env: TrackingEnvConfig = field(default_factory=TrackingEnvConfig)
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -182,34 +172,20 @@ class PolicyRunConfig:
     """Rollouts between checkpoints."""
     seed: int = 0
     mirror_references: bool = False
-    """The run's reference set (``RUN/reference_train.npz``, built by ``grip train-policy``)
+    """The run's reference set (``RUN/reference_train.npz``, built by ``grip policy train``)
     also holds the left-right mirror image of every clip
     (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
     right balanced."""
-    reverse_categories: tuple[str, ...] = ()
-    """Category globs (e.g. ``["walk"]``) of training clips whose motions, played backwards,
-    join the reference set as extra recordings of category ``"<category>-reversed"``, with
-    sensors synthesised like the dataset's (:mod:`grip.dataset.augment`; a forward walk played
-    backwards is a backward walk). Needs a ``grip data build`` folder (its ``motions/``); a
-    stage's category globs must match the new category (``walk*`` matches
-    ``walk-reversed``). Empty: none."""
-    push_force_n: float = 0.0
-    """Training perturbations (:class:`envs.wrappers.RandomPushes`): the largest horizontal
-    force of a random push on the pelvis, N; 0 (the default) = no pushes. Inference never
-    pushes."""
-    push_every_s: float = 3.0
-    """Mean wait between pushes, s."""
-    push_duration_s: float = 0.2
-    """Length of a push, s."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a
     validation split for choosing among a run's exports without looking at the test split
-    (``grip eval-policy --split holdout``). The names are in ``RUN/holdout.json`` and in every
+    (``grip policy eval --split holdout``). The names are in ``RUN/holdout.json`` and in every
     export's ``info``. 0 trains on every training clip."""
 
     def __post_init__(self) -> None:
-        checks = (
+        check(
+            self,
             (self.ppo.activation in ACTIVATIONS, f"ppo.activation must be one of {ACTIVATIONS}"),
             (self.ppo.vec_env in VEC_ENVS, f"ppo.vec_env must be one of {VEC_ENVS}"),
             (self.amp.loss in AMP_LOSSES, f"amp.loss must be one of {AMP_LOSSES}"),
@@ -219,14 +195,9 @@ class PolicyRunConfig:
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
-            (self.push_force_n >= 0 and self.push_every_s > 0 and self.push_duration_s > 0,
-             "push_force_n must be >= 0 (0 = off), push_every_s and push_duration_s > 0"),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip
-        for ok, msg in checks:
-            if not ok:
-                raise ValueError(f"PolicyRunConfig: {msg}")
 
     def stages(self) -> list[tuple[str, StageConfig]]:
         return [("stage1", self.stage1), ("stage2", self.stage2)]
@@ -241,3 +212,45 @@ class PolicyRunConfig:
             termination_dist_m=stage.termination_dist_m, fall_height_m=stage.fall_height_m,
             max_episode_frames=stage.max_episode_frames, amp_window=self.amp.window,
         )  # fmt: skip
+
+
+REMOVED_IN = "42da3e6"
+"""The last commit with the knobs of :data:`REMOVED_SETTINGS`."""
+
+REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
+    RemovedSetting("amp.from_init", True, "a fresh discriminator on --init", REMOVED_IN),
+    RemovedSetting("ppo.fixed_std", False, "a fixed action std (ppo.fixed_std)", REMOVED_IN),
+    RemovedSetting("ppo.target_kl", 0.0, "PPO's KL early stop (ppo.target_kl)", REMOVED_IN),
+    RemovedSetting("reverse_categories", (), "time-reversed reference clips", REMOVED_IN),
+    RemovedSetting("push_force_n", 0.0, "random pushes (experiments/random_pushes.py)",
+                   REMOVED_IN),
+    RemovedSetting("push_every_s", REMOVED_ANY_VALUE, "random pushes", REMOVED_IN),
+    RemovedSetting("push_duration_s", REMOVED_ANY_VALUE, "random pushes", REMOVED_IN),
+)  # fmt: skip
+"""Training settings deleted from :class:`PolicyRunConfig` that configs stored in older policy
+files and run folders may hold (:func:`policy_config_from_dict`)."""
+
+REMOVED_KINEMATIC_OBS: tuple[str, ...] = ("OAV_Jhor",)
+"""Observation variants deleted from ``envs.config.KINEMATIC_OBS`` (in :data:`REMOVED_IN`)."""
+
+
+def policy_config_from_dict(data: dict, where: str, training: bool = False) -> PolicyRunConfig:
+    """The :class:`PolicyRunConfig` of a stored config (a policy file's or a run folder's
+    ``config.json``), written by this or an older version.
+
+    Removed training settings (:data:`REMOVED_SETTINGS`) changed how a policy was trained, not
+    what it does: reading a file to play it (``training`` false) drops them whatever their
+    value. To train on (``training``), one that turned its feature on is refused, and one at
+    its "off" value is dropped. A removed observation variant is refused either way.
+
+    Raises:
+        ConfigError: Naming ``where``: unknown keys, bad values, or a removed feature.
+    """
+    env = data.get("env") if isinstance(data, dict) else None
+    obs = env.get("kinematic_obs") if isinstance(env, dict) else None
+    if obs in REMOVED_KINEMATIC_OBS:
+        raise ConfigError(f"{where}: env.kinematic_obs = {obs!r} was removed (commit "
+                          f"{REMOVED_IN} has it)")  # fmt: skip
+    removed = REMOVED_SETTINGS if training else tuple(
+        dataclasses.replace(r, off=REMOVED_ANY_VALUE) for r in REMOVED_SETTINGS)
+    return apply_dict(PolicyRunConfig(), drop_removed(data, removed, where), where)

@@ -13,8 +13,8 @@ network to act like the teacher on the states the *student* visits (DAgger, Ross
 3. Fit the student to all labels by mean-squared error for ``epochs`` passes.
 
 The student has one member's network shape and observation normaliser and starts from that
-member's weights (``init_member``), so its file is an ordinary policy file: ``grip eval-policy``
-plays it and ``grip train-policy --init`` fine-tunes it with PPO. Runs checkpoint after every
+member's weights (``init_member``), so its file is an ordinary policy file: ``grip policy eval``
+plays it and ``grip policy train --init`` fine-tunes it with PPO. Runs checkpoint after every
 iteration (``RUN/checkpoint/``, ``RUN/data/iter_NNN.npz``) and resume.
 """
 
@@ -31,12 +31,32 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from grip.core.atomic import atomic_write, atomic_write_text
+from grip.config import REMOVED_ANY_VALUE, RemovedSetting, drop_removed
+from grip.core.atomic import atomic_write
+from grip.core.checks import check
+from grip.core.rundir import RunDir
+from policies.config import REMOVED_IN
+
+RESUMABLE: tuple[str, ...] = ("iterations",)
+"""Settings a resumed distillation may change: its length."""
+
+REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
+    RemovedSetting("push_force_n", 0.0, "random pushes (experiments/random_pushes.py)",
+                   REMOVED_IN),
+    RemovedSetting("push_every_s", REMOVED_ANY_VALUE, "random pushes", REMOVED_IN),
+    RemovedSetting("push_duration_s", REMOVED_ANY_VALUE, "random pushes", REMOVED_IN),
+)  # fmt: skip
+"""Settings deleted from :class:`DistillConfig` that older run folders may record."""
+
+
+def _upgrade_settings(old: dict, where: str) -> dict:
+    """An older run folder's recorded settings without those removed since."""
+    return drop_removed(old, REMOVED_SETTINGS, where)
 
 
 @dataclass(frozen=True)
 class DistillConfig:
-    """Settings of ``grip distill-policy`` (``configs/policy/distill.toml``).
+    """Settings of ``grip policy distill`` (``configs/policy/distill.toml``).
 
     Attributes:
         iterations: DAgger iterations (each: a rollout, then a fit).
@@ -59,14 +79,9 @@ class DistillConfig:
             (clipped to [-1, 1]); the label stays the teacher's action without noise. Noise in
             the rollouts shows the student the teacher's corrections from states a little off
             its own path (DART, Laskey et al. 2017). 0: none.
-        push_force_n: Random pushes on the pelvis during the rollouts
-            (:class:`envs.wrappers.RandomPushes`, as ``grip train-policy``'s), largest force, N;
-            0: none.
-        push_every_s: Mean wait between pushes, s.
-        push_duration_s: Length of a push, s.
-        reverse_categories: As ``grip train-policy``'s: training clips of these categories,
+        reverse_categories: As ``grip policy train``'s: training clips of these categories,
             played backwards, join the reference set (``RUN/reference_train.npz``).
-        mirror_references: As ``grip train-policy``'s: the mirror image of every clip joins.
+        mirror_references: As ``grip policy train``'s: the mirror image of every clip joins.
         threads: Torch threads (0: all cores).
         seed: Seed of the environments, the mixing and the minibatches.
     """
@@ -88,14 +103,12 @@ class DistillConfig:
     reverse_categories: tuple[str, ...] = ("walk",)
     mirror_references: bool = True
     action_noise: float = 0.0
-    push_force_n: float = 0.0
-    push_every_s: float = 3.0
-    push_duration_s: float = 0.2
     threads: int = 0
     seed: int = 0
 
     def __post_init__(self) -> None:
-        checks = (
+        check(
+            self,
             (self.iterations >= 1, "iterations must be >= 1"),
             (self.n_envs >= 1, "n_envs must be >= 1"),
             (self.decisions_per_iteration >= self.n_envs,
@@ -108,14 +121,9 @@ class DistillConfig:
              "max_samples must hold at least one iteration's decisions"),
             (self.init_member >= 0, "init_member must be >= 0"),
             (self.action_noise >= 0, "action_noise must be >= 0"),
-            (self.push_force_n >= 0 and self.push_every_s > 0 and self.push_duration_s > 0,
-             "push_force_n must be >= 0 (0 = off), push_every_s and push_duration_s > 0"),
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
              "fall_height_m and max_episode_frames must be >= 0"),
         )  # fmt: skip
-        for ok, msg in checks:
-            if not ok:
-                raise ValueError(f"DistillConfig: {msg}")
 
     def beta(self, iteration: int) -> float:
         """The teacher's share of the actions played in ``iteration``."""
@@ -143,15 +151,16 @@ class Distiller:
         cfg: Settings.
         teacher: Policy or ensemble files whose (mean) action the student learns.
         run_dir: Run folder (created or resumed).
-        reference: The training reference set (``.npz``, as ``grip train-policy`` builds it).
-        make_env: The environment constructor (:class:`policies.train.EnvMaker`; the edge
+        reference: The training reference set (``.npz``, as ``grip policy train`` builds it).
+        make_env: The environment constructor (:class:`policies.vec_env.EnvMaker`; the edge
             passes :func:`envs.factory.make_tracking_env`).
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
         log: Where each iteration's summary line goes (None: nowhere).
 
     Raises:
         ValueError: naming the file, when a teacher file is not a policy, its members act
-            differently, or ``cfg.init_member`` is not one of them.
+            differently, or ``cfg.init_member`` is not one of them, or when ``run_dir`` holds a
+            checkpoint of other settings or teachers (besides :data:`RESUMABLE`).
     """
 
     def __init__(self, cfg: DistillConfig, teacher: Sequence[str | os.PathLike],
@@ -162,7 +171,11 @@ class Distiller:
         from policies.runner import PolicyRunner
 
         self.cfg = cfg
-        self.run_dir = Path(run_dir)
+        self.rundir = RunDir(run_dir, RESUMABLE, "'grip policy distill' run")
+        self.teacher_resolved = [str(Path(t).resolve()) for t in teacher]
+        self.rundir.check_resume(cfg, DistillConfig(), {"teacher": self.teacher_resolved},
+                                 upgrade=_upgrade_settings)  # fmt: skip
+        self.run_dir = self.rundir.path
         self.reference = str(reference)
         self.make_env = make_env
         self.progress = progress
@@ -190,42 +203,33 @@ class Distiller:
         self.iteration = 0
         self.history: list[dict] = []
         self._chunks: list[tuple[np.ndarray, np.ndarray]] | None = None  # newest last
-        self._wall0 = 0.0
-        self._t0 = time.time()
 
     # -------------------------------------------------------------- bookkeeping
     @property
     def ckpt_dir(self) -> Path:
-        return self.run_dir / "checkpoint"
+        return self.rundir.checkpoint_dir
 
     @property
     def data_dir(self) -> Path:
         return self.run_dir / "data"
 
     def wall_s(self) -> float:
-        return self._wall0 + time.time() - self._t0
+        return self.rundir.wall_s()
 
     def save_checkpoint(self) -> None:
-        """The student, its optimiser and the history, written atomically (file by file; the
-        state file last, so a run killed in between resumes from the previous iteration)."""
-        self.ckpt_dir.mkdir(parents=True, exist_ok=True)
-        buf = io.BytesIO()
-        torch.save({"actor": self.student.actor.state_dict(), "optim": self.optim.state_dict(),
-                    "iteration": self.iteration}, buf)  # fmt: skip
-        atomic_write(self.ckpt_dir / "student.pt", lambda f: f.write(buf.getvalue()))
+        """The student, its optimiser and the history: ``checkpoint/student.pt`` and
+        ``state.json``, swapped in together (:meth:`grip.core.rundir.RunDir.save_checkpoint`)."""
+        ck = {"actor": self.student.actor.state_dict(), "optim": self.optim.state_dict(),
+              "iteration": self.iteration}  # fmt: skip
         state = {"iteration": self.iteration, "wall_s": self.wall_s(), "history": self.history}
-        atomic_write_text(self.ckpt_dir / "state.json", json.dumps(state))
+        self.rundir.save_checkpoint(lambda tmp: torch.save(ck, tmp / "student.pt"), state)
 
     def _resume(self) -> None:
         from policies.runner import load_weights
 
-        p = self.ckpt_dir / "state.json"
-        if not p.is_file():
+        state = self.rundir.read_state()
+        if state is None:
             return
-        try:
-            state = json.loads(p.read_text())
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{p}: unreadable distillation state ({e})") from e
         ck = load_weights(self.ckpt_dir / "student.pt", "distillation checkpoint")
         if int(ck.get("iteration", -1)) != int(state["iteration"]):
             raise ValueError(
@@ -234,7 +238,7 @@ class Distiller:
             )
         self.student.actor.load_state_dict(ck["actor"])
         self.optim.load_state_dict(ck["optim"])
-        self.iteration, self._wall0 = int(state["iteration"]), float(state["wall_s"])
+        self.iteration, self.rundir.wall0_s = int(state["iteration"]), float(state["wall_s"])
         self.history = list(state["history"])
 
     # -------------------------------------------------------------- data
@@ -261,13 +265,12 @@ class Distiller:
         return xa, ya
 
     def _make_env(self):
-        from policies.train import stage2_rollout_env
+        from policies.vec_env import stage2_rollout_env
 
         c = self.cfg
-        push = (c.push_force_n, c.push_every_s, c.push_duration_s) if c.push_force_n > 0 else None
         return stage2_rollout_env(self.make_env, self.teacher.env_cfg, self.reference,
                                   c.categories, c.n_envs, c.seed + 7919 * self.iteration,
-                                  c.fall_height_m, c.max_episode_frames, push)  # fmt: skip
+                                  c.fall_height_m, c.max_episode_frames)  # fmt: skip
 
     def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
         """One rollout of ``decisions_per_iteration`` decisions with the student acting (the

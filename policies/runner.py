@@ -24,12 +24,11 @@ from torch import nn
 
 from envs.amp import FRAME_DIM
 from envs.config import TrackingEnvConfig
-from grip.config import apply_dict
 from grip.core.atomic import atomic_write
 from grip.core.limits import read_json_file
 from grip.core.loaderrors import describe_load_error
 from policies.amp import Discriminator
-from policies.config import PolicyRunConfig
+from policies.config import policy_config_from_dict
 
 FORMAT = "grip-policy"
 VERSION = 2
@@ -217,7 +216,7 @@ class PolicyRunner:
         if missing:
             raise ValueError(f"{path}: policy file lacks {missing}")
         try:
-            cfg = apply_dict(PolicyRunConfig(), json.loads(ck["config"]), f"{path}: config")
+            cfg = policy_config_from_dict(json.loads(ck["config"]), f"{path}: config")
             actor = _load_mlp(ck["actor_sizes"], ck["actor"], cfg.ppo.activation)
             critic = None
             if "critic" in ck:  # files written since the value network is exported
@@ -268,7 +267,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
     if not isinstance(cfg_d, dict):
         raise ValueError(f"{cfg_path}: not a 'grip policy train' run config (no 'config' object)")
     try:
-        cfg = apply_dict(PolicyRunConfig(), cfg_d, str(cfg_path))
+        cfg = policy_config_from_dict(cfg_d, str(cfg_path))
     except (TypeError, KeyError, AttributeError) as e:
         raise ValueError(f"{cfg_path}: not a 'grip policy train' run config ({e})") from e
     ppo = read_ppo_zip(ck_dir / "model.zip")  # (never unpickled: policies.checkpoint)

@@ -10,150 +10,60 @@ A run folder holds::
     curves.png             learning curves
 
 Running the same command again resumes from ``checkpoint/`` (stage, steps, optimiser,
-normaliser and discriminator); the replay buffer of policy samples is not saved (it refills
+normaliser and discriminator; only the settings of :data:`RESUMABLE` may change, and the folder
+is a :class:`grip.core.rundir.RunDir`); the replay buffer of policy samples is not saved (it refills
 within a few rollouts). ``model.zip`` is written by stable-baselines3 but never loaded by it:
 a resumed run builds its PPO from the config and takes the zip's state dicts and step counters
 (:mod:`policies.checkpoint`), so nothing pickled in the folder runs.
 
 Like SB3's ``PPO(policy, env)``, the trainer receives its environment: a constructor
-(:class:`EnvMaker`) that the edge passes in (``grip train-policy`` passes
+(:class:`policies.vec_env.EnvMaker`) that the edge passes in (``grip policy train`` passes
 :func:`envs.factory.make_tracking_env`); no tracking-env module is imported here.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import os
-import shutil
-import time
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol
 
 import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import (
-    DummyVecEnv,
-    SubprocVecEnv,
-    VecEnv,
-    VecEnvWrapper,
-    VecMonitor,
-    VecNormalize,
-)
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
 from envs import amp as A
-from envs import observations as O
-from envs.config import TrackingEnvConfig
-from grip.core import skeleton as sk
-from grip.core.limits import read_json_file
+from grip.config import drop_removed
 from grip.core.reference_sets import load_reference, select_clips
+from grip.core.rundir import RunDir
 from policies.amp import AmpTrainer, RealSampler
 from policies.checkpoint import read_ppo_zip, read_vecnorm
-from policies.config import PolicyRunConfig, StageConfig
+from policies.config import REMOVED_SETTINGS, PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers, load_weights
-
-JHOR_PRIOR_STD_M = 0.3
-"""Normaliser scale given to ``OAV_Jhor``'s horizontal root error when a run starts from an
-``OAV_Jrel`` policy (``--init``), m: about the ground a slow walk loses in a second."""
+from policies.vec_env import (
+    AmpReward,
+    EnvMaker,
+    load_vecnorm_state,
+    make_vec_env,
+    vecnorm_state,
+)
 
 INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
 
-
-class EnvMaker(Protocol):
-    """The environment constructor a trainer receives from the edge (SB3's ``PPO(policy, env)``
-    receives its env the same way).
-
-    ``make_env(env_cfg, categories, seed, push)`` returns one gymnasium environment, reset with
-    ``seed``, that tracks the clips of ``categories`` (category globs; all when empty) and is
-    pushed ``(force N, mean wait s, duration s)`` or not (``None``). The tracking env's is
-    :func:`envs.factory.make_tracking_env`. It must pickle, for subprocess vector envs (a
-    module-level function does).
-    """
-
-    def __call__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seed: int,
-                 push: tuple[float, float, float] | None) -> Any: ...  # fmt: skip
-
-
-class AmpReward(VecEnvWrapper):
-    """Adds ``weight x r_amp`` of the discriminator to the environment reward and keeps the
-    rollout's AMP windows for the discriminator's next update (``info["reward/amp"]`` is set)."""
-
-    def __init__(self, venv: VecEnv, amp: AmpTrainer, weight: float) -> None:
-        super().__init__(venv)
-        self.amp, self.weight = amp, weight
-        self._samples: list[np.ndarray] = []
-
-    def reset(self):
-        return self.venv.reset()
-
-    def step_wait(self):
-        obs, rew, dones, infos = self.venv.step_wait()
-        x = np.stack([info["amp_obs"] for info in infos])
-        r = self.amp.reward(x)
-        for info, ri in zip(infos, r, strict=True):
-            info["reward/amp"] = float(ri)
-        self._samples.append(x)
-        return obs, rew + (self.weight * r).astype(rew.dtype), dones, infos
-
-    def pop_samples(self) -> np.ndarray:
-        x = np.concatenate(self._samples) if self._samples else np.zeros((0, 1), np.float32)
-        self._samples = []
-        return x
-
-
-def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed: int,
-                 make_env: EnvMaker) -> VecEnv:  # fmt: skip
-    """The vector env of one training stage: ``cfg.ppo.n_envs`` environments from
-    ``make_env``, seeded ``seed``, ``seed + 1000``, ..."""
-    env_cfg = cfg.env_config(stage, reference)
-    push = None  # RandomPushes only with a positive force
-    if cfg.push_force_n > 0:
-        push = (cfg.push_force_n, cfg.push_every_s, cfg.push_duration_s)
-    fns = [functools.partial(make_env, env_cfg, stage.categories, seed + 1000 * i, push)
-           for i in range(cfg.ppo.n_envs)]  # fmt: skip
-    if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:
-        return SubprocVecEnv(fns, start_method="forkserver")
-    return DummyVecEnv(fns)
-
-
-def stage2_rollout_env(make_env: EnvMaker, env_cfg: TrackingEnvConfig, reference: str,
-                       categories: tuple[str, ...], n_envs: int, seed: int,
-                       fall_height_m: float = 0.3, max_episode_frames: int = 1000,
-                       push: tuple[float, float, float] | None = None) -> DummyVecEnv:  # fmt: skip
-    """In-process environments from ``make_env`` that play GRIP's stage-2 episodes with an
-    exported policy's settings (``env_cfg``, e.g. ``runner.env_cfg``): random starts on the
-    clips of ``categories``, no distance termination, a pelvis below ``fall_height_m`` ends an
-    episode (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
-    cfg = dataclasses.replace(env_cfg, reference=str(reference), random_start=True,
-                              clip_index=-1, termination_dist_m=0.0, fall_height_m=fall_height_m,
-                              max_episode_frames=max_episode_frames)  # fmt: skip
-    return DummyVecEnv([functools.partial(make_env, cfg, tuple(categories), seed + 1000 * i, push)
-                        for i in range(n_envs)])  # fmt: skip
-
-
-# -------------------------------------------------------------------- normaliser state
-def vecnorm_state(vn: VecNormalize) -> dict[str, np.ndarray]:
-    """VecNormalize statistics as plain arrays (saved as npz, not as a pickle)."""
-    out = {"ret_mean": vn.ret_rms.mean, "ret_var": vn.ret_rms.var, "ret_count": vn.ret_rms.count}
-    for k, rms in vn.obs_rms.items():
-        out[f"obs/{k}/mean"], out[f"obs/{k}/var"] = rms.mean, rms.var
-        out[f"obs/{k}/count"] = np.array(rms.count)
-    return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
-
-
-def load_vecnorm_state(vn: VecNormalize, state: dict[str, np.ndarray]) -> None:
-    vn.ret_rms.mean, vn.ret_rms.var = state["ret_mean"], state["ret_var"]
-    vn.ret_rms.count = float(state["ret_count"])
-    for k, rms in vn.obs_rms.items():
-        rms.mean, rms.var = state[f"obs/{k}/mean"], state[f"obs/{k}/var"]
-        rms.count = float(state[f"obs/{k}/count"])
+RESUMABLE: tuple[str, ...] = (
+    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
+    "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
+    "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm",
+    "ppo.critic_warmup_steps",
+)  # fmt: skip
+"""Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
+run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
 
 
 # ------------------------------------------------------------------------ callback
@@ -284,6 +194,12 @@ class TrainingCallback(BaseCallback):
 
 
 # ------------------------------------------------------------------------ trainer
+def _upgrade_settings(old: dict, where: str) -> dict:
+    """An older run folder's recorded settings without those removed since (off: dropped; on:
+    refused, :func:`grip.config.drop_removed`)."""
+    return drop_removed(old, REMOVED_SETTINGS, where)
+
+
 class PolicyTrainer:
     """A resumable DynamicsNet training run in ``run_dir``.
 
@@ -302,7 +218,8 @@ class PolicyTrainer:
 
     Raises:
         ValueError: naming the file, when ``init`` is not a policy, or ``init_member`` is not
-            one of its members.
+            one of its members, or when ``run_dir`` holds a checkpoint of other settings than
+            ``cfg`` (besides :data:`RESUMABLE`).
     """
 
     def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
@@ -310,7 +227,9 @@ class PolicyTrainer:
                  progress: Callable | None = None, init: str | os.PathLike | None = None,
                  init_member: int = 0) -> None:  # fmt: skip
         self.cfg = cfg
-        self.run_dir = Path(run_dir)
+        self.rundir = RunDir(run_dir, RESUMABLE, "'grip policy train' run")
+        self.rundir.check_resume(cfg, defaults=PolicyRunConfig(), upgrade=_upgrade_settings)
+        self.run_dir = self.rundir.path
         self.reference = str(reference)
         self.make_env = make_env
         self.progress = progress
@@ -329,8 +248,6 @@ class PolicyTrainer:
         self.stage_done = 0
         self.stage_done0 = 0
         self.history: list[dict] = []
-        self._wall0 = 0.0
-        self._t0 = time.time()
         self.model: PPO | None = None
         self.venv: VecNormalize | None = None
         self.amp_wrapper: AmpReward | None = None
@@ -343,42 +260,31 @@ class PolicyTrainer:
     # -------------------------------------------------------------- bookkeeping
     @property
     def ckpt_dir(self) -> Path:
-        return self.run_dir / "checkpoint"
+        return self.rundir.checkpoint_dir
 
     def wall_s(self) -> float:
-        return self._wall0 + time.time() - self._t0
+        return self.rundir.wall_s()
 
     def total_done(self) -> int:
         stages = self.cfg.stages()
         return sum(s.timesteps for _, s in stages[: self.stage_index]) + self.stage_done
 
     def save_checkpoint(self) -> None:
-        """Write ``checkpoint/`` atomically (a new folder swapped in by rename)."""
-        tmp = self.run_dir / "checkpoint.tmp"
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        self.model.save(tmp / "model.zip")
-        np.savez(tmp / "vecnorm.npz", **vecnorm_state(self.venv))
-        amp_state = self.amp.state_dict()
-        amp_state["rng"] = json.dumps(amp_state["rng"])  # (weights_only loads plain types)
-        torch.save(amp_state, tmp / "amp.pt")
+        """Write ``checkpoint/`` atomically (:meth:`grip.core.rundir.RunDir.save_checkpoint`):
+        ``model.zip``, ``vecnorm.npz``, ``amp.pt`` and ``state.json``."""
+
+        def write(tmp: Path) -> None:
+            self.model.save(tmp / "model.zip")
+            np.savez(tmp / "vecnorm.npz", **vecnorm_state(self.venv))
+            amp_state = self.amp.state_dict()
+            amp_state["rng"] = json.dumps(amp_state["rng"])  # (weights_only loads plain types)
+            torch.save(amp_state, tmp / "amp.pt")
+
         state = {"stage_index": self.stage_index, "stage_done": self.stage_done,
                  "wall_s": self.wall_s(), "history": self.history}  # fmt: skip
         if self.mining is not None:
             state["mining"] = {"stage_index": self.stage_index, **self.mining.state_dict()}
-        (tmp / "state.json").write_text(json.dumps(state))
-        old = self.run_dir / "checkpoint.old"
-        shutil.rmtree(old, ignore_errors=True)
-        if self.ckpt_dir.exists():
-            self.ckpt_dir.rename(old)
-        tmp.rename(self.ckpt_dir)
-        shutil.rmtree(old, ignore_errors=True)
-
-    def _load_state(self) -> dict | None:
-        p = self.ckpt_dir / "state.json"
-        if not p.is_file():
-            return None
-        return read_json_file(p, "training state")
+        self.rundir.save_checkpoint(write, state)
 
     # -------------------------------------------------------------- model
     def _policy_kwargs(self) -> dict:
@@ -403,8 +309,7 @@ class PolicyTrainer:
         return {"learning_rate": p.learning_rate, "n_steps": p.n_steps,
                 "batch_size": p.batch_size, "n_epochs": p.n_epochs, "gae_lambda": p.gae_lambda,
                 "clip_range": p.clip_range, "ent_coef": p.ent_coef, "vf_coef": p.vf_coef,
-                "max_grad_norm": p.max_grad_norm,
-                "target_kl": p.target_kl if p.target_kl > 0 else None}  # fmt: skip
+                "max_grad_norm": p.max_grad_norm}  # fmt: skip
 
     def _new_model(self, venv: VecNormalize) -> PPO:
         p = self.cfg.ppo
@@ -432,14 +337,10 @@ class PolicyTrainer:
         self.model = self._new_model(self.venv)
         ck.restore(self.model)
 
-    def _apply_fixed_std(self) -> None:
-        if self.cfg.ppo.fixed_std:
-            self.model.policy.log_std.requires_grad_(False)
-
     def _actor_params(self) -> list[torch.nn.Parameter]:
         pol = self.model.policy
         params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
-        return params + ([] if self.cfg.ppo.fixed_std else [pol.log_std])
+        return [*params, pol.log_std]
 
     def set_actor_frozen(self, frozen: bool) -> None:
         """Freeze the policy (mean network and log std) so that a PPO update trains only the
@@ -463,10 +364,9 @@ class PolicyTrainer:
 
     def warm_start(self, runner) -> None:
         """Start from an exported policy (:class:`policies.runner.PolicyRunner`): its policy
-        network and log std (with ``ppo.fixed_std``: the config's ``log_std_init``), its value
-        network when the file has one, its observation normaliser and its discriminator (a
-        fresh one when ``amp.from_init`` is false). PPO's optimiser, the return normaliser and
-        the discriminator's optimiser start afresh.
+        network and log std, its value network when the file has one, its observation
+        normaliser and its discriminator. PPO's optimiser, the return normaliser and the
+        discriminator's optimiser start afresh.
 
         Raises:
             ValueError: naming the file, when its networks or observations do not fit this
@@ -497,58 +397,25 @@ class PolicyTrainer:
                     dst.bias.copy_(s.bias)
 
         theirs, ours = runner.env_cfg.kinematic_obs, self.cfg.env.kinematic_obs
-        new_cols = self._new_kinematic_inputs(theirs, ours, spaces)
+        if theirs != ours:  # their inputs mean different things at the same places
+            raise ValueError(f"{src}: trained with env.kinematic_obs={theirs!r}, this run has "
+                             f"{ours!r}")  # fmt: skip
         load(runner.actor, pol.mlp_extractor.policy_net, pol.action_net, "policy")
         if runner.critic is not None:
             load(runner.critic, pol.mlp_extractor.value_net, pol.value_net, "value")
-        if runner.log_std is not None and not self.cfg.ppo.fixed_std:
+        if runner.log_std is not None:
             with torch.no_grad():
                 pol.log_std.copy_(runner.log_std)
         count = runner.obs_count if runner.obs_count is not None else 1e6
         for k, rms in self.venv.obs_rms.items():
             rms.mean, rms.var = runner.obs_mean[k].copy(), runner.obs_var[k].copy()
             rms.count = count
-        if new_cols is not None:
-            # The pelvis row of J_rel's d_p is always 0: its normaliser has no scale and its
-            # first-layer weights never learned anything. Give it a prior scale and zero
-            # weights, so that the new input starts out ignored and is learned from there.
-            rows, cols = new_cols
-            rms = self.venv.obs_rms["kinematic"]
-            rms.mean[rows], rms.var[rows] = 0.0, JHOR_PRIOR_STD_M**2
-            with torch.no_grad():
-                for net in (pol.mlp_extractor.policy_net, pol.mlp_extractor.value_net):
-                    linear_layers(net)[0].weight[:, cols] = 0.0
-        if runner.disc is not None and self.cfg.amp.from_init:
+        if runner.disc is not None:
             try:
                 self.amp.disc.load_state_dict(runner.disc.state_dict())
             except RuntimeError as e:
                 raise ValueError(f"{src}: its discriminator does not fit this run's amp "
                                  f"settings ({e})") from e
-
-    def _new_kinematic_inputs(self, theirs: str, ours: str,
-                              spaces: dict) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
-        """Where ``--init``'s observation variant differs from this run's: ``None`` when they
-        are the same; for ``OAV_Jrel`` -> ``OAV_Jhor`` the pelvis row's indices in the
-        ``kinematic`` part and in the network's input (the parts concatenated in order).
-
-        Raises:
-            ValueError: naming the file, for any other pair (their inputs mean different
-                things at the same places).
-        """
-        if theirs == ours:
-            return None
-        if (theirs, ours) != ("OAV_Jrel", "OAV_Jhor"):
-            raise ValueError(f"{self.init}: trained with env.kinematic_obs={theirs!r}, this "
-                             f"run has {ours!r}; only OAV_Jrel -> OAV_Jhor can be "
-                             "fine-tuned")  # fmt: skip
-        n = O.kinematic_dim(ours)
-        rows = np.arange(n - 6 * sk.N_JOINTS, n - 6 * sk.N_JOINTS + 3)  # d_p's pelvis row
-        offset = 0
-        for k, space in spaces.items():
-            if k == "kinematic":
-                return rows, rows + offset
-            offset += int(np.prod(space.shape))
-        raise ValueError(f"{self.init}: this run has no 'kinematic' observation")
 
     # -------------------------------------------------------------- run
     def train(self) -> None:
@@ -556,10 +423,10 @@ class PolicyTrainer:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if self.cfg.ppo.threads:
             torch.set_num_threads(self.cfg.ppo.threads)
-        state = self._load_state()
+        state = self.rundir.read_state()
         if state is not None:
             self.stage_index, self.stage_done = state["stage_index"], state["stage_done"]
-            self._wall0, self.history = state["wall_s"], state["history"]
+            self.rundir.wall0_s, self.history = state["wall_s"], state["history"]
             self._mining_state = state.get("mining")
             ck = load_weights(self.ckpt_dir / "amp.pt", "discriminator checkpoint")
             ck["rng"] = json.loads(ck["rng"])
@@ -602,7 +469,6 @@ class PolicyTrainer:
         else:
             load_vecnorm_state(self.venv, old_norm)
             self.model.set_env(self.venv)
-        self._apply_fixed_std()
         self.stage_done0 = self.stage_done
         self.mining = None
         if stage.mining_mix > 0:

@@ -157,7 +157,7 @@ def test_every_frame_rotation_is_checked(tmp_path) -> None:
 
 
 def test_rotation_check_is_fast() -> None:
-    from prism_tools.schema import _check_rotations
+    from prism_tools.validation import _check_rotations
 
     rot = np.broadcast_to(np.eye(3), (200_000, 3, 3))
     t0 = time.perf_counter()
@@ -407,7 +407,7 @@ def test_export_skips_an_unreadable_reconstruction(tmp_path, capsys) -> None:
 
 
 def test_bench_segments_skip_unreadable_files(tmp_path) -> None:
-    from grip.eval.bench import BenchError, list_segments
+    from grip.eval.segments import BenchError, list_segments
 
     _, files = _dataset(tmp_path)
     errors: list[tuple[str, str]] = []

@@ -64,9 +64,11 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from grip.cli.reconstruct import policy_checkpoint, safe_name
     from grip.core.atomic import atomic_write_text
-    from grip.eval import bench as B
     from grip.eval.methods import MethodOptions, make_method
+    from grip.eval.report import method_table
+    from grip.eval.scoring import segment_metrics
     from grip.export import export_reconstruction
+    from grip.kinematics.features import ground_truth
     from prism_tools.io import load_recording
 
     src = args.recording or SAMPLE_RECORDING
@@ -78,7 +80,7 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     opts = MethodOptions(policy_checkpoint=policy_checkpoint(args.policy))
     print(f"[1/4] {src}: {rec.name}, {rec.n_frames} frames at {rec.fps:g} Hz")
-    gt = B.ground_truth(rec)
+    gt = ground_truth(rec)
     summary, recons, methods = {}, {}, {}
     for name in DEMO_METHODS:
         t0 = time.perf_counter()
@@ -87,7 +89,7 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
             recon = method.reconstruct(rec)
         except ValueError as e:
             raise CliError(f"{name}: {e}") from e
-        m, _ = B.segment_metrics(recon, gt, can_fall=method.can_fall)
+        m, _ = segment_metrics(recon, gt, can_fall=method.can_fall)
         summary[name] = {**m, "ms_per_frame": recon.ms_per_frame, "segments": 1, "failed": 0}
         recons[name] = recon
         methods[name] = method
@@ -106,7 +108,7 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     for fmt, msg in failed.items():
         print(f"      {fmt} not written: {msg}")
     print("[4/4] metrics against the recording's ground truth (one 5 s segment)")
-    table = B.markdown_table(summary)
+    table = method_table(summary)
     print(table)
     atomic_write_text(out / "metrics.md", table + "\n")
     atomic_write_text(out / "metrics.json", json.dumps(summary, indent=1, default=float))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -51,18 +50,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_distill(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from tqdm import tqdm
 
     from envs.factory import make_tracking_env
     from grip.assets import SHIPPED_POLICY
     from grip.cli.errors import CliError
     from grip.cli.paths import REPO_ROOT, load_run_config
-    from grip.cli.policy_runs import build_training_reference, changed_settings
+    from grip.cli.policy_runs import build_training_reference
     from grip.cli.recordings import kin_checkpoint, split_paths
-    from grip.core.atomic import atomic_write_text
-    from grip.core.runs import git_hash
     from policies.distill import DistillConfig, Distiller, plot_distill_curves
 
     cfg = load_run_config(args.config or REPO_ROOT / DEFAULT_CONFIG, "distill", DistillConfig(),
@@ -73,30 +68,17 @@ def cmd_distill(args: argparse.Namespace) -> int:
             raise CliError(f"{t}: no such policy file")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    record = {"config": dataclasses.asdict(cfg),
-              "teacher": [str(Path(t).resolve()) for t in teachers]}  # fmt: skip
-    prev = out / "config.json"
-    if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
-        old = json.loads(prev.read_text())
-        defaults = dataclasses.asdict(DistillConfig())
-        changed = changed_settings(old.get("config", {}), record["config"], defaults,
-                                   ("iterations",))  # fmt: skip
-        if old.get("teacher") != record["teacher"]:
-            changed.append("--teacher")
-        if changed:
-            raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
-                           "only iterations may change on resume")  # fmt: skip
     kin = kin_checkpoint(args.kin)
     ref_path = out / "reference_train.npz"
     build_training_reference(ref_path, args.data, split_paths(args.data, "train"), [kin],
                              cfg.reverse_categories, cfg.mirror_references)  # fmt: skip
-    try:
+    try:  # (refuses to resume with other settings than iterations changed, or other teachers)
         dist = Distiller(cfg, teachers, out, ref_path, make_tracking_env, progress=tqdm,
                          log=tqdm.write)
     except ValueError as e:
         raise CliError(str(e)) from e
-    record.update(git=git_hash(), data=str(args.data.resolve()), kin=str(kin.resolve()))
-    atomic_write_text(prev, json.dumps(record, indent=1))
+    dist.rundir.write_config(cfg, teacher=dist.teacher_resolved,
+                             data=str(args.data.resolve()), kin=str(kin.resolve()))  # fmt: skip
     names = dist.teacher_names
     print(f"teacher: {len(names)} polic{'ies' if len(names) > 1 else 'y'}; the student starts "
           f"from member {cfg.init_member}, {names[cfg.init_member]}"

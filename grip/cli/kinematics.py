@@ -173,29 +173,19 @@ def cmd_train_baseline(args: argparse.Namespace) -> int:
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.errors import CliError
-    from grip.kinematics.dataset import holdout_split, load_split_sequences, split_files
+    from grip.kinematics.dataset import holdout_split, load_split_sequences
     from grip.kinematics.train import Trainer
 
     t0 = time.perf_counter()
     tc = cfg.train
     try:
         train = load_split_sequences(data, "train", cfg.features)
-        stems = [f.stem for f in split_files(data, "train")]  # in the order of ``train``
         if tc.val_source == "holdout":
-            kept, val = holdout_split(train, tc.val_fraction, tc.seed)
-            names = {s.name for s in kept}
-            stems = [st for st, s in zip(stems, train, strict=True) if s.name in names]
-            train = kept
+            train, val = holdout_split(train, tc.val_fraction, tc.seed)
         else:
             val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(f"{data}: {e}" if str(data) not in str(e) else str(e)) from e
-    if tc.reverse_categories:
-        from grip.cli.recordings import reversed_training_recordings
-        from grip.kinematics.dataset import sequence_arrays
-
-        recs = reversed_training_recordings(data, stems, tc.reverse_categories)
-        train += [sequence_arrays(r, cfg.features) for r in recs]
     n_frames = sum(len(s.x) for s in train)
     what = "held-out training" if tc.val_source == "holdout" else "test"
     print(f"loaded {len(train)} train / {len(val)} validation ({what}) sequences "
@@ -222,7 +212,6 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
-    from grip.kinematics.train import write_run_config
 
     last = out / "last.pt"
     if last.exists():
@@ -231,7 +220,7 @@ def fit_run(trainer, cfg, out: Path, info: dict, *, epochs: int, postfix: str) -
         except ValueError as e:
             raise CliError(f"{e}; use another --out or the same settings") from e
         print(f"resuming {last} at epoch {trainer.epoch}/{epochs}")
-    write_run_config(out, cfg, info)
+    trainer.rundir.write_config(cfg, **info)
     tc = cfg.train
     total = epochs * tc.steps_per_epoch
     done = trainer.epoch * tc.steps_per_epoch
@@ -308,12 +297,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint
     from grip.core.atomic import atomic_write_text
-    from grip.kinematics.evaluate import (
-        aggregate,
-        evaluate_recordings,
-        markdown_table,
-        plot_categories,
-    )
+    from grip.eval.kinematics import aggregate, evaluate_segments, markdown_table
+    from grip.eval.plots import plot_categories
     from grip.kinematics.inference import KinematicsEstimator
 
     limits_from_args(args)
@@ -327,10 +312,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise CliError(str(e)) from e
     errors: list[tuple[str, str]] = []
-    recs = _load_split(args.data, args.split, errors)
-    with tqdm(unit="segment", desc="evaluating") as bar:
-        rows = evaluate_recordings(est, recs, args.segment_frames, progress=bar.update,
-                                   joints=args.joints)  # fmt: skip
+    segs = _split_segments(args, errors)
+    with tqdm(total=len(segs), unit="segment", desc="evaluating") as bar:
+        rows = evaluate_segments(est, segs, progress=bar.update, joints=args.joints)
     agg = aggregate(rows)
     table = markdown_table(agg)
     print(table)
@@ -353,12 +337,24 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return _exit_status(errors)
 
 
-def _load_split(data: Path, split: str, errors: list[tuple[str, str]]) -> list:
-    """The recordings of a split; unreadable files are reported, skipped and put in
-    ``errors``."""
-    from grip.cli.recordings import load_recordings, split_paths
+def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> list:
+    """The segments of ``--split`` (tails down to 10 frames kept); unreadable files are
+    reported, skipped and put in ``errors``."""
+    from grip.cli.errors import CliError
+    from grip.cli.recordings import skip_file, split_paths
+    from grip.eval.kinematics import MIN_SEGMENT_FRAMES
+    from grip.eval.segments import BenchError, list_segments
 
-    return load_recordings(split_paths(data, split), errors=errors)
+    unreadable: list[tuple[str, str]] = []
+    try:
+        segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
+                             errors=unreadable, min_frames=MIN_SEGMENT_FRAMES)  # fmt: skip
+    except BenchError as e:
+        raise CliError(str(e)) from e
+    finally:
+        for f, why in unreadable:
+            skip_file(errors, f, why)
+    return segs
 
 
 def _exit_status(errors: list[tuple[str, str]]) -> int:
@@ -374,7 +370,7 @@ def _eval_sweep(args: argparse.Namespace) -> int:
 
     from grip.cli.errors import CliError
     from grip.core.atomic import atomic_write_text
-    from grip.kinematics.evaluate import aggregate, evaluate_recordings
+    from grip.eval.kinematics import aggregate, evaluate_segments
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.sweep import find_runs, sweep_table
 
@@ -383,7 +379,7 @@ def _eval_sweep(args: argparse.Namespace) -> int:
         raise CliError(f"{args.sweep}: no sweep runs (imu<N>_press|nopress/best.pt); train them "
                        "with 'grip kin train --sweep --out DIR'")  # fmt: skip
     errors: list[tuple[str, str]] = []
-    recs = _load_split(args.data, args.split, errors)
+    segs = _split_segments(args, errors)
     results = []
     for s, ck in tqdm(runs, unit="config", desc="sweep"):
         try:
@@ -394,9 +390,7 @@ def _eval_sweep(args: argparse.Namespace) -> int:
             raise CliError(f"{ck}: trained on {est.cfg.features.sites} "
                            f"(insoles={est.cfg.features.insoles}), not the {s.name} "
                            "configuration its folder names")  # fmt: skip
-        results.append(
-            (s, aggregate(evaluate_recordings(est, recs, args.segment_frames, joints=args.joints)))
-        )
+        results.append((s, aggregate(evaluate_segments(est, segs, joints=args.joints))))
     table = sweep_table([(s, a["overall"]) for s, a in results])
     print(table)
     if args.json:

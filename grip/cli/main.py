@@ -8,12 +8,16 @@ Heavy imports happen inside the subcommand functions so ``grip --help`` stays in
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
 from grip.cli import bench, body, data, demo, export, kinematics, policy
 from grip.cli import reconstruct as reconstruct_cmd
 from grip.cli.errors import CliError
+
+LIMITS_ENV = "GRIP_LIMITS"
+"""As :data:`grip.core.limits.LIMITS_ENV` (not imported here: that loads numpy)."""
 
 RENAMED: dict[str, str] = {
     "train-kin": "grip kin train",
@@ -57,6 +61,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     parser = build_parser()
     args = parser.parse_args(argv)
+    # --input-limit sets $GRIP_LIMITS for the command and its workers; a caller that runs
+    # several commands in one process (tests, notebooks) gets its own value back afterwards
+    saved_limits = os.environ.get(LIMITS_ENV)
     try:
         return int(args.func(args) or 0)
     except CliError as e:
@@ -66,6 +73,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("grip: interrupted (finished files are kept; run the same command to resume)",
               file=sys.stderr)  # fmt: skip
         return 130
+    finally:
+        if saved_limits is None:
+            os.environ.pop(LIMITS_ENV, None)
+        else:
+            os.environ[LIMITS_ENV] = saved_limits
 
 
 if __name__ == "__main__":

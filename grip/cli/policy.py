@@ -7,12 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from grip.cli.policy_runs import (
-    RESUMABLE,
-    build_training_reference,
-    changed_settings,
-    training_files,
-)
+from grip.cli.policy_runs import build_training_reference, training_files
 from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
 
 
@@ -191,11 +186,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from grip.cli.paths import load_run_config
     from grip.cli.recordings import kin_checkpoint, split_paths
-    from grip.core.atomic import atomic_write_text
-    from grip.core.limits import read_json_file
-    from grip.core.runs import git_hash
+    from grip.core.rundir import RunDir
     from policies.config import PolicyRunConfig
-    from policies.train import PolicyTrainer, run_config_dict
+    from policies.train import PolicyTrainer
 
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
     if args.init is not None and not args.init.is_file():
@@ -207,46 +200,27 @@ def cmd_train(args: argparse.Namespace) -> int:
     kins = [kin_checkpoint(k) for k in (args.kin or [None])]
     ref_path = out / "reference_train.npz"
     files = training_files(split_paths(args.data, "train"), cfg, out)
-    build_training_reference(ref_path, args.data, files, kins, cfg.reverse_categories,
-                             cfg.mirror_references)  # fmt: skip
-    prev = out / "config.json"
-    if prev.is_file() and (out / "checkpoint" / "state.json").is_file():
-        try:
-            prev_cfg = read_json_file(prev, "'grip policy train' run config")["config"]
-            changed = changed_settings(prev_cfg, run_config_dict(cfg),
-                                       run_config_dict(PolicyRunConfig()))  # fmt: skip
-        except (ValueError, KeyError, TypeError, AttributeError) as e:
-            raise CliError(f"{prev}: not a 'grip policy train' run config ({str(e)[:300]})") from e
-        if changed:
-            raise CliError(f"{out}: resuming with different settings ({', '.join(changed)}); "
-                           f"only {', '.join(RESUMABLE)} may change on resume")  # fmt: skip
-    resuming = (out / "checkpoint" / "state.json").is_file()
-    init = args.init
-    if init is not None and resuming:
-        print(f"{out} resumes from its own checkpoint; --init {init} is ignored")
-        init = None
-    payload = {"config": run_config_dict(cfg), "git": git_hash(),
-               "data": str(args.data.resolve()),
-               "kin": [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())}
-    # what the run started from: this call's --init, or on resume what config.json recorded
-    try:
-        began = (read_json_file(prev, "'grip policy train' run config")
-                 if resuming and prev.is_file() else {})
-    except ValueError as e:
-        raise CliError(str(e)) from e
-    if init is not None:
-        began = {"init": str(init.resolve()), "init_member": args.init_member}
-    payload.update({k: began[k] for k in ("init", "init_member") if began.get(k) is not None})
-    try:
+    build_training_reference(ref_path, args.data, files, kins, mirror=cfg.mirror_references)
+    resuming = RunDir(out).has_checkpoint()
+    init = None if resuming else args.init
+    try:  # (refuses to resume with settings other than RESUMABLE changed)
         trainer = PolicyTrainer(cfg, out, ref_path, make_tracking_env, progress=tqdm, init=init,
                                 init_member=args.init_member)  # fmt: skip
+        # what the run started from: this call's --init, or on resume what config.json recorded
+        began = (trainer.rundir.read_config() or {}) if resuming else {}
     except ValueError as e:
         raise CliError(str(e)) from e
+    if args.init is not None and resuming:
+        print(f"{out} resumes from its own checkpoint; --init {args.init} is ignored")
+    if init is not None:
+        began = {"init": str(init.resolve()), "init_member": args.init_member}
+    kin = [str(k.resolve()) for k in kins] if len(kins) > 1 else str(kins[0].resolve())
+    recorded = {k: began[k] for k in ("init", "init_member") if began.get(k) is not None}
     if trainer.init_members > 1:
         print(f"--init {init}: an ensemble of {trainer.init_members} policies; training starts "
               f"from its member {args.init_member}, {trainer.init_name} (ensemble files keep no "
               "value network: a fresh critic warms up first, ppo.critic_warmup_steps)")  # fmt: skip
-    atomic_write_text(prev, json.dumps(payload, indent=1))
+    trainer.rundir.write_config(cfg, data=str(args.data.resolve()), kin=kin, **recorded)
     t0 = time.perf_counter()
     try:
         trainer.train()
@@ -302,8 +276,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from grip.assets import SHIPPED_POLICY
     from grip.cli.errors import CliError
-    from grip.cli.recordings import exit_status, kin_checkpoint, load_recordings, split_paths
-    from grip.eval.policy import evaluate_policy, markdown_table, summarize_rows, write_rows
+    from grip.cli.recordings import exit_status, kin_checkpoint, skip_file
+    from grip.eval.policy import evaluate_segments, markdown_table, summarize_rows, write_rows
+    from grip.eval.segments import BenchError, list_segments, split_files
     from grip.kinematics.inference import KinematicsEstimator
     from policies.controller import load_controller
 
@@ -330,34 +305,40 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(f"--action-noise with {pol}: {e}") from e
     if args.stride < 0:
         raise CliError(f"--stride must be >= 0, got {args.stride}")
-    if args.split == "holdout":
-        held = set(runner.info.get("holdout") or ())
-        if not held:
-            raise CliError(f"{pol}: no clips were held out of this policy's training (train "
-                           "with --set holdout_fraction=0.1 for a validation split)")  # fmt: skip
-        files = [f for f in split_paths(args.data, "train") if f.stem in held]
-        if not files:
-            raise CliError(f"{args.data}: its train split holds none of the {len(held)} "
-                           f"sequences held out of {pol}'s training (other data?)")  # fmt: skip
-    else:
-        files = split_paths(args.data, args.split)
+    held = set(runner.info.get("holdout") or ()) if args.split == "holdout" else set()
+    if args.split == "holdout" and not held:
+        raise CliError(f"{pol}: no clips were held out of this policy's training (train "
+                       "with --set holdout_fraction=0.1 for a validation split)")  # fmt: skip
+    try:
+        files = split_files(args.data, args.split, held)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+    if args.split == "holdout" and not files:
+        raise CliError(f"{args.data}: its train split holds none of the {len(held)} "
+                       f"sequences held out of {pol}'s training (other data?)")  # fmt: skip
     skipped: list[tuple[str, str]] = []  # unreadable files: reported, skipped, exit code 1
-    recs = load_recordings(files, args.category,
-                           args.segment_frames, limit=args.segments,
-                           segment_stride=args.stride, errors=skipped)  # fmt: skip
+    unreadable: list[tuple[str, str]] = []
+    try:
+        segs = list_segments(files, args.segment_frames, args.category, unreadable,
+                             stride=args.stride, limit=args.segments)  # fmt: skip
+    except BenchError as e:
+        raise CliError(str(e)) from e
+    finally:
+        for f, why in unreadable:
+            skip_file(skipped, f, why)
     passes: list[list[dict]] = []
-    with tqdm(total=len(recs) * args.repeats, unit="seg", desc="episodes") as bar:
+    with tqdm(total=len(segs) * args.repeats, unit="seg", desc="episodes") as bar:
         for i in range(args.repeats):
             if i:
                 runner.use_action_noise(args.action_noise, args.seed + i)
-            got = evaluate_policy(runner, est, recs, progress=bar.update,
-                                  reference=args.reference)  # fmt: skip
+            got = evaluate_segments(runner, est, segs, progress=bar.update,
+                                    reference=args.reference)  # fmt: skip
             passes.append([dict(r, replay=i) for r in got] if args.repeats > 1 else got)
     rows = [r for p in passes for r in p]
     summary = summarize_rows(rows)
     print(markdown_table(summary))
     if args.repeats > 1:
-        from grip.eval.policy import replay_spread
+        from grip.eval.report import replay_spread
 
         spread = replay_spread(passes)
         summary["overall"].update(spread)

@@ -1,5 +1,6 @@
-"""Run folders of ``grip policy train`` and ``grip policy distill``: which settings a resumed run
-may change, the clips held out of training, and the training reference set both build."""
+"""Run folders of ``grip policy train`` and ``grip policy distill``: the clips held out of
+training and the training reference set both build (which settings a resumed run may change is
+the trainers' :data:`policies.train.RESUMABLE`, checked by :class:`grip.core.rundir.RunDir`)."""
 
 from __future__ import annotations
 
@@ -8,41 +9,6 @@ from pathlib import Path
 
 HOLDOUT_FILE = "holdout.json"
 """Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
-
-RESUMABLE: tuple[str, ...] = (
-    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
-    "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
-    "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm", "ppo.target_kl",
-    "ppo.critic_warmup_steps",
-)  # fmt: skip
-"""Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
-run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
-
-
-def _flatten(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def changed_settings(old: dict, new: dict, defaults: dict | None = None,
-                     resumable: tuple[str, ...] = RESUMABLE) -> list[str]:  # fmt: skip
-    """Dotted keys whose values differ between two config dicts, except those starting with one
-    of ``resumable`` (``grip policy train``'s :data:`RESUMABLE` by default).
-
-    A key missing from ``old`` (a setting added to the project after the run began) takes its
-    value from ``defaults``, the current default config, if given: a new setting left at its
-    default does not block resuming an older run."""
-    a, b = _flatten(json.loads(json.dumps(old))), _flatten(json.loads(json.dumps(new)))
-    if defaults is not None:
-        d = _flatten(json.loads(json.dumps(defaults)))
-        a = {**{k: v for k, v in d.items() if k not in a}, **a}
-    keys = sorted(set(a) | set(b))
-    return [k for k in keys if a.get(k) != b.get(k) and not k.startswith(resumable)]
 
 
 def training_files(files: list[Path], cfg, out: Path) -> list[Path]:

@@ -182,9 +182,8 @@ def add_tta_argument(parser) -> None:
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
                                  categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence
-    files (or file stems) ``files`` (``reverse_categories`` of ``grip policy train`` and
-    ``grip kin train``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that
-    select nothing."""
+    files (or file stems) ``files`` (``reverse_categories`` of ``grip policy distill``,
+    :mod:`grip.dataset.augment`), with a progress bar; refuses globs that select nothing."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError

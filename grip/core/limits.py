@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from grip.core.checks import check, check_fields
+
 __all__ = [
     "DEFAULT_LIMITS",
     "LIMITS_ENV",
@@ -102,12 +104,11 @@ class InputLimits:
     max_position_m: float = 1000.0
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v) or v < 0:
-                raise ValueError(f"limit {f.name} must be a number >= 0 (or inf), got {v!r}")
-        if self.min_fps > self.max_fps:
-            raise ValueError(f"limit min_fps={self.min_fps:g} is above max_fps={self.max_fps:g}")
+        check_fields(self, lambda v: (not isinstance(v, bool) and isinstance(v, int | float)
+                                      and not math.isnan(v) and v >= 0),
+                     "must be a number >= 0 (or inf)")  # fmt: skip
+        check(self, (self.min_fps <= self.max_fps,
+                     f"min_fps={self.min_fps:g} is above max_fps={self.max_fps:g}"))  # fmt: skip
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -334,6 +335,38 @@ def check_npz(
     return out
 
 
+def load_checked_npz(path: str | os.PathLike, limits: InputLimits, error: type[Exception],
+                     what: str = ".npz file") -> tuple[dict[str, np.ndarray], Any]:  # fmt: skip
+    """The arrays of an npz checked by :func:`check_npz` first, and its JSON ``"__meta__"``
+    member parsed by :func:`safe_json_loads` (removed from the arrays).
+
+    Args:
+        path: The ``.npz`` file.
+        limits: The limits to apply.
+        error: Exception class raised on any problem, with a message naming ``path``.
+        what: The kind of file, for the message of an unreadable one.
+
+    Returns:
+        ``(arrays, meta)``: member name -> array, and the parsed metadata (not yet checked).
+    """
+    try:
+        check_npz(path, limits)
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except LimitExceeded as e:
+        raise error(f"{path}: {e}") from None
+    except Exception as e:  # any failure of zipfile/numpy: a corrupt or hostile file
+        raise error(f"{path}: not a readable {what} "
+                    f"({type(e).__name__}: {str(e)[:300]})") from None  # fmt: skip
+    try:
+        meta = safe_json_loads(str(data.pop("__meta__")), limits, "'__meta__'")
+    except LimitExceeded as e:
+        raise error(f"{path}: {e}") from None
+    except (KeyError, ValueError) as e:
+        raise error(f"{path}: missing or corrupt '__meta__' ({e})") from None
+    return data, meta
+
+
 # ---------------------------------------------------------------------------------- JSON
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
@@ -370,7 +403,7 @@ def read_json_file(path: str | os.PathLike, what: str = "JSON file",
 
     Args:
         path: The file.
-        what: What it should be, for the messages (``"train-policy run config"``).
+        what: What it should be, for the messages (``"policy train run config"``).
         limits: Default :func:`active_limits`.
         kind: The type its top level must have (``dict``; ``object`` for any).
 

@@ -4,9 +4,9 @@
 backwards (:meth:`grip.motion.motion.Motion.time_reversed`), a forward walk becomes a backward
 walk of the same subject and style; its sensors are synthesised by the same physics and noise as
 the dataset's (:func:`prism_tools.synth.recording_from_motion`) and chunked as the build chunks.
-The controller's training (``grip train-policy --set 'reverse_categories=["walk"]'``) uses them to
-see many more backward walks than the few recorded ones. They are made in memory from the clips
-of the given training sequences only, so a test clip never contributes.
+The distillation's reference set (``grip policy distill``, ``reverse_categories = ["walk"]``)
+uses them to see many more backward walks than the few recorded ones. They are made in memory
+from the clips of the given training sequences only, so a test clip never contributes.
 """
 
 from __future__ import annotations

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from grip.config import ConfigError, apply_dict
+from grip.core.checks import check
 from grip.kinematics.features import DEFAULT_SITES, FeatureConfig
 
 METHODS: tuple[str, ...] = ("transpose", "pip")
@@ -59,9 +60,13 @@ class TransPoseConfig:
     online_future_frames: int = 8
 
     def __post_init__(self) -> None:
-        _check_sizes(self, ("s1_width", "s2_width", "s3_width", "b1_width", "b2_width", "layers"))
-        if self.online_past_frames < 0 or self.online_future_frames < 0:
-            raise ValueError("TransPoseConfig: online window frames must be >= 0")
+        check(
+            self,
+            _sizes_rule(self, ("s1_width", "s2_width", "s3_width", "b1_width", "b2_width",
+                               "layers")),
+            (self.online_past_frames >= 0 and self.online_future_frames >= 0,
+             "online window frames must be >= 0"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -96,10 +101,12 @@ class PipNetConfig:
     vel_scale: float = 3.0
 
     def __post_init__(self) -> None:
-        _check_sizes(self, ("width", "contact_width", "layers"))
-        if self.init_leaf_frame not in ("root", "world"):
-            raise ValueError(f"PipNetConfig.init_leaf_frame must be 'root' or 'world', got "
-                             f"{self.init_leaf_frame!r}")  # fmt: skip
+        check(
+            self,
+            _sizes_rule(self, ("width", "contact_width", "layers")),
+            (self.init_leaf_frame in ("root", "world"),
+             f"init_leaf_frame must be 'root' or 'world', got {self.init_leaf_frame!r}"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -137,15 +144,15 @@ class BaselineTrainConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_sizes(self, ("window_frames", "batch_size", "steps_per_epoch", "val_windows"))
-        if self.epochs < 0:
-            raise ValueError(f"BaselineTrainConfig.epochs must be >= 0, got {self.epochs}")
-        if self.contact_labels not in ("insole", "motion"):
-            raise ValueError("BaselineTrainConfig.contact_labels must be 'insole' or 'motion', "
-                             f"got {self.contact_labels!r}")  # fmt: skip
-        if not self.cumulative_blocks or min(self.cumulative_blocks) < 1:
-            raise ValueError("BaselineTrainConfig.cumulative_blocks: need block lengths >= 1, "
-                             f"got {self.cumulative_blocks}")  # fmt: skip
+        check(
+            self,
+            _sizes_rule(self, ("window_frames", "batch_size", "steps_per_epoch", "val_windows")),
+            (self.epochs >= 0, f"epochs must be >= 0, got {self.epochs}"),
+            (self.contact_labels in ("insole", "motion"),
+             f"contact_labels must be 'insole' or 'motion', got {self.contact_labels!r}"),
+            (bool(self.cumulative_blocks) and min(self.cumulative_blocks) >= 1,
+             f"cumulative_blocks: need block lengths >= 1, got {self.cumulative_blocks}"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -177,10 +184,10 @@ class PipRunConfig:
 RunConfig = TransPoseRunConfig | PipRunConfig
 
 
-def _check_sizes(cfg, names: tuple[str, ...]) -> None:
+def _sizes_rule(cfg, names: tuple[str, ...]) -> tuple[bool, str]:
+    """The rule of :func:`grip.core.checks.check` that the sizes ``names`` of ``cfg`` are >= 1."""
     bad = [f"{n}={getattr(cfg, n)}" for n in names if getattr(cfg, n) < 1]
-    if bad:
-        raise ValueError(f"{type(cfg).__name__}: must be >= 1: {', '.join(bad)}")
+    return not bad, f"must be >= 1: {', '.join(bad)}"
 
 
 def default_run_config(method: str) -> RunConfig:

@@ -3,22 +3,20 @@ their extra targets, the training data and the trainer with its checkpoints."""
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from grip.core import skeleton as sk
-from grip.core.atomic import atomic_write
 from grip.core.metrics import contacts_from_motion
 from grip.core.rotations import rot_z, sixd_to_matrix
-from grip.core.runs import git_hash, history_wall_s
+from grip.core.rundir import RunDir
+from grip.core.runs import git_hash, history_wall_s, require_same_settings
 from grip.kinematics.baseline_config import (
     _IMU_FEATURES,
     _INSOLE_FEATURES,
@@ -33,9 +31,11 @@ from grip.kinematics.baseline_nets import build_nets, leaf_in_root_frame
 from grip.kinematics.dataset import Normalizer, SequenceArrays, load_split_sequences, sample_windows
 from grip.kinematics.train import log_epoch
 from grip.nn.symmetry import rotate_batch
-from grip.nn.weights import load_checkpoint
+from grip.nn.weights import load_checkpoint, save_checkpoint
 
 CHECKPOINT_VERSION = 1
+RESUMABLE: tuple[str, ...] = ("train.epochs",)
+"""Settings a resumed run may change: its length."""
 
 
 # ---------------------------------------------------------------------------- data
@@ -113,7 +113,8 @@ class BaselineTrainer:
                 raise ValueError(f"sequence {s.name}: missing baseline targets "
                                  "(load with load_baseline_sequences)")  # fmt: skip
         self.cfg = cfg
-        self.run_dir = Path(run_dir)
+        self.rundir = RunDir(run_dir, RESUMABLE, "'grip kin train --baseline' run")
+        self.run_dir = self.rundir.path
         self.train_seqs = train_seqs
         self.val_seqs = val_seqs or train_seqs
         torch.manual_seed(cfg.train.seed)
@@ -223,8 +224,8 @@ class BaselineTrainer:
             log_epoch(writer, record)
             self.epoch += 1
             self.update_best(val)
-            self._write(self.run_dir / "best.pt", self.best_state())
-            self._write(self.run_dir / "last.pt", self.state())
+            save_checkpoint(self.run_dir / "best.pt", self.best_state())
+            save_checkpoint(self.run_dir / "last.pt", self.state())
         return self.history
 
     def wall_s(self) -> float:
@@ -265,15 +266,9 @@ class BaselineTrainer:
         keep = ("version", "config", "norm_mean", "norm_std", "epoch", "best_val", "history", "git")
         return {**{k: v for k, v in self.state().items() if k in keep}, "model": model}
 
-    @staticmethod
-    def _write(path: str | os.PathLike, state: dict) -> None:
-        buf = io.BytesIO()
-        torch.save(state, buf)
-        atomic_write(path, lambda f: f.write(buf.getvalue()))
-
     def save(self, path: str | os.PathLike) -> None:
         """Write a resumable checkpoint (weights, optimiser, RNG, history) atomically."""
-        self._write(path, self.state())
+        save_checkpoint(path, self.state())
 
     def load(self, path: str | os.PathLike) -> None:
         """Resume from a checkpoint of the same configuration (only ``train.epochs`` may
@@ -286,13 +281,9 @@ class BaselineTrainer:
         old = config_from_json(ck["config"], str(path))
         if old.method != self.cfg.method:
             raise ValueError(f"{path}: checkpoint of {old.method}, not {self.cfg.method}")
-        a, b = asdict(old), asdict(self.cfg)
-        a["train"].pop("epochs")
-        b["train"].pop("epochs")
-        if a != b:
-            diff = sorted(k for k in a if a[k] != b[k])
-            raise ValueError(f"{path}: checkpoint was trained with another configuration "
-                             f"(differs in {', '.join(diff)})")  # fmt: skip
+        require_same_settings(asdict(old), asdict(self.cfg), path, "",
+                              may_change=self.rundir.may_change,
+                              what="checkpoint was trained with another configuration")  # fmt: skip
         if int(ck["epoch"]) > self.cfg.train.epochs:
             raise ValueError(f"{path}: checkpoint is at epoch {int(ck['epoch'])}, beyond the "
                              f"{self.cfg.train.epochs} epochs of this configuration")  # fmt: skip

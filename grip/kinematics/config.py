@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+from grip.config import REMOVED_ANY_VALUE, RemovedSetting, drop_removed
+from grip.core.checks import check
 from grip.kinematics.features import FeatureConfig
 from grip.kinematics.model import STAGES, KinematicsNetConfig
 
@@ -36,14 +38,6 @@ class TrainConfig:
         mirror_augment: Mirror half of the windows left-right
             (:func:`grip.nn.symmetry.mirror_batch`); needs a
             sensor set that is its own mirror image (every left site with its right partner).
-        category_balance: Even out the motion categories of the training windows
-            (:func:`grip.kinematics.dataset.category_weights`): 0 samples frames uniformly
-            (common motions dominate), 1 gives every category the same share.
-        time_warp: Play each training window at a random speed ``s``, log-uniform in
-            ``[1 / (1 + time_warp), 1 + time_warp]`` (0: off): frames are interpolated
-            (:func:`grip.kinematics.dataset.sample_windows`) and the rates rescaled
-            (:func:`grip.kinematics.dataset.time_warp_rates`), so the network sees the same
-            motions faster and slower.
         lr_final: Learning rate at the end of the joint phase, reached by a cosine decay from
             ``lr`` over that phase (``None``: constant ``lr``). The stage-wise phases use ``lr``.
         val_windows: Validation windows (fixed draw) evaluated after every epoch.
@@ -53,11 +47,6 @@ class TrainConfig:
             (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
             unseen by model selection.
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
-        reverse_categories: Category globs (e.g. ``["walk"]``) of training clips whose
-            motions, played backwards, join the training sequences as ``"<category>-reversed"``
-            (:mod:`grip.dataset.augment`: a forward walk played backwards is a backward walk,
-            its sensors synthesised as the dataset's); held-out clips do not contribute. Needs
-            a ``grip data build`` folder. Empty: none.
         seed: Seed of windows, noise and initialisation.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
@@ -79,27 +68,21 @@ class TrainConfig:
     ori_noise_rad: float = 0.02
     yaw_augment: bool = True
     mirror_augment: bool = False
-    time_warp: float = 0.0
-    category_balance: float = 0.0
     lr_final: float | None = None
     val_windows: int = 256
     val_source: str = "test"
     val_fraction: float = 0.1
-    reverse_categories: tuple[str, ...] = ()
     seed: int = 0
     bf16: bool = False
 
     def __post_init__(self) -> None:
-        if self.val_source not in VAL_SOURCES:
-            raise ValueError(f"train.val_source must be one of {list(VAL_SOURCES)}, "
-                             f"got {self.val_source!r}")  # fmt: skip
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"train.val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not 0.0 <= self.category_balance <= 1.0:
-            raise ValueError(f"train.category_balance must be in [0, 1], got "
-                             f"{self.category_balance}")  # fmt: skip
-        if not 0.0 <= self.time_warp <= 1.0:
-            raise ValueError(f"train.time_warp must be in [0, 1], got {self.time_warp}")
+        check(
+            self,
+            (self.val_source in VAL_SOURCES, f"train.val_source must be one of "
+             f"{list(VAL_SOURCES)}, got {self.val_source!r}"),
+            (0.0 < self.val_fraction < 1.0,
+             f"train.val_fraction must be in (0, 1), got {self.val_fraction}"),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -134,9 +117,33 @@ class KinematicsRunConfig:
         return sum(n for _, n in self.phases())
 
 
-def run_config_from_dict(d: dict) -> KinematicsRunConfig:
-    """Inverse of ``asdict`` for :class:`KinematicsRunConfig` (unknown keys are errors)."""
-    d = dict(d)
+REMOVED_IN = "42da3e6"
+"""The last commit with the knobs of :data:`REMOVED_SETTINGS`."""
+
+REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
+    RemovedSetting("train.time_warp", 0.0, "time-warp augmentation", REMOVED_IN),
+    RemovedSetting("train.category_balance", 0.0, "category-balanced sampling", REMOVED_IN),
+    RemovedSetting("train.reverse_categories", (), "time-reversed training clips", REMOVED_IN),
+)
+"""Training settings deleted from :class:`TrainConfig` that older checkpoints may hold."""
+
+
+def run_config_from_dict(d: dict, where: str = "config", training: bool = False,
+                         ) -> KinematicsRunConfig:  # fmt: skip
+    """Inverse of ``asdict`` for :class:`KinematicsRunConfig` (unknown keys are errors), for
+    configs written by this or an older version.
+
+    Removed training settings (:data:`REMOVED_SETTINGS`) changed how a network was trained,
+    not what it does: reading a checkpoint to run it (``training`` false) drops them whatever
+    their value (a fine-tuning's ``--init`` takes only weights); to resume (``training``), one
+    that turned its feature on is refused, one at its "off" value is dropped.
+
+    Raises:
+        ConfigError: Naming ``where`` and the removed feature that ``d`` turned on.
+    """
+    removed = REMOVED_SETTINGS if training else tuple(
+        dataclasses.replace(r, off=REMOVED_ANY_VALUE) for r in REMOVED_SETTINGS)
+    d = drop_removed(dict(d), removed, where)
     feats = dict(d.pop("features", {}))
     if "sites" in feats:
         feats["sites"] = tuple(feats["sites"])

@@ -1,9 +1,7 @@
 """Training data for KinematicsNet: a dataset folder's split -> arrays -> random windows.
 
 Features and targets of every sequence of a split are computed once (numpy) and kept in memory
-as float32; a typical dataset built from the shared clips (~125k frames) takes ~120 MB. Windows
-may be drawn at other playback speeds (:func:`sample_windows`), their rates rescaled to match
-(:func:`time_warp_rates`).
+as float32; a typical dataset built from the shared clips (~125k frames) takes ~120 MB.
 """
 
 from __future__ import annotations
@@ -154,132 +152,30 @@ class Normalizer:
         return ((x - self.mean) / self.std).astype(np.float32)
 
 
-def category_weights(seqs: list[SequenceArrays], balance: float) -> np.ndarray:
-    """Sampling weights of sequences that even out their motion categories.
-
-    A sequence weighs its length times ``F_c ** -balance``, ``F_c`` the frames of its category
-    (``SequenceArrays.category``): ``balance = 0`` samples frames uniformly (each category in
-    proportion to its frames), ``1`` gives every category the same share, values between
-    interpolate (0.5: a category's share grows as the square root of its frames).
-    """
-    if not 0.0 <= balance <= 1.0:
-        raise ValueError(f"category balance must be in [0, 1], got {balance}")
-    lens = np.array([len(s.x) for s in seqs], dtype=np.float64)
-    frames: dict[str, float] = {}
-    for s, n in zip(seqs, lens, strict=True):
-        frames[s.category] = frames.get(s.category, 0.0) + n
-    return lens * np.array([frames[s.category] ** -balance for s in seqs])
-
-
-def sample_windows(
-    seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
-    speeds: np.ndarray | None = None, weights: np.ndarray | None = None,
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
+def sample_windows(seqs: list[SequenceArrays], n: int, length: int,
+                   rng: np.random.Generator) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), weighted by sequence length.
-
-    Args:
-        speeds: ``(n,)`` playback speeds: window ``i`` reads its sequence at the fractional
-            frames ``start + speeds[i] * k`` (``k < length``), every feature and target linearly
-            interpolated between the two nearest frames. Only the sampling: scaling the rates
-            (accelerations, velocities) to the new speed is the caller's
-            (:func:`time_warp_rates`). ``None``: whole frames, speed 1.
-        weights: ``(len(seqs),)`` sampling weights of the sequences instead of their lengths
-            (e.g. :func:`category_weights`).
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
         sequences (``TARGET_KEYS`` plus any the caller added to ``SequenceArrays.y``), plus
         ``"offsets": (n, 24, 3)``.
     """
-    if speeds is not None:
-        speeds = np.asarray(speeds, dtype=np.float64)
-        if speeds.shape != (n,) or not np.all(np.isfinite(speeds)) or np.any(speeds <= 0):
-            raise ValueError(f"speeds must be {n} finite positive values, got shape "
-                             f"{speeds.shape}")  # fmt: skip
-    if weights is None:
-        weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
-    weights = np.asarray(weights, dtype=np.float64)
-    valid = np.all(np.isfinite(weights)) and np.all(weights >= 0) and weights.sum() > 0
-    if weights.shape != (len(seqs),) or not valid:
-        raise ValueError(f"weights must be {len(seqs)} finite non-negative values with a "
-                         f"positive sum, got shape {weights.shape}")  # fmt: skip
+    weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
     pick = rng.choice(len(seqs), size=n, p=weights / weights.sum())
     keys = tuple(seqs[0].y)
     xs, offs, ys = [], [], {k: [] for k in keys}
-    for w, i in enumerate(pick):
+    for i in pick:
         s = seqs[i]
         t = len(s.x)
-        if speeds is None:
-            start = int(rng.integers(0, max(t - length, 0) + 1))
-            idx = np.minimum(np.arange(start, start + length), t - 1)
-            xs.append(s.x[idx])
-            for k in keys:
-                ys[k].append(s.y[k][idx])
-        else:
-            span = speeds[w] * (length - 1)
-            start = int(rng.integers(0, max(int(np.floor(t - 1 - span)), 0) + 1))
-            pos = np.minimum(start + speeds[w] * np.arange(length), t - 1)
-            i0 = np.floor(pos).astype(np.int64)
-            i1 = np.minimum(i0 + 1, t - 1)
-            frac = (pos - i0)[:, None]
-
-            def lerp(a: np.ndarray, i0=i0, i1=i1, frac=frac) -> np.ndarray:
-                return (a[i0] * (1 - frac) + a[i1] * frac).astype(a.dtype)
-
-            xs.append(lerp(s.x))
-            for k in keys:
-                ys[k].append(lerp(s.y[k]))
+        start = int(rng.integers(0, max(t - length, 0) + 1))
+        idx = np.minimum(np.arange(start, start + length), t - 1)
+        xs.append(s.x[idx])
+        for k in keys:
+            ys[k].append(s.y[k][idx])
         offs.append(s.offsets)
     out = {k: np.stack(v) for k, v in ys.items()}
     out["offsets"] = np.stack(offs)
     return np.stack(xs), out
 
-
-def time_warp_rates(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray, n_sites: int,
-                    insoles: bool) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
-    """Rescale the rates of windows resampled at playback ``speeds`` (``sample_windows(...,
-    speeds=...)``) to what the sensors would read at that speed.
-
-    A motion played ``s`` times faster has accelerations ``s^2`` and angular and linear
-    velocities ``s`` times the original's at the same pose. So the IMUs' free accelerations
-    scale by ``s^2``, their angular velocities and the leaf/pelvis velocity targets by ``s``;
-    orientations, positions and rotations keep their values. The insoles' total vertical force
-    (body weights) is one plus the centre of mass's vertical acceleration over g, so its
-    deviation from 1 scales by ``s^2``, shared between the feet as recorded; the CoP keeps its
-    value and the contact flags are rounded back to 0/1. The force rule is an approximation
-    (it ignores how the stance phases themselves would change); the rest is exact up to the
-    interpolation and the recording's low-pass filter.
-
-    Args:
-        x: ``(B, T, F)`` raw (unnormalised) features: 15 per IMU site, then 10 insole values.
-        y: Targets ``lp, fp, fa, lv`` ``(B, T, dim)`` and ``offsets``.
-        speeds: ``(B,)`` playback speeds.
-
-    Raises:
-        ValueError: ``y`` has a target without a known rule.
-    """
-    known = ("lp", "fp", "fa", "lv", "offsets")
-    unknown = [k for k in y if k not in known]
-    if unknown:
-        raise ValueError(f"time_warp_rates: no rule for target(s) {unknown}")
-    s = np.asarray(speeds, dtype=np.float64)[:, None, None]
-    x = x.copy()
-    b, t, _ = x.shape
-    imu = x[..., : 15 * n_sites].reshape(b, t, n_sites, 15)
-    imu[..., 0:3] *= (s**2)[..., None].astype(x.dtype)
-    imu[..., 3:6] *= s[..., None].astype(x.dtype)
-    x[..., : 15 * n_sites] = imu.reshape(b, t, -1)
-    if insoles:
-        ins = x[..., 15 * n_sites : 15 * n_sites + 10].reshape(b, t, 2, 5)
-        force = ins[..., 0].astype(np.float64)
-        total = force.sum(-1, keepdims=True)
-        new_total = np.maximum(1.0 + s**2 * (total - 1.0), 0.0)
-        share = np.divide(force, total, out=np.zeros_like(force), where=total > 1e-3)
-        ins[..., 0] = np.where(total > 1e-3, share * new_total, force).astype(x.dtype)
-        ins[..., 3:5] = np.round(ins[..., 3:5])
-        x[..., 15 * n_sites : 15 * n_sites + 10] = ins.reshape(b, t, 10)
-    y = dict(y)
-    if "lv" in y:
-        y["lv"] = (y["lv"] * s).astype(y["lv"].dtype)
-    return x, y

@@ -7,13 +7,12 @@ with ``torch.load(..., weights_only=True)`` (:func:`grip.nn.weights.load_checkpo
 
 Only training lives here: the run settings are :mod:`grip.kinematics.config`, the augmenting
 symmetries :mod:`grip.nn.symmetry`, weight packing and checkpoint loading
-:mod:`grip.nn.weights`, and the run folder's git hash :mod:`grip.core.runs`, so inference and
-the controller's code never import the trainer.
+:mod:`grip.nn.weights`, and the run folder (``config.json``, the resume check)
+:mod:`grip.core.rundir`, so inference and the controller's code never import the trainer.
 """
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import time
@@ -24,22 +23,25 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from grip.config import drop_removed
 from grip.core import skeleton as sk
-from grip.core.atomic import atomic_write, atomic_write_text
 from grip.core.rotations import axis_angle_to_matrix
-from grip.core.runs import git_hash, history_wall_s
-from grip.kinematics.config import KinematicsRunConfig, run_config_from_dict
-from grip.kinematics.dataset import (
-    TARGET_KEYS,
-    Normalizer,
-    SequenceArrays,
-    category_weights,
-    sample_windows,
-    time_warp_rates,
-)
+from grip.core.rundir import RunDir
+from grip.core.runs import git_hash, history_wall_s, require_same_settings
+from grip.kinematics.config import REMOVED_SETTINGS, KinematicsRunConfig, run_config_from_dict
+from grip.kinematics.dataset import TARGET_KEYS, Normalizer, SequenceArrays, sample_windows
 from grip.kinematics.model import KinematicsNet
 from grip.nn.symmetry import mirror_batch, mirror_site_order, rotate_batch, yaw_matrices
-from grip.nn.weights import CHECKPOINT_VERSION, load_checkpoint, pack_weights, unpack_weights
+from grip.nn.weights import (
+    CHECKPOINT_VERSION,
+    load_checkpoint,
+    pack_weights,
+    save_checkpoint,
+    unpack_weights,
+)
+
+RESUMABLE: tuple[str, ...] = ("train.joint_epochs",)
+"""Settings a resumed run may change: the length of its last phase."""
 
 
 def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
@@ -86,10 +88,9 @@ class Trainer:
         if not train_seqs:
             raise ValueError("no training sequences")
         self.cfg = cfg
-        self.run_dir = Path(run_dir)
+        self.rundir = RunDir(run_dir, RESUMABLE, "'grip kin train' run")
+        self.run_dir = self.rundir.path
         self.train_seqs = train_seqs
-        self.train_weights = (category_weights(train_seqs, cfg.train.category_balance)
-                              if cfg.train.category_balance > 0 else None)  # fmt: skip
         self.val_seqs = val_seqs or train_seqs
         torch.manual_seed(cfg.train.seed)
         if cfg.train.mirror_augment:
@@ -229,14 +230,7 @@ class Trainer:
         tick = clock.append if clock is not None else lambda _t: None
         for group in self.opt.param_groups:
             group["lr"] = lr
-        speeds = None
-        if tc.time_warp > 0:
-            speeds = np.exp(self.rng.uniform(-1.0, 1.0, tc.batch_size) * np.log1p(tc.time_warp))
-        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
-                              speeds=speeds, weights=self.train_weights)  # fmt: skip
-        if speeds is not None:
-            x, y = time_warp_rates(x, y, speeds, len(self.cfg.features.sites),
-                                   self.cfg.features.insoles)  # fmt: skip
+        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
         tick(time.perf_counter())
         xt, yt = self._tensors(x, y, augment=True)
         tick(time.perf_counter())
@@ -302,9 +296,7 @@ class Trainer:
         }
 
     def save(self, path: Path) -> None:
-        buf = io.BytesIO()
-        torch.save(self.state(), buf)
-        atomic_write(path, lambda f: f.write(buf.getvalue()))
+        save_checkpoint(path, self.state())
 
     def load(self, path: Path) -> None:
         """Resume from a checkpoint of the same configuration.
@@ -313,21 +305,12 @@ class Trainer:
         long as the checkpoint is still in the stage-wise phase or within the new length.
         """
         ck = load_checkpoint(path)
-        old = json.loads(ck["config"])
-        new = json.loads(json.dumps(asdict(self.cfg)))
-        old["train"].pop("joint_epochs")
-        new["train"].pop("joint_epochs")
-        defaults = asdict(KinematicsRunConfig())
-        for k in set(new["train"]) - set(old["train"]):  # fields added since the run began
-            if new["train"][k] == defaults["train"][k]:
-                new["train"].pop(k)
-        for k in set(new) - set(old):
-            if new[k] == defaults[k]:
-                new.pop(k)
-        if old != new:
-            diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
-            raise ValueError(f"{path}: checkpoint was trained with another configuration "
-                             f"(differs in {', '.join(diff)})")  # fmt: skip
+        # settings added since the run began count as their defaults
+        old = drop_removed(json.loads(ck["config"]), REMOVED_SETTINGS, str(path))
+        require_same_settings(old, asdict(self.cfg), path, "",
+                              may_change=self.rundir.may_change,
+                              defaults=asdict(KinematicsRunConfig()),
+                              what="checkpoint was trained with another configuration")  # fmt: skip
         if int(ck["epoch"]) > self.cfg.total_epochs():
             raise ValueError(f"{path}: checkpoint is at epoch {int(ck['epoch'])}, beyond the "
                              f"{self.cfg.total_epochs()} epochs of this configuration")  # fmt: skip
@@ -351,15 +334,6 @@ def export_for_inference(src: str | os.PathLike, dst: str | os.PathLike,
     out = {k: ck[k] for k in ("version", "config", "norm_mean", "norm_std", "epoch", "history")
            if k in ck}  # fmt: skip
     out["model"] = pack_weights(ck["model"], precision)
-    buf = io.BytesIO()
-    torch.save(out, buf)
-    atomic_write(dst, lambda f: f.write(buf.getvalue()))
-    return len(buf.getvalue())
-
-
-def write_run_config(run_dir: Path, cfg: KinematicsRunConfig, extra: dict) -> None:
-    """``config.json`` with the resolved settings, the git hash and ``extra`` (data, command)."""
-    payload = {"config": asdict(cfg), "git": git_hash(), **extra}
-    atomic_write_text(run_dir / "config.json", json.dumps(payload, indent=1))
+    return save_checkpoint(dst, out)
 
 

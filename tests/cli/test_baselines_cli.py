@@ -78,17 +78,18 @@ def test_train_baseline_runs_resumes_and_exports(dataset: Path, tmp_path: Path, 
 
 def _check_bench_method(name: str, checkpoint: Path, dataset: Path) -> None:
     """The exported nets run as a ``grip bench`` method from the true first frame."""
-    from grip.eval import bench as B
     from grip.eval.methods import MethodOptions, make_method
+    from grip.eval.scoring import segment_metrics
+    from grip.kinematics.features import ground_truth
     from prism_tools.io import load_recording
 
     rec = load_recording(sorted((dataset / "sequences").glob("*.npz"))[0]).slice_frames(0, 40)
     method = make_method(name, MethodOptions(**{f"{name}_checkpoint": checkpoint}))
     recon = method.reconstruct(rec)
-    gt = B.ground_truth(rec)
+    gt = ground_truth(rec)
     assert recon.method == name and recon.n_frames == 40 and not method.can_fall
     assert abs(recon.joint_pos[0, 0] - gt.joint_pos[0, 0]).max() < 0.05
-    m, _ = B.segment_metrics(recon, gt, can_fall=False)
+    m, _ = segment_metrics(recon, gt, can_fall=False)
     assert np.isfinite(m["MPJPE_mm"]) and (np.isfinite(m["vGRF_N"]) == (name == "pip"))
 
 

@@ -126,16 +126,6 @@ def test_train_kin_runs_and_resumes(built: Path, tmp_path: Path, capsys) -> None
     assert "dataset" in err and "at least 2 clips" in err and "Traceback" not in err
     assert main([*held, "--set", "train.val_source=dev"]) == 2
     assert "val_source" in capsys.readouterr().err
-    # time-reversed training clips join the training sequences (grip.dataset.augment)
-    rev = [*args, "--set", 'train.reverse_categories=["*"]']
-    rev[rev.index(str(run))] = str(tmp_path / "rev")
-    assert main(rev) == 0
-    out = capsys.readouterr().out
-    n_train = len(json.loads((built / "split.json").read_text())["train"])
-    assert f"time-reversed recordings of {n_train} training clips" in out
-    assert f"loaded {2 * n_train} train" in out
-    assert main([*rev[:-1], "train.reverse_categories=walk"]) == 2
-    assert "reverse_categories: expected a list" in capsys.readouterr().err
 
 
 def test_train_kin_init_fine_tunes_from_another_run(built: Path, tmp_path: Path, capsys) -> None:
@@ -451,19 +441,21 @@ def test_time_reversed_motions_join_the_policy_references(
         time_reversed_recordings(bare, split["train"], [clip["category"]])
     with pytest.raises(ValueError, match="manifest"):
         time_reversed_recordings(tmp_path, split["train"], ["*"])
-    # grip policy train: the reversed recordings join the references once (and their mirrors)
-    run = tmp_path / "rev"
-    args = ["policy", "train", "--data", str(built), "--out", str(run), *tiny_policy_settings,
-            "--set", f'reverse_categories=["{clip["category"]}"]']  # fmt: skip
-    assert main(args) == 0
-    names = [c.name for c in ReferenceSet.load(run / "reference_train.npz").clips]
+    # grip policy distill's reference set: the reversed recordings join the references once
+    from grip.cli.errors import CliError
+    from grip.cli.policy_runs import build_training_reference
+    from grip.cli.recordings import kin_checkpoint, split_paths
+
+    ref_path, files = tmp_path / "rev.npz", split_paths(built, "train")
+    build_training_reference(ref_path, built, files, [kin_checkpoint(None)], (clip["category"],))
+    names = [c.name for c in ReferenceSet.load(ref_path).clips]
     assert len(names) == len(split["train"]) + len(recs)
     assert sum(n.endswith(tuple(f"-reversed_seq{i:03d}" for i in range(9))) for n in names) \
         == len(recs)  # fmt: skip
     assert "time-reversed recordings" in capsys.readouterr().out
-    assert main([*args[:5], str(tmp_path / "none"), *args[6:-1],
-                 'reverse_categories=["no-such-category"]']) == 2  # fmt: skip
-    assert "no training clip" in capsys.readouterr().err
+    with pytest.raises(CliError, match="no training clip"):
+        build_training_reference(tmp_path / "none.npz", built, files, [kin_checkpoint(None)],
+                                 ("no-such-category",))  # fmt: skip
 
 
 TINY_DISTILL = ["--set", "iterations=2", "--set", "decisions_per_iteration=64",
@@ -564,11 +556,10 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
         xa, ya = keep._add_data(np.full((100, 3), i, np.float16), np.full((100, 2), i, np.float16))
     assert len(xa) == 256 and xa[0, 0] == 1 and xa[-1, 0] == 3 and (ya[:, 0] == xa[:, 0]).all()
     assert len(keep._chunks) == 3  # iteration 0's samples are no longer needed
-    # noise on the played actions and pushes move the rollouts off the teacher's own states
+    # noise on the played actions moves the rollouts off the teacher's own states
     noisy = tmp_path / "noisy"
     assert main([*args[:9], str(noisy), *TINY_DISTILL, "--set", "init_member=1",
-                 "--set", "iterations=1", "--set", "action_noise=0.5",
-                 "--set", "push_force_n=300", "--set", "push_every_s=0.1"]) == 0  # fmt: skip
+                 "--set", "iterations=1", "--set", "action_noise=0.5"]) == 0  # fmt: skip
     with np.load(out / "data" / "iter_000.npz") as a, np.load(noisy / "data" / "iter_000.npz") as b:
         assert a["x"].shape == b["x"].shape and not np.array_equal(a["x"], b["x"])
         np.testing.assert_array_equal(a["x"][:2], b["x"][:2])  # the same first states

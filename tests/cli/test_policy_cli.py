@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from grip.cli.policy_runs import changed_settings
+from grip.core.runs import changed_settings
 from policies.config import PolicyRunConfig
-from policies.train import run_config_dict
+from policies.train import RESUMABLE, run_config_dict
 
 
 def test_changed_settings_allows_resumable_and_new_default_keys():
@@ -14,13 +14,15 @@ def test_changed_settings_allows_resumable_and_new_default_keys():
     old = run_config_dict(base)
     defaults = run_config_dict(PolicyRunConfig())
     lr = dataclasses.replace(base, ppo=dataclasses.replace(base.ppo, learning_rate=1e-6))
-    assert changed_settings(old, run_config_dict(lr), defaults) == []  # resumable
+    assert changed_settings(old, run_config_dict(lr), defaults, RESUMABLE) == []  # resumable
     arch = dataclasses.replace(base, ppo=dataclasses.replace(base.ppo, net_arch=(8,)))
-    assert changed_settings(old, run_config_dict(arch), defaults) == ["ppo.net_arch"]
+    assert changed_settings(old, run_config_dict(arch), defaults, RESUMABLE) == ["ppo.net_arch"]
     # a run that began before stage1.mining_mix existed: the key is missing from its config
     older = run_config_dict(base)
     del older["stage1"]["mining_mix"]
-    assert changed_settings(older, run_config_dict(base), defaults) == []
-    assert changed_settings(older, run_config_dict(base)) == ["stage1.mining_mix"]  # no defaults
+    assert changed_settings(older, run_config_dict(base), defaults, RESUMABLE) == []
+    no_defaults = changed_settings(older, run_config_dict(base), may_change=RESUMABLE)
+    assert no_defaults == ["stage1.mining_mix"]
     mined = dataclasses.replace(base, stage1=dataclasses.replace(base.stage1, mining_mix=0.5))
-    assert changed_settings(older, run_config_dict(mined), defaults) == ["stage1.mining_mix"]
+    mined_diff = changed_settings(older, run_config_dict(mined), defaults, RESUMABLE)
+    assert mined_diff == ["stage1.mining_mix"]

@@ -54,7 +54,7 @@ def test_heading_matrix_points_x_where_the_pelvis_faces() -> None:
     np.testing.assert_allclose(np.linalg.det(h), 1.0)
 
 
-@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jhor"])
+@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel"])
 def test_state_difference_vanishes_when_the_estimate_equals_the_simulation(variant) -> None:
     pvw, rot = _state()
     pos, vel, w = pvw
@@ -70,25 +70,6 @@ def test_state_difference_vanishes_when_the_estimate_equals_the_simulation(varia
     n_zero = diffs.size - (72 if variant.startswith("OAV_J") else 0)
     np.testing.assert_allclose(diffs[:n_zero], 0.0, atol=1e-12)
     assert self_vec[0] == pos[0, 2]
-
-
-def test_jhor_is_jrel_with_the_horizontal_root_error_in_the_pelvis_row() -> None:
-    pvw, rot = _state(seed=4)
-    pos, vel, w = pvw
-    h = O.heading_matrix(rot[0])
-    imu = list(O.IMU_JOINTS)
-    est_pos = (pos - pos[0]) * 0.9
-    est_pos[0] = 0.0
-    est_root = pos[0] + np.array([0.3, -0.2, 0.5])  # 0.5 m of vertical drift is not shown
-    args = (h, pvw, rot, est_pos, rot[imu], vel[list(sk.VELOCITY_JOINTS)], w[imu], est_root)
-    rel, _ = O.observation_parts("OAV_Jrel", *args)
-    hor, _ = O.observation_parts("OAV_Jhor", *args)
-    n = rel.size
-    pelvis = slice(n - 144, n - 141)
-    np.testing.assert_allclose(rel[pelvis], 0.0, atol=1e-12)
-    np.testing.assert_allclose(hor[pelvis], np.array([0.3, -0.2, 0.0]) @ h, atol=1e-12)
-    keep = np.r_[0 : n - 144, n - 141 : n]
-    np.testing.assert_array_equal(hor[keep], rel[keep])
 
 
 def test_observations_are_invariant_to_a_yaw_of_the_whole_scene() -> None:

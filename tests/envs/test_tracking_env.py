@@ -90,7 +90,7 @@ def test_reward_is_the_weighted_sum_of_its_terms(reference) -> None:
     assert energies[:3] == [0.0, 0.0, 0.0] and energies[3] > 0
 
 
-@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jhor"])
+@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel"])
 def test_ablation_flags_set_the_kinematic_observation(reference, variant) -> None:
     env = _env(reference, kinematic_obs=variant)
     obs, _ = env.reset(seed=0)

@@ -3,8 +3,6 @@ import pytest
 
 from grip.kinematics.dataset import (
     Normalizer,
-    SequenceArrays,
-    category_weights,
     sample_windows,
     sequence_arrays,
 )
@@ -58,28 +56,3 @@ def test_holdout_split_keeps_each_clip_on_one_side():
         holdout_split(seqs[:12], 0.99, seed=0)
     with pytest.raises(ValueError, match="at least 2 clips"):
         holdout_split(seqs[:6], 0.5, seed=0)
-
-
-def _seq(category: str, n: int, value: float) -> SequenceArrays:
-    return SequenceArrays("s", category, np.full((n, 2), value, np.float32),
-                          {"lp": np.zeros((n, 15), np.float32)}, np.zeros((n, 3)),
-                          np.zeros((24, 3)))  # fmt: skip
-
-
-def test_category_weights_even_out_categories():
-    # two walks of 1000 frames and one sit/stand of 500: frames 2000 against 500
-    seqs = [_seq("walk", 1000, 0.0), _seq("walk", 1000, 0.0), _seq("sit", 500, 1.0)]
-    share = lambda b: category_weights(seqs, b) / category_weights(seqs, b).sum()  # noqa: E731
-    np.testing.assert_allclose(share(0.0), [0.4, 0.4, 0.2])  # by frames
-    np.testing.assert_allclose(share(1.0), [0.25, 0.25, 0.5])  # each category half
-    np.testing.assert_allclose(share(0.5), [1 / 3, 1 / 3, 1 / 3])  # sqrt(2000) : sqrt(500)
-    with pytest.raises(ValueError, match="balance"):
-        category_weights(seqs, 1.5)
-    # the sampler follows the weights: the sit/stand sequence (features 1.0) in half the windows
-    x, _ = sample_windows(seqs, 4000, 50, np.random.default_rng(0),
-                          weights=category_weights(seqs, 1.0))  # fmt: skip
-    assert abs(x[:, 0, 0].mean() - 0.5) < 0.03
-    x0, _ = sample_windows(seqs, 4000, 50, np.random.default_rng(0))
-    assert abs(x0[:, 0, 0].mean() - 0.2) < 0.03
-    with pytest.raises(ValueError, match="weights"):
-        sample_windows(seqs, 4, 50, np.random.default_rng(0), weights=np.zeros(3))

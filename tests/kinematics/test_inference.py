@@ -47,7 +47,8 @@ def test_offline_batched_equals_single_and_streaming(ckpt):
 
 
 def test_evaluation_rows_and_table(ckpt, tmp_path):
-    from grip.kinematics.evaluate import aggregate, evaluate_recordings, markdown_table
+    from grip.eval.kinematics import aggregate, markdown_table
+    from grip.kinematics.evaluate import evaluate_recordings
 
     est = KinematicsEstimator.from_checkpoint(ckpt)
     rows = evaluate_recordings(est, [make_recording(130, seed=3)], segment_frames=50)

@@ -239,3 +239,26 @@ def test_dropout_acts_in_training_only_and_weight_decay_selects_adamw(seqs, tmp_
     back.init_from(tmp_path / "plain.pt")
     torch.testing.assert_close(back.model.state_dict()["stages.fp.head.weight"],
                                tr.model.state_dict()["stages.fp.head.weight"])  # fmt: skip
+
+
+def test_stored_configs_with_removed_settings():
+    from dataclasses import asdict
+
+    from grip.config import ConfigError, drop_removed
+    from grip.kinematics.config import (
+        REMOVED_IN,
+        REMOVED_SETTINGS,
+        KinematicsRunConfig,
+        run_config_from_dict,
+    )
+
+    d = asdict(KinematicsRunConfig())
+    off = {**d, "train": {**d["train"], "time_warp": 0.0, "category_balance": 0.0,
+                          "reverse_categories": []}}  # fmt: skip
+    assert run_config_from_dict(off) == KinematicsRunConfig()
+    on = {**d, "train": {**d["train"], "time_warp": 0.2}}
+    assert run_config_from_dict(on) == KinematicsRunConfig()  # to run it: trained as it was
+    with pytest.raises(ConfigError, match=f"time_warp = 0.2 turns on time-warp.*{REMOVED_IN}"):
+        drop_removed(on, REMOVED_SETTINGS, "ck.pt")  # a resume could not go on as it began
+    with pytest.raises(TypeError, match="no_such_knob"):
+        run_config_from_dict({**d, "train": {**d["train"], "no_such_knob": 1}})

@@ -175,7 +175,8 @@ def test_resume_continues_exactly_as_sb3_load_would(tmp_path):
     from stable_baselines3 import PPO
 
     from envs.factory import make_tracking_env
-    from policies.train import PolicyTrainer, load_vecnorm_state, run_config_dict
+    from policies.train import PolicyTrainer, run_config_dict
+    from policies.vec_env import load_vecnorm_state
     from tests.policies.test_train import _tiny
 
     cfg = _tiny()

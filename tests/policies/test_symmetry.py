@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -23,13 +21,8 @@ def mirrored():
     return cfg, both, len(ref.clips), ObservationMirror(cfg, ref.sensor_sites, ref.insoles)
 
 
-@pytest.mark.parametrize("variant", ["OAV_Jrel", "OAV_Jhor"])
-def test_mirrored_observation_is_what_the_mirrored_humanoid_observes(mirrored, variant):
+def test_mirrored_observation_is_what_the_mirrored_humanoid_observes(mirrored):
     cfg, both, n, mir = mirrored
-    if variant != cfg.kinematic_obs:
-        ref = ReferenceSet.load(SAMPLE_REFERENCE)
-        cfg = dataclasses.replace(cfg, kinematic_obs=variant)
-        mir = ObservationMirror(cfg, ref.sensor_sites, ref.insoles)
     env, twin = GripTrackingEnv(cfg, both), GripTrackingEnv(cfg, both)
     o1, _ = env.reset(options={"clip": 0, "start": 5})
     o2, _ = twin.reset(options={"clip": n, "start": 5})  # the mirror image of clip 0
@@ -43,8 +36,6 @@ def test_mirrored_observation_is_what_the_mirrored_humanoid_observes(mirrored, v
         a = rng.uniform(-0.5, 0.5, 69)
         o1, *_ = env.step(a)
         o2, *_ = twin.step(mir.action(a))
-    if variant == "OAV_Jhor":  # the horizontal root error (d_p's pelvis row) was mirrored too
-        assert np.abs(o1["kinematic"][-144:-141]).max() > 0.05
 
 
 def test_mirror_twice_is_the_identity_and_the_height_map_flips(mirrored):

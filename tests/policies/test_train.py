@@ -106,12 +106,12 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     copy2 = tmp_path / "resumed_lr"
     shutil.copytree(path, copy2)
     slower = dataclasses.replace(
-        longer, ppo=dataclasses.replace(cfg.ppo, learning_rate=1e-5, n_epochs=2, target_kl=0.02)
+        longer, ppo=dataclasses.replace(cfg.ppo, learning_rate=1e-5, n_epochs=2, clip_range=0.1)
     )
     tr3 = PolicyTrainer(slower, copy2, SAMPLE_REFERENCE, make_tracking_env)
     tr3.train()
     assert tr3.model.learning_rate == 1e-5 and tr3.model.n_epochs == 2
-    assert tr3.model.target_kl == 0.02
+    assert tr3.model.clip_range(1.0) == pytest.approx(0.1)
     assert tr3.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
 
 
@@ -405,12 +405,12 @@ def test_category_selection_and_config_checks():
         PolicyRunConfig(amp=AmpConfig(loss="wgan"))
     from grip.config import apply_dict
 
-    with pytest.raises(ValueError, match=r"reverse_categories: expected a list, got 'walk'"):
-        apply_dict(PolicyRunConfig(), {"reverse_categories": "walk"}, "x")  # letter by letter
+    with pytest.raises(ValueError, match=r"categories: expected a list, got 'walk'"):
+        apply_dict(PolicyRunConfig(), {"stage2": {"categories": "walk"}}, "x")  # letter by letter
     with pytest.raises(ValueError, match="expected a list of strings"):
         apply_dict(PolicyRunConfig(), {"stage2": {"categories": ["walk", 3]}}, "x")
-    assert apply_dict(PolicyRunConfig(), {"reverse_categories": ["walk"]},
-                      "x").reverse_categories == ("walk",)  # fmt: skip
+    assert apply_dict(PolicyRunConfig(), {"stage2": {"categories": ["walk"]}},
+                      "x").stage2.categories == ("walk",)  # fmt: skip
 
 
 def test_eval_policy_rows_summary_and_files(run, tmp_path):
@@ -525,26 +525,6 @@ def test_warm_start_takes_the_exported_networks_and_warmup_trains_only_the_criti
         np.testing.assert_array_equal(rms.var, src.obs_var[k])
         assert rms.count == src.obs_count
     fresh.venv.close()
-    # amp.from_init = false: the policy and normaliser are the file's, the discriminator is new
-    # ppo.fixed_std: the std is the config's log_std_init, not the file's, and stays fixed
-    cfg = _warm_cfg(0)
-    cfg = dataclasses.replace(cfg, amp=dataclasses.replace(cfg.amp, from_init=False),
-                              ppo=dataclasses.replace(cfg.ppo, fixed_std=True,
-                                                      log_std_init=-3.25))  # fmt: skip
-    own = PolicyTrainer(cfg, tmp_path / "own_disc", SAMPLE_REFERENCE, make_tracking_env,
-                        init=exported)
-    new_disc = {k: v.clone() for k, v in own.amp.disc.state_dict().items()}
-    own.venv = own._build_env(own.cfg.stage2)
-    own.model = own._new_model(own.venv)
-    own.warm_start(src)
-    w = own.amp.disc.head.weight
-    assert torch.equal(w, new_disc["head.weight"]) and not torch.equal(w, src.disc.head.weight)
-    own._apply_fixed_std()
-    log_std = own.model.policy.log_std
-    assert torch.allclose(log_std, torch.full_like(log_std, -3.25)) and not log_std.requires_grad
-    assert not torch.allclose(src.log_std, torch.full_like(src.log_std, -3.25))
-    own.venv.close()
-
     # no warm-up: the policy trains from the exported weights
     (tmp_path / "free").mkdir()
     (tmp_path / "free" / "config.json").write_text(
@@ -580,68 +560,46 @@ def test_warm_start_refuses_a_policy_of_another_size(run, tmp_path):
                       init=tmp_path / "junk.pt")
 
 
-def test_warm_start_from_jrel_into_jhor_starts_the_new_input_ignored(run, tmp_path):
-    import torch
-
-    from envs import observations as O
-    from policies.train import JHOR_PRIOR_STD_M
-
+def test_warm_start_refuses_another_observation_variant(run, tmp_path):
     path, _ = run
     exported = tmp_path / "p.pt"
     export_policy(path, exported, half=False)
-    src = PolicyRunner.load(exported)
-    assert src.env_cfg.kinematic_obs == "OAV_Jrel"
+    assert PolicyRunner.load(exported).env_cfg.kinematic_obs == "OAV_Jrel"
     cfg = _warm_cfg(0)
-    jhor = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jhor"))
-    tr = PolicyTrainer(jhor, tmp_path / "jhor", SAMPLE_REFERENCE, make_tracking_env, init=exported)
-    tr.venv = tr._build_env(tr.cfg.stage2)
-    tr.model = tr._new_model(tr.venv)
-    tr.warm_start(src)
-    n = O.kinematic_dim("OAV_Jhor")
-    rows = np.arange(n - 144, n - 141)  # d_p's pelvis row
-    rms = tr.venv.obs_rms["kinematic"]
-    np.testing.assert_array_equal(rms.var[rows], JHOR_PRIOR_STD_M**2)
-    np.testing.assert_array_equal(rms.mean[rows], 0.0)
-    keep = np.setdiff1d(np.arange(n), rows)
-    np.testing.assert_array_equal(rms.var[keep], src.obs_var["kinematic"][keep])
-    # input columns: the parts in order; only the three new ones are zeroed
-    dims = {k: int(np.prod(s.shape)) for k, s in tr.model.observation_space.spaces.items()}
-    start = sum(dims[k] for k in list(dims)[: list(dims).index("kinematic")])
-    pol = tr.model.policy
-    w, w_src = _linears(pol.mlp_extractor.policy_net)[0].weight, _linears(src.actor)[0].weight
-    cols = start + rows
-    assert torch.count_nonzero(w[:, cols]) == 0 and torch.count_nonzero(w_src[:, cols]) > 0
-    others = np.setdiff1d(np.arange(w.shape[1]), cols)
-    assert torch.equal(w[:, others], w_src[:, others])
-    assert torch.count_nonzero(_linears(pol.mlp_extractor.value_net)[0].weight[:, cols]) == 0
-    tr.venv.close()
-
     glo = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jglo"))
     tr = PolicyTrainer(glo, tmp_path / "jglo", SAMPLE_REFERENCE, make_tracking_env, init=exported)
     with pytest.raises(ValueError, match=r"p\.pt: trained with env.kinematic_obs='OAV_Jrel'"):
         tr.train()
 
 
-def test_training_environments_are_pushed_only_when_asked():
-    from envs.wrappers import ActionRepeat, RandomPushes
-    from policies.train import make_vec_env
+def test_stored_configs_with_removed_settings():
+    from grip.config import ConfigError
+    from policies.config import REMOVED_IN, policy_config_from_dict
 
-    def chain(env) -> list[type]:
-        out = []
-        while hasattr(env, "env"):
-            out.append(type(env))
-            env = env.env
-        return out
+    d = run_config_dict(PolicyRunConfig())
+    old = {**d, "push_force_n": 0.0, "push_every_s": 3.0, "reverse_categories": [],
+           "ppo": {**d["ppo"], "fixed_std": False, "target_kl": 0.0},
+           "amp": {**d["amp"], "from_init": True}}  # the removed settings at their "off" values
+    assert policy_config_from_dict(old, "x", training=True) == PolicyRunConfig()
+    on = {**d, "push_force_n": 150.0, "ppo": {**d["ppo"], "target_kl": 0.05}}
+    with pytest.raises(ConfigError, match=f"ppo.target_kl = 0.05 turns on PPO's KL early stop.*"
+                                          f"{REMOVED_IN}"):  # fmt: skip
+        policy_config_from_dict(on, "run/config.json", training=True)
+    # playing a file needs none of them: how it was trained does not change what it does
+    assert policy_config_from_dict(on, "x") == PolicyRunConfig()
+    jhor = {**d, "env": {**d["env"], "kinematic_obs": "OAV_Jhor"}}
+    with pytest.raises(ConfigError, match=f"kinematic_obs = 'OAV_Jhor' was removed.*{REMOVED_IN}"):
+        policy_config_from_dict(jhor, "x")
+    with pytest.raises(ConfigError, match="unknown key 'no_such_knob'"):
+        policy_config_from_dict({**d, "no_such_knob": 1}, "x")
 
-    cfg = _tiny()
-    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, action_repeat=3))
-    for force, pushed in ((0.0, False), (120.0, True)):
-        c = dataclasses.replace(cfg, push_force_n=force, push_every_s=1.5, push_duration_s=0.1)
-        venv = make_vec_env(c, c.stage2, SAMPLE_REFERENCE, seed=0, make_env=make_tracking_env)
-        kinds = chain(venv.envs[0])
-        # inside the action repeat: waits and pushes count frames
-        assert kinds == ([ActionRepeat, RandomPushes] if pushed else [ActionRepeat])
-        if pushed:
-            w = venv.envs[0].env
-            assert w.force_n == 120.0 and w._frames == 10
-        venv.close()
+
+def test_the_shipped_policy_file_loads():
+    from grip.assets import SHIPPED_POLICY
+    from policies.config import policy_config_from_dict
+    from policies.runner import read_policy_file
+
+    members, _ = read_policy_file(SHIPPED_POLICY)
+    for m in members:  # stored with ppo.fixed_std = false and ppo.target_kl = 0 (removed since)
+        cfg = policy_config_from_dict(json.loads(m["config"]), "member", training=True)
+        assert cfg.env.kinematic_obs == "OAV_Jrel"
