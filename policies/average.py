@@ -1,6 +1,6 @@
 """Weight averaging of exported policies (``grip policy combine --average``).
 
-PPO's exports swing from one checkpoint to the next (README, "DynamicsNet"); the average of a
+PPO's exports swing from one checkpoint to the next; the average of a
 run's late exports, like the stochastic weight averaging of supervised training, sits between
 the swings. The files must come from one run or its continuations: the same network, the same
 observations, and weights near each other. The last file is the base: its observation

@@ -1,8 +1,7 @@
 """Settings of DynamicsNet training (frozen dataclasses; ``configs/policy/*.toml`` hold overrides).
 
 GRIP's values (paper, supplement, BASELINES_AND_METRICS section 5) are noted where the CPU
-default differs; the defaults were chosen by measurement on a 2-core machine (README,
-"DynamicsNet").
+default differs; the defaults were chosen by measurement on a 2-core machine.
 """
 
 from __future__ import annotations
@@ -74,7 +73,7 @@ class PPOConfig:
         learning_rate_decay_steps: Anneal the learning rate over the last this many decisions
             of the final stage, linearly from ``learning_rate`` to ``learning_rate_final`` (0 =
             constant). Tied to the stage's end, so extending ``stage2.timesteps`` moves the
-            decay to the new end. Against the swings of a long run's last exports (README).
+            decay to the new end. Against the swings of a long run's last exports.
         learning_rate_final: The learning rate at the end of the decay.
         gamma, gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm: PPO as in SB3.
         normalize_reward: Scale rewards by a running return std (SB3 VecNormalize).
@@ -127,7 +126,7 @@ class StageConfig:
             distance and tightens it linearly to ``termination_dist_m`` over
             ``termination_anneal_steps``; 0 = no curriculum. Long episodes early on teach
             balance before precision (at 0.25 m an untrained controller's episodes end after
-            about half a second, README "DynamicsNet").
+            about half a second).
         termination_anneal_steps: Steps of the stage over which the distance tightens.
         mining_mix: Hard-clip mining (:mod:`policies.mining`): share of episodes started on
             clips in proportion to their recent failure rate instead of by length alone

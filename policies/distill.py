@@ -1,7 +1,7 @@
 """Distil a teacher policy (usually an ensemble) into one network with DAgger.
 
 The shipped controller is an ensemble whose mean action keeps more segments on their feet than
-any of its members alone (README, "Ensembles"). :class:`Distiller` trains a single student
+any of its members alone. :class:`Distiller` trains a single student
 network to act like the teacher on the states the *student* visits (DAgger, Ross et al. 2011):
 
 1. Roll out the training environments (GRIP's stage 2: random starts, falls end episodes) with

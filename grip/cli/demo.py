@@ -57,8 +57,7 @@ def reconstruct_demo(args: argparse.Namespace) -> int:
     import torch
 
     # Every method runs one recording at batch 1, where a second thread gains little and, on a
-    # machine with a busy core, costs a lot: the demo took 18.6 s with torch's default two
-    # threads and 8.0 s with one while a training held the other core (README, "The demo").
+    # machine with a busy core, costs a lot (18.6 s against 8.0 s with one thread, measured)
     torch.set_num_threads(1)
     from grip.assets import SAMPLE_RECORDING
     from grip.cli.errors import CliError

@@ -167,8 +167,7 @@ def kin_checkpoint(path: Path | None, flag: str = "--kin") -> Path:
 TTA_HELP = (
     "test-time augmentation of KinematicsNet: average its estimates of the input turned about "
     "the vertical and mirrored left-right, each mapped back ('mirror': 2 copies, 'yaw4': 4 "
-    "turns, 'full': both, 8 copies; default 'none'). More accurate, n times the computation "
-    "(README, issue 3)"
+    "turns, 'full': both, 8 copies; default 'none'). More accurate, n times the computation"
 )
 
 

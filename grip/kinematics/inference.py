@@ -47,7 +47,7 @@ class KinematicEstimate:
         joint_pos: ``(T, 24, 3)`` root-relative joints of the estimated pose: forward
             kinematics of ``global_rot`` on the subject's body, as TransPose and PIP evaluate
             their poses (posed SMPL with the true shape); closer to the truth than the FP
-            stage's own joints (``grip kin eval --joints fp`` measures those; README, issue 3).
+            stage's own joints (``grip kin eval --joints fp`` measures those).
         global_rot: ``(T, 24, 3, 3)`` global joint rotations (the FA stage).
         velocity: ``(T, 6, 3)`` world velocities of the leaves and the pelvis, m/s (LV).
         root_pos: ``(T, 3)`` pelvis trajectory integrated from the estimated pelvis velocity,
@@ -160,7 +160,7 @@ class KinematicsEstimator:
 
     ``tta`` (a key of :data:`TTA_MODES`, default ``"none"``) averages the estimate over turned
     and mirrored copies of the input (:class:`Symmetries`), offline and streaming alike: more
-    accurate, at ``n`` times the computation (README, issue 3).
+    accurate, at ``n`` times the computation.
     """
 
     def __init__(self, model: KinematicsNet, norm: Normalizer, cfg, tta: str = "none") -> None:
