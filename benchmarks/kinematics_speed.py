@@ -1,8 +1,15 @@
 """KinematicsNet speed: streaming latency (batch 1, one thread) and offline throughput.
 
 Each figure is printed with a reference measured in the same run on the same thread count: a
-bare ``torch.nn.LSTM`` of the same width and depth (one stage's recurrent core). The ratio is
-what to compare across machines; the absolute numbers depend on the CPU and its load.
+bare ``torch.nn.LSTM`` of the same width and depth (one stage's recurrent core; the network has
+four such stages, so about 4 is the floor of both ratios). The ratio is what to compare across
+machines; the absolute numbers depend on the CPU and its load, so every timing runs in several
+rounds that take turns with its reference and the medians are kept.
+
+- stream: one frame at batch 1 through the streaming path (:class:`FrameStep`, what
+  ``StreamingEstimator`` runs); ``module_stream``: ``KinematicsNet.forward`` on a one-frame
+  sequence, for comparison.
+- offline: 32 sequences of 500 frames through ``KinematicsNet.forward``.
 
     python benchmarks/kinematics_speed.py [--model CKPT] [--hidden 256 --layers 2] [--json PATH]
     python benchmarks/kinematics_speed.py --model CKPT --tta full
@@ -15,11 +22,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import time
 
 import torch
 
-from grip.kinematics.model import KinematicsNet, KinematicsNetConfig
+from grip.kinematics.model import FrameStep, KinematicsNet, KinematicsNetConfig
 
 
 def _time(fn, repeats: int) -> float:
@@ -30,15 +38,26 @@ def _time(fn, repeats: int) -> float:
     return (time.perf_counter() - t0) / repeats
 
 
+def _interleaved(fns: dict, repeats: int, rounds: int) -> dict[str, float]:
+    """Median seconds per call of each function over ``rounds`` rounds that take turns, so
+    that a change in the machine's load hits the figures and their reference alike."""
+    got: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            got[k].append(_time(fn, repeats))
+    return {k: statistics.median(v) for k, v in got.items()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--model", default=None, help="checkpoint (else a random net of the sizes)")
     ap.add_argument("--hidden", type=int, default=256)
     ap.add_argument("--layers", type=int, default=2)
     ap.add_argument("--inputs", type=int, default=70)
-    ap.add_argument("--frames", type=int, default=2000, help="streamed frames")
+    ap.add_argument("--frames", type=int, default=2000, help="streamed frames per round")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of every timing, in turns")
     ap.add_argument("--tta", default="full", help="test-time augmentation timed with --model")
-    ap.add_argument("--json", default=None)
+    ap.add_argument("--json", default=None, help="also write the figures here")
     args = ap.parse_args()
     torch.set_num_threads(1)
     if args.model:
@@ -51,14 +70,20 @@ def main() -> None:
         net = KinematicsNet(cfg).eval()
     first = {k: torch.zeros(1, s.head.out_features) for k, s in net.stages.items()}
     ref = torch.nn.LSTM(cfg.hidden, cfg.hidden, cfg.layers, batch_first=True).eval()
+    step = FrameStep(net)
 
     x1 = torch.randn(1, 1, cfg.n_inputs)
     r1 = torch.randn(1, 1, cfg.hidden)
+    # the bare LSTM and the module path at batch 1 run without oneDNN (~5x faster: DESIGN.md)
     prev = torch.backends.mkldnn.set_flags(False)
-    with torch.no_grad():
+    with torch.inference_mode():
         state = net.initial_state(first)
+        flat = step.flat_state(state)
 
-        def net_step():
+        def frame_step():  # the streaming path (StreamingEstimator)
+            step(x1[0], flat)
+
+        def module_step():  # KinematicsNet.forward on a one-frame sequence
             nonlocal state
             _, state = net(x1, state)
 
@@ -68,30 +93,32 @@ def main() -> None:
             nonlocal ref_state
             _, ref_state = ref(r1, ref_state)
 
-        n = args.frames
-        stream_s = _time(net_step, n)
-        ref_stream_s = _time(ref_step, n)
+        stream = _interleaved({"frame": frame_step, "module": module_step, "ref": ref_step},
+                              args.frames, args.rounds)  # fmt: skip
     torch.backends.mkldnn.set_flags(prev[0])
 
     xb = torch.randn(32, 500, cfg.n_inputs)
     rb = torch.randn(32, 500, cfg.hidden)
-    with torch.no_grad():
-        off_s = _time(lambda: net(xb, net.initial_state(
-            {k: v.expand(32, -1) for k, v in first.items()})), 3)  # fmt: skip
-        ref_off_s = _time(lambda: ref(rb), 3)
+    with torch.inference_mode():
+        s32 = net.initial_state({k: v.expand(32, -1) for k, v in first.items()})
+        off = _interleaved({"net": lambda: net(xb, s32), "ref": lambda: ref(rb)}, 1,
+                           args.rounds)  # fmt: skip
     frames = 32 * 500
     steps = _estimator_steps(args.model, args.tta, args.frames) if args.model else {}
     res = {
-        "stream_ms_per_frame": stream_s * 1e3,
-        "ref_lstm_stream_ms_per_frame": ref_stream_s * 1e3,
-        "stream_ratio_to_ref": stream_s / ref_stream_s,
-        "offline_frames_per_s": frames / off_s,
-        "ref_lstm_offline_frames_per_s": frames / ref_off_s,
-        "offline_ratio_to_ref": (frames / off_s) / (frames / ref_off_s),
+        "stream_ms_per_frame": stream["frame"] * 1e3,
+        "module_stream_ms_per_frame": stream["module"] * 1e3,
+        "ref_lstm_stream_ms_per_frame": stream["ref"] * 1e3,
+        "stream_ratio_to_ref": stream["frame"] / stream["ref"],
+        "module_stream_ratio_to_ref": stream["module"] / stream["ref"],
+        "offline_frames_per_s": frames / off["net"],
+        "ref_lstm_offline_frames_per_s": frames / off["ref"],
+        "offline_ratio_to_ref": off["ref"] / off["net"],
         "hidden": cfg.hidden,
         "layers": cfg.layers,
         "parameters": int(sum(p.numel() for p in net.parameters())),
         "threads": 1,
+        "rounds": args.rounds,
         **steps,
     }
     for k, v in res.items():

@@ -1,6 +1,6 @@
 import torch
 
-from grip.kinematics.model import STAGE_DIMS, KinematicsNet, KinematicsNetConfig
+from grip.kinematics.model import STAGE_DIMS, STAGES, FrameStep, KinematicsNet, KinematicsNetConfig
 
 
 def _net(seed=0):
@@ -36,6 +36,22 @@ def test_streaming_equals_offline():
     for k in full:
         torch.testing.assert_close(torch.cat([s[k] for s in steps], 1), full[k], atol=1e-5,
                                    rtol=1e-5)  # fmt: skip
+
+
+def test_frame_step_equals_the_network_frame_by_frame():
+    """The streaming path (cells called directly) gives forward's outputs and states."""
+    net = _net().eval()
+    x = torch.randn(3, 25, 70)
+    step = FrameStep(net)
+    with torch.inference_mode():
+        full, end = net(x, net.initial_state(_first(3)))
+        flat = step.flat_state(net.initial_state(_first(3)))
+        rows = torch.stack([step(x[:, t], flat) for t in range(25)], 1)
+    torch.testing.assert_close(rows, torch.cat([full[k] for k in STAGES], -1), atol=1e-5,
+                               rtol=1e-5)  # fmt: skip
+    for k in STAGES:
+        for got, want in zip(step.state(flat)[k], end[k], strict=True):
+            torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
 
 
 def test_one_optimizer_step_lowers_the_loss():
