@@ -7,6 +7,12 @@ raw_mj_steps_per_s is the share of time left to physics (target >= 0.5: observat
 and reward must not dominate).
 
     python benchmarks/env_steps.py [--steps 3000] [--reference REF.npz] [--json out.json]
+    python benchmarks/env_steps.py --batch 16 --threads 1   # the batched env (envs/batched.py)
+
+With ``--batch N`` the figures are those of :class:`envs.batched.BatchedTrackingEnv` stepping N
+environments (``--threads`` physics threads, 0: all cores) against the same single-thread raw
+``mj_step`` rate: with one thread the physics share compares with the single env's; with more
+it can exceed 1 (that is the parallel speed-up).
 """
 
 from __future__ import annotations
@@ -19,8 +25,10 @@ from pathlib import Path
 
 
 def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
-              amp_window: int = 10) -> dict:  # fmt: skip
-    """Env steps/s and raw mj_step/s (best of ``repeats``), single process, single thread."""
+              amp_window: int = 10, batch: int = 0, threads: int = 1) -> dict:  # fmt: skip
+    """Env steps/s and raw mj_step/s (best of ``repeats``), single process, single thread
+    (``batch`` > 0: that many environments in a batched env with ``threads`` physics
+    threads)."""
     import time
 
     import mujoco
@@ -40,6 +48,29 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
             if term or trunc:
                 env.reset()
         return time.perf_counter() - t0
+
+    if batch > 0:
+        from envs.batched import BatchedTrackingEnv
+
+        cfg = env.cfg
+        envs, compiled = [], {}
+        for i in range(batch):
+            e = GripTrackingEnv(cfg, env.reference, compiled_models=compiled)
+            e.reset(seed=i)
+            envs.append(e)
+        bat = BatchedTrackingEnv(envs, threads)
+        actions = np.zeros((batch, *env.action_space.shape), dtype=np.float32)
+        rounds = max(1, steps // batch)
+
+        def run_env() -> float:  # (N env steps per call)
+            for i in range(batch):
+                bat.reset(i, seed=i)
+            t0 = time.perf_counter()
+            for _ in range(rounds):
+                _, _, term, trunc, _ = bat.step(actions)
+                for i in np.flatnonzero(term | trunc).tolist():
+                    bat.reset(i)
+            return (time.perf_counter() - t0) * steps / (rounds * batch)
 
     env.reset(seed=0)
     model = env.model
@@ -67,6 +98,8 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
         "substeps": env.cfg.substeps,
         "physics_share": env_sps * env.cfg.substeps / raw_sps,
         "steps": steps,
+        "batch": batch,
+        "threads": threads if batch > 0 else 1,
     }
 
 
@@ -83,13 +116,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=5, help="best of N timings (default 5)")
     ap.add_argument("--amp-window", type=int, default=10,
                     help="AMP frames kept for the discriminator (0: none; default 10)")
+    ap.add_argument("--batch", type=int, default=0,
+                    help="time a batched env of this many environments (0: one GripTrackingEnv)")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="physics threads of the batched env (0: all cores; default 1)")
     ap.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     args = ap.parse_args(argv)
-    if args.steps < 1 or args.repeats < 1:
-        ap.error("--steps and --repeats must be >= 1")
+    if args.steps < 1 or args.repeats < 1 or args.batch < 0 or args.threads < 0:
+        ap.error("--steps and --repeats must be >= 1, --batch and --threads >= 0")
     try:
         res = bench_env(args.steps, str(args.reference) if args.reference else None, args.repeats,
-                        args.amp_window)  # fmt: skip
+                        args.amp_window, args.batch, args.threads)  # fmt: skip
     except (OSError, ReferenceError) as e:
         print(f"env_steps: error: {e}", file=sys.stderr)
         return 2

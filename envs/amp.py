@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from envs.observations import heading_matrix
+from envs.observations import heading_matrices, heading_matrix
 from grip.core import skeleton as sk
 
 KEY_JOINTS: tuple[int, ...] = (20, 21, 7, 8)
@@ -40,20 +40,6 @@ PARTS: dict[str, slice] = {k: slice(int(e) - n, int(e))
 """Where each part of an AMP frame lies (the module docstring's table, in order)."""
 FRAME_DIM = PARTS["key_pos"].stop
 """Length of one AMP frame (163)."""
-
-
-def heading_matrices(root_rot: np.ndarray) -> np.ndarray:
-    """``(..., 3, 3)`` yaw rotations whose x axis is the pelvis' facing direction (vectorised
-    :func:`envs.observations.heading_matrix`)."""
-    fx, fy = root_rot[..., 0, 2], root_rot[..., 1, 2]
-    n = np.hypot(fx, fy)
-    ok = n > 1e-9
-    c = np.where(ok, fx / np.where(ok, n, 1.0), 1.0)
-    s = np.where(ok, fy / np.where(ok, n, 1.0), 0.0)
-    h = np.zeros((*root_rot.shape[:-2], 3, 3))
-    h[..., 0, 0], h[..., 0, 1], h[..., 1, 0], h[..., 1, 1] = c, -s, s, c
-    h[..., 2, 2] = 1.0
-    return h
 
 
 def amp_features(

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from envs.batched import BatchedTrackingEnv
 from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
@@ -36,3 +37,24 @@ def make_tracking_env(env_cfg: TrackingEnvConfig, categories: tuple[str, ...],
         env = ActionRepeat(env, env_cfg.action_repeat)
     env.reset(seed=seed)
     return env
+
+
+def make_batched_tracking_env(
+    env_cfg: TrackingEnvConfig, categories: tuple[str, ...], seeds: list[int], threads: int = 0
+) -> BatchedTrackingEnv:
+    """``len(seeds)`` training environments stepped together (:class:`~envs.batched.
+    BatchedTrackingEnv`), environment ``i`` reset with ``seeds[i]``: the same transitions as
+    ``make_tracking_env(env_cfg, categories, seeds[i])`` for each. ``threads``: physics threads
+    (0: the cores this process may use)."""
+    ref = select_clips(load_reference(env_cfg.reference), categories)
+    envs, compiled = [], {}
+    for seed in seeds:
+        env = GripTrackingEnv(env_cfg, ref, compiled_models=compiled)
+        env.reset(seed=seed)
+        envs.append(env)
+    return BatchedTrackingEnv(envs, threads)
+
+
+make_tracking_env.batched = make_batched_tracking_env  # type: ignore[attr-defined]
+"""The batched form a trainer's ``make_vec_env`` uses with ``ppo.vec_env = "batched"``
+(:class:`policies.vec_env.EnvMaker`)."""

@@ -48,6 +48,20 @@ def heading_matrix(root_rot: np.ndarray) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def heading_matrices(root_rot: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` yaw rotations whose x axis is the pelvis' facing direction (vectorised
+    :func:`heading_matrix`)."""
+    fx, fy = root_rot[..., 0, 2], root_rot[..., 1, 2]
+    n = np.hypot(fx, fy)
+    ok = n > 1e-9
+    c = np.where(ok, fx / np.where(ok, n, 1.0), 1.0)
+    s = np.where(ok, fy / np.where(ok, n, 1.0), 0.0)
+    h = np.zeros((*root_rot.shape[:-2], 3, 3))
+    h[..., 0, 0], h[..., 0, 1], h[..., 1, 0], h[..., 1, 1] = c, -s, s, c
+    h[..., 2, 2] = 1.0
+    return h
+
+
 def observation_parts(
     variant: str,
     h: np.ndarray,
@@ -107,6 +121,55 @@ def observation_parts(
     self_vec = np.concatenate([pos[0, 2:3], vecs[:_N_SELF_VEC].ravel(), six[:n].ravel()])
     kin = np.concatenate([six[n + _N_IMU :].ravel(), six[n : n + _N_IMU].ravel(),
                           vecs[_N_SELF_VEC:].ravel()])  # fmt: skip
+    return kin, self_vec
+
+
+def observation_parts_batch(
+    variant: str,
+    h: np.ndarray,
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    est_pos: np.ndarray,
+    est_leaf_rot: np.ndarray,
+    est_vel: np.ndarray,
+    est_leaf_angvel: np.ndarray,
+    est_root_pos: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`observation_parts` of B states at once (the batched training env's).
+
+    Args:
+        variant: As :func:`observation_parts`.
+        h: ``(B, 3, 3)`` heading matrices.
+        sim_pvw: ``(B, 3, J, 3)``; sim_rot: ``(B, J, 3, 3)``; est_pos: ``(B, J, 3)``;
+            est_leaf_rot: ``(B, 4, 3, 3)``; est_vel: ``(B, 6, 3)``; est_leaf_angvel:
+            ``(B, 4, 3)``; est_root_pos: ``(B, 3)``: the arguments of
+            :func:`observation_parts` stacked.
+
+    Returns:
+        ``kinematic (B, kinematic_dim(variant))`` and ``self (B, SELF_DIM)`` (equal to the
+        unbatched function's to float rounding: its 3 x 3 products may sum in another order).
+    """
+    b = h.shape[0]
+    pos, vel, w = sim_pvw[:, 0], sim_pvw[:, 1], sim_pvw[:, 2]
+    rel = pos - pos[:, :1]
+    rows = [rel[:, 1:], vel, w, est_leaf_angvel - w[:, _IMU]]
+    if variant != "OA":
+        rows.append(est_vel - vel[:, _VEL])
+    if variant == "OAV_Jrel":
+        rows += [est_pos - rel, est_pos]
+    elif variant == "OAV_Jglo":
+        rows += [(est_root_pos[:, None] + est_pos) - pos, est_pos]
+    vecs = np.concatenate(rows, axis=1) @ h
+    e_leaf = est_leaf_rot
+    d_rot = e_leaf @ np.swapaxes(sim_rot[:, _IMU], -1, -2)
+    cols = np.concatenate([sim_rot[..., :2], e_leaf[..., :2], d_rot @ h[:, None, :, :2]], axis=1)
+    six = (np.swapaxes(cols, -1, -2).reshape(b, -1, 3) @ h).reshape(b, -1, 6)
+    n = sk.N_JOINTS
+    self_vec = np.concatenate([pos[:, 0, 2:3], vecs[:, :_N_SELF_VEC].reshape(b, -1),
+                               six[:, :n].reshape(b, -1)], axis=1)  # fmt: skip
+    kin = np.concatenate([six[:, n + _N_IMU :].reshape(b, -1),
+                          six[:, n : n + _N_IMU].reshape(b, -1),
+                          vecs[:, _N_SELF_VEC:].reshape(b, -1)], axis=1)  # fmt: skip
     return kin, self_vec
 
 

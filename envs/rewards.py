@@ -6,8 +6,6 @@ Each function returns raw, unweighted terms; the environment multiplies them by
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from envs.config import RewardConfig
@@ -46,7 +44,9 @@ def imitation_terms(
     sq = np.einsum("kji,kji->kj", e, e)
     ang = rotation_angles(sim_rot, ref_rot)
     tot = sq.sum(axis=1)
-    x = np.array([tot[0], np.dot(ang, ang), tot[1], tot[2]])
+    # (products then sums, not dot products: BLAS may fuse them, and the batched version
+    # below gives the same bits only for the same operations)
+    x = np.array([tot[0], (ang * ang).sum(), tot[1], tot[2]])
     x = x * (1.0 / ang.size) if cfg.form == "mean_sq" else np.sqrt(x)
     r = np.exp(-np.array([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel]) * x)
     return dict(zip(IMITATION_TERMS, r.tolist(), strict=True)), sq
@@ -69,9 +69,42 @@ def root_velocity_term(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: floa
         term a body that walks too slowly loses nothing for it).
     """
     e = (np.asarray(sim_disp, dtype=np.float64) - ref_disp) / seconds
-    return math.exp(-k * float(e @ e))
+    return float(np.exp(-k * (e * e).sum()))
 
 
 def mechanical_power(torque: np.ndarray, joint_vel: np.ndarray) -> float:
     """Sum over actuated DoF of ``|tau * qdot|``, W (GRIP eq. 9 before the ``-alpha`` weight)."""
     return float(np.abs(torque * joint_vel).sum())
+
+
+def imitation_terms_batch(
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    ref_pvw: np.ndarray,
+    ref_rot: np.ndarray,
+    cfg: RewardConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`imitation_terms` of B states at once (the batched training env's).
+
+    Args:
+        sim_pvw, ref_pvw: ``(B, 3, J, 3)``; sim_rot, ref_rot: ``(B, J, 3, 3)``.
+        cfg: As :func:`imitation_terms`.
+
+    Returns:
+        ``(B, 4)`` terms in :data:`IMITATION_TERMS` order and ``(B, 3, J)`` squared errors.
+    """
+    e = sim_pvw - ref_pvw
+    sq = np.einsum("bkji,bkji->bkj", e, e)
+    tr = np.einsum("bjac,bjac->bj", sim_rot, ref_rot)
+    ang = np.arccos(np.minimum(np.maximum((tr - 1.0) * 0.5, -1.0), 1.0))
+    tot = sq.sum(axis=2)
+    x = np.stack([tot[:, 0], (ang * ang).sum(axis=1), tot[:, 1], tot[:, 2]], axis=1)
+    x = x * (1.0 / ang.shape[1]) if cfg.form == "mean_sq" else np.sqrt(x)
+    return np.exp(-np.array([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel]) * x), sq
+
+
+def root_velocity_terms(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: float,
+                        k: float) -> np.ndarray:  # fmt: skip
+    """:func:`root_velocity_term` of ``(B, 2)`` displacements: ``(B,)``."""
+    e = (sim_disp - ref_disp) / seconds
+    return np.exp(-k * (e * e).sum(axis=1))

@@ -3,6 +3,7 @@ subjects switched in (the training task and the inference pipeline share it)."""
 
 from __future__ import annotations
 
+import copy
 import functools
 import types
 
@@ -30,13 +31,19 @@ class HumanoidScenes:
             (:func:`envs.terrain.make_scene`).
         heightfield_cell_m: Resolution of a terrain height field, m.
         max_scenes: Scenes kept (the oldest is dropped).
+        compiled: Compiled models by (scene, subject), shared by the ``HumanoidScenes`` of
+            environments with the same settings and clips (a batch of training environments:
+            each compiles a scene and subject once, not once per environment); ``None``: this
+            object's own.
     """
 
     def __init__(self, cfg: HumanoidConfig, mjcf: MjcfConfig, terrain: str = "auto",
-                 heightfield_cell_m: float = 0.02, max_scenes: int = 16) -> None:  # fmt: skip
+                 heightfield_cell_m: float = 0.02, max_scenes: int = 16,
+                 compiled: dict | None = None) -> None:  # fmt: skip
         self.cfg, self.mjcf, self.terrain = cfg, mjcf, terrain
         self.cell_m, self.max_scenes = heightfield_cell_m, max_scenes
         self._scenes: dict[tuple, Humanoid] = {}
+        self._compiled = {} if compiled is None else compiled
 
     def _scene_key(self, objects: SceneObjects | None, tag) -> tuple:
         if self.terrain == "auto":
@@ -56,6 +63,18 @@ class HumanoidScenes:
             xml = add_heightfield(xml, hf)
         return mujoco.MjModel.from_xml_string(xml), hf
 
+    def _compiled_model(self, body: BodyParams, objects: SceneObjects | None, skey: tuple,
+                        bkey: tuple):  # fmt: skip
+        """The model (read only: copy it to simulate) and height field of a scene and subject,
+        compiled once."""
+        key = (skey, bkey)
+        hit = self._compiled.get(key)
+        if hit is None:
+            if len(self._compiled) >= 4 * self.max_scenes:
+                self._compiled.pop(next(iter(self._compiled)))
+            hit = self._compiled[key] = self._compile(body, objects, skey[0])
+        return hit
+
     def get(self, body: BodyParams, objects: SceneObjects | None = None, tag=None) -> Humanoid:
         """The humanoid of ``body`` in the scene of ``objects`` (``tag`` names that scene: scenes
         with objects are told apart by it, e.g. a clip index)."""
@@ -64,10 +83,11 @@ class HumanoidScenes:
         if h is not None:
             if h.key != bkey:
                 if not h.has(bkey):
-                    h.add(bkey, self._compile(body, objects, skey[0])[0])
+                    h.add(bkey, self._compiled_model(body, objects, skey, bkey)[0])
                 h.switch(bkey)
             return h
-        model, hf = self._compile(body, objects, skey[0])
+        model, hf = self._compiled_model(body, objects, skey, bkey)
+        model = copy.copy(model)  # (switching subjects changes a humanoid's model in place)
         terrain = None if hf is None else functools.partial(sample_heightmap, hf)
         top = 0.0 if hf is None else float(hf.heights.max())
         h = Humanoid(model, self.cfg, bkey, terrain, top)
@@ -83,6 +103,8 @@ def humanoid_config(cfg: TrackingEnvConfig) -> HumanoidConfig:
                           cfg.blowup_height_m, cfg.blowup_depth_m)  # fmt: skip
 
 
-def humanoid_scenes(cfg: TrackingEnvConfig) -> HumanoidScenes:
-    """The humanoids of a tracking env's settings (a policy's ``env_cfg``), one per scene."""
-    return HumanoidScenes(humanoid_config(cfg), cfg.mjcf, cfg.terrain, cfg.heightfield_cell_m)
+def humanoid_scenes(cfg: TrackingEnvConfig, compiled: dict | None = None) -> HumanoidScenes:
+    """The humanoids of a tracking env's settings (a policy's ``env_cfg``), one per scene
+    (``compiled``: see :class:`HumanoidScenes`)."""
+    return HumanoidScenes(humanoid_config(cfg), cfg.mjcf, cfg.terrain, cfg.heightfield_cell_m,
+                          compiled=compiled)  # fmt: skip

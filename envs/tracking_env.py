@@ -46,6 +46,8 @@ class GripTrackingEnv(gym.Env):
         reference: Clips to track; default: the file ``cfg.reference`` or the bundled sample.
         render_mode: ``None`` or ``"rgb_array"`` (needs an OpenGL backend, e.g.
             ``MUJOCO_GL=egl``).
+        compiled_models: A cache of compiled models shared with environments of the same
+            settings and reference (:class:`envs.scenes.HumanoidScenes`); ``None``: its own.
 
     Observation: ``spaces.Dict`` with ``"sensor"`` (the KinematicsNet inputs of the next frame),
     ``"kinematic"`` (State Difference, :func:`envs.observations.state_difference`), ``"self"``
@@ -65,7 +67,8 @@ class GripTrackingEnv(gym.Env):
 
     def __init__(self, cfg: TrackingEnvConfig | None = None,
                  reference: ReferenceSource | None = None,
-                 render_mode: str | None = None) -> None:  # fmt: skip
+                 render_mode: str | None = None,
+                 compiled_models: dict | None = None) -> None:  # fmt: skip
         self.cfg = cfg = cfg or TrackingEnvConfig()
         if reference is None:
             reference = ReferenceSet.load(cfg.reference or SAMPLE_REFERENCE)
@@ -85,7 +88,7 @@ class GripTrackingEnv(gym.Env):
             lengths[i] = c.n_frames
         self._clip_len = lengths
         self._clip_p = lengths / lengths.sum()  # random starts pick clips by length
-        self._scenes = humanoid_scenes(cfg)
+        self._scenes = humanoid_scenes(cfg, compiled_models)
         self._grid = heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m)
         self._hm = np.zeros(len(self._grid))
         clip0 = reference.clip(0)

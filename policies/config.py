@@ -15,7 +15,7 @@ from grip.core.checks import check
 
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
-VEC_ENVS: tuple[str, ...] = ("subproc", "dummy")
+VEC_ENVS: tuple[str, ...] = ("subproc", "dummy", "batched")
 
 GRIP_NET_ARCH: tuple[int, ...] = (2048, 1536, 1024, 1024, 512, 512)
 """GRIP's policy MLP (8.6M parameters); ``--set ppo.net_arch=[2048,1536,1024,1024,512,512]``."""
@@ -65,7 +65,10 @@ class PPOConfig:
         activation: :data:`ACTIVATIONS` (GRIP: SiLU).
         log_std_init: Initial log standard deviation of the Gaussian actions (PHC: -2.9).
         n_envs: Environments; stepped in parallel processes with ``vec_env = "subproc"``.
-        vec_env: ``"subproc"`` (one process per environment) or ``"dummy"`` (all in the learner).
+        vec_env: ``"subproc"`` (one process per environment), ``"dummy"`` (all in the learner,
+            one after the other) or ``"batched"`` (all in the learner, stepped by one call:
+            numpy over all environments at once, the physics in ``env_threads`` threads; the
+            same transitions as ``"dummy"``).
         n_steps: Steps per environment per rollout.
         batch_size: Minibatch size.
         n_epochs: Passes over each rollout.
@@ -83,6 +86,7 @@ class PPOConfig:
             from an exported policy without a value network (``grip policy train --init``),
             whose fresh critic would otherwise feed the policy meaningless advantages.
         threads: Torch threads of the learner (0: all cores).
+        env_threads: Physics threads of the ``"batched"`` vector env (0: all cores).
         device: Torch device of the learner (``"cpu"``, ``"cuda"``, ``"auto"``).
     """
 
@@ -107,6 +111,7 @@ class PPOConfig:
     clip_obs: float = 10.0
     critic_warmup_steps: int = 0
     threads: int = 0
+    env_threads: int = 0
     device: str = "cpu"
 
 
@@ -190,6 +195,7 @@ class PolicyRunConfig:
             (self.amp.loss in AMP_LOSSES, f"amp.loss must be one of {AMP_LOSSES}"),
             (self.amp.window >= 1, "amp.window must be >= 1"),
             (self.ppo.n_envs >= 1, "ppo.n_envs must be >= 1"),
+            (self.ppo.env_threads >= 0, "ppo.env_threads must be >= 0 (0 = all cores)"),
             (self.ppo.n_steps * self.ppo.n_envs >= self.ppo.batch_size,
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),

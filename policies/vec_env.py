@@ -29,11 +29,81 @@ class EnvMaker(Protocol):
     ``make_env(env_cfg, categories, seed)`` returns one gymnasium environment, reset with
     ``seed``, that tracks the clips of ``categories`` (category globs; all when empty). The
     tracking env's is :func:`envs.factory.make_tracking_env`. It must pickle, for subprocess
-    vector envs (a module-level function does).
+    vector envs (a module-level function does). For ``ppo.vec_env = "batched"`` it also has
+    an attribute ``batched(env_cfg, categories, seeds, threads)`` that returns the
+    environments of all ``seeds`` as one batch (:class:`BatchedVecEnv`).
     """
 
     def __call__(self, env_cfg: TrackingEnvConfig, categories: tuple[str, ...],
                  seed: int) -> Any: ...  # fmt: skip
+
+
+class BatchedVecEnv(VecEnv):
+    """SB3 ``VecEnv`` over a batch of environments stepped by one call
+    (``envs.batched.BatchedTrackingEnv``, which an :class:`EnvMaker`'s ``batched`` attribute
+    builds): auto-reset with ``info["terminal_observation"]`` and ``"TimeLimit.truncated"``
+    as :class:`DummyVecEnv` does, so both give the same rollouts.
+
+    ``batch`` needs ``num_envs``, ``observation_space``, ``action_space``, ``envs`` (the
+    environments, for ``get_attr``/``env_method``), ``step(actions) -> (obs dict of (N, ...),
+    reward (N,), terminated (N,), truncated (N,), infos)``, ``reset(i, seed, options) ->
+    (obs, info)`` and ``close()``.
+    """
+
+    def __init__(self, batch: Any) -> None:
+        self.batch = batch
+        self.envs = batch.envs
+        super().__init__(batch.num_envs, batch.observation_space, batch.action_space)
+        self._actions: np.ndarray | None = None
+
+    def reset(self):
+        n = self.num_envs
+        obs = {k: np.zeros((n, *s.shape), s.dtype) for k, s in self.observation_space.items()}
+        for i in range(n):
+            o, self.reset_infos[i] = self.batch.reset(
+                i, seed=self._seeds[i], options=self._options[i] or None
+            )
+            for k in obs:
+                obs[k][i] = o[k]
+        self._reset_seeds()
+        self._reset_options()
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        obs, rew, term, trunc, infos = self.batch.step(self._actions)
+        dones = term | trunc
+        for i, info in enumerate(infos):
+            info["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
+        for i in np.flatnonzero(dones).tolist():
+            infos[i]["terminal_observation"] = {k: v[i].copy() for k, v in obs.items()}
+            o, self.reset_infos[i] = self.batch.reset(i)
+            for k in obs:
+                obs[k][i] = o[k]
+        return obs, rew.astype(np.float32), dones, infos
+
+    def close(self) -> None:
+        self.batch.close()
+
+    def get_images(self):
+        return [env.render() for env in self.envs]
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        return [getattr(self.envs[i], attr_name) for i in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        for i in self._get_indices(indices):
+            setattr(self.envs[i], attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None,
+                   **method_kwargs) -> list[Any]:  # fmt: skip
+        return [getattr(self.envs[i], method_name)(*method_args, **method_kwargs)
+                for i in self._get_indices(indices)]  # fmt: skip
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
 
 
 class AmpReward(VecEnvWrapper):
@@ -68,6 +138,13 @@ def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed:
     """The vector env of one training stage: ``cfg.ppo.n_envs`` environments from
     ``make_env``, seeded ``seed``, ``seed + 1000``, ..."""
     env_cfg = cfg.env_config(stage, reference)
+    if cfg.ppo.vec_env == "batched":
+        batched = getattr(make_env, "batched", None)
+        if batched is None:
+            raise ValueError("ppo.vec_env = 'batched' needs an env maker with a 'batched' form "
+                             "(envs.factory.make_tracking_env has one)")  # fmt: skip
+        seeds = [seed + 1000 * i for i in range(cfg.ppo.n_envs)]
+        return BatchedVecEnv(batched(env_cfg, stage.categories, seeds, cfg.ppo.env_threads))
     fns = [functools.partial(make_env, env_cfg, stage.categories, seed + 1000 * i)
            for i in range(cfg.ppo.n_envs)]  # fmt: skip
     if cfg.ppo.vec_env == "subproc" and cfg.ppo.n_envs > 1:

@@ -603,3 +603,33 @@ def test_the_shipped_policy_file_loads():
     for m in members:  # stored with ppo.fixed_std = false and ppo.target_kl = 0 (removed since)
         cfg = policy_config_from_dict(json.loads(m["config"]), "member", training=True)
         assert cfg.env.kinematic_obs == "OAV_Jrel"
+
+
+def test_batched_vec_env_trains_the_same_policy_as_dummy(tmp_path):
+    """``ppo.vec_env = "batched"`` gives the transitions of ``"dummy"``, so the same seed trains
+    the same networks (the layouts are interchangeable)."""
+    import torch
+
+    base = _tiny()
+    runs = {}
+    for kind in ("dummy", "batched"):
+        cfg = dataclasses.replace(
+            base, env=dataclasses.replace(base.env, action_repeat=3),
+            ppo=dataclasses.replace(base.ppo, vec_env=kind, env_threads=2),
+            stage1=dataclasses.replace(base.stage1, timesteps=128, max_episode_frames=45),
+            stage2=dataclasses.replace(base.stage2, timesteps=0), checkpoint_every=100,
+        )  # fmt: skip
+        d = tmp_path / kind
+        d.mkdir()
+        (d / "config.json").write_text(json.dumps({"config": run_config_dict(cfg)}))
+        torch.manual_seed(0)  # (the discriminator's initial weights come from torch's RNG)
+        tr = PolicyTrainer(cfg, d, SAMPLE_REFERENCE, make_tracking_env)
+        tr.train()
+        runs[kind] = tr
+    a, b = runs["dummy"], runs["batched"]
+    drop = {"wall_s"}
+    assert [{k: v for k, v in h.items() if k not in drop} for h in b.history] == [
+        {k: v for k, v in h.items() if k not in drop} for h in a.history
+    ]
+    for p, q in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
+        torch.testing.assert_close(q, p, rtol=0, atol=0)

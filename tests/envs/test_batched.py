@@ -1,0 +1,97 @@
+"""The batched vector env gives the transitions of N separate environments (same seeds and
+actions), resets and early termination included: the physics bit for bit; observations,
+rewards and infos bit for bit on the machine this was written on (the tolerances leave room for
+a BLAS that sums the batched 3 x 3 products in another order)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from envs.batched import BatchedTrackingEnv
+from envs.config import TrackingEnvConfig
+from envs.tracking_env import GripTrackingEnv
+from envs.wrappers import ActionRepeat
+from policies.vec_env import BatchedVecEnv
+
+N = 3
+
+
+def _single(cfg, reference, seed):
+    env = GripTrackingEnv(cfg, reference)
+    if cfg.action_repeat > 1:
+        env = ActionRepeat(env, cfg.action_repeat)
+    env.reset(seed=seed)
+    return env
+
+
+def _batched(cfg, reference, seeds, threads):
+    envs, compiled = [], {}
+    for s in seeds:
+        e = GripTrackingEnv(cfg, reference, compiled_models=compiled)
+        e.reset(seed=s)
+        envs.append(e)
+    return BatchedVecEnv(BatchedTrackingEnv(envs, threads))
+
+
+@pytest.mark.parametrize(("repeat", "threads", "align"), [(3, 2, True), (1, 1, False)])
+def test_batched_matches_separate_envs(reference, repeat, threads, align):
+    cfg = TrackingEnvConfig(
+        action_repeat=repeat,
+        termination_dist_m=0.15,
+        max_episode_frames=40,
+        min_episode_frames=20,
+        align_root_xy=align,
+    )
+    seeds = [7 + 1000 * i for i in range(N)]
+    ref = DummyVecEnv([functools.partial(_single, cfg, reference, s) for s in seeds])
+    bat = _batched(cfg, reference, seeds, threads)
+    ref.seed(3)
+    bat.seed(3)
+    o1, o2 = ref.reset(), bat.reset()
+    for k in o1:
+        np.testing.assert_allclose(o2[k], o1[k], rtol=1e-6, atol=1e-6)
+    rng = np.random.default_rng(0)
+    dones = 0
+    unstable = 0
+    for step in range(60):
+        a = rng.uniform(-1, 1, (N, 69)).astype(np.float32) * (0.2 if step % 7 else 1.0)
+        if step == 20:  # a blow-up (pelvis far above the blow-up speed) ends an episode
+            for venv in (ref, bat):
+                venv.env_method("push_pelvis", np.array([0.0, 0.0, 1e6]), indices=[1])
+        o1, r1, d1, i1 = ref.step(a)
+        o2, r2, d2, i2 = bat.step(a)
+        np.testing.assert_array_equal(d2, d1)
+        dones += int(d1.sum())
+        np.testing.assert_allclose(r2, r1, rtol=1e-6, atol=1e-7)
+        for k in o1:
+            np.testing.assert_allclose(o2[k], o1[k], rtol=1e-6, atol=1e-6, err_msg=k)
+        for a1, a2 in zip(i1, i2, strict=True):
+            unstable += a1["sim_unstable"]
+            assert a1.keys() == a2.keys()
+            for key, v in a1.items():
+                if key == "terminal_observation":
+                    for kk in v:
+                        np.testing.assert_allclose(a2[key][kk], v[kk], rtol=1e-6, atol=1e-6)
+                elif isinstance(v, (float, np.ndarray)):
+                    np.testing.assert_allclose(a2[key], v, rtol=1e-6, atol=1e-6, err_msg=key)
+                else:
+                    assert a2[key] == v, key
+    assert dones >= 2 and unstable == 1  # resets and the blow-up path were exercised
+    # the physics itself is bit for bit the same
+    for e1, e2 in zip(ref.envs, bat.envs, strict=True):
+        np.testing.assert_array_equal(e2.data.qpos, e1.unwrapped.data.qpos)
+    assert bat.env_method("set_termination_dist", 0.3) == [None] * N
+    assert bat.get_attr("termination_dist_m") == [0.3] * N
+    bat.close()
+
+
+def test_batched_refuses_mixed_configs(reference):
+    a = GripTrackingEnv(TrackingEnvConfig(), reference)
+    b = GripTrackingEnv(dataclasses.replace(TrackingEnvConfig(), action_scale=0.3), reference)
+    with pytest.raises(ValueError, match="same config"):
+        BatchedTrackingEnv([a, b])
