@@ -28,6 +28,7 @@ __all__ = [
     "make_split",
     "save_split",
     "segments",
+    "stratified_test_groups",
 ]
 
 SPLIT_FORMAT = "grip-prism-split"
@@ -123,6 +124,7 @@ def make_split(
     categories: Mapping[str, str] | None = None,
     frames_per_chunk: int | Mapping[str, int] = 1000,
     groups: Mapping[str, str] | None = None,
+    strata: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Chunk-level random train/test split, in the shape of PRISM's statistics JSON.
 
@@ -161,12 +163,19 @@ def make_split(
             variants and consecutive pieces) never straddle train and test. A group with any
             ``train_only`` chunk stays in train. The returned dict then also lists
             ``"groups": {"train": [...], "test": [...]}``.
+        strata: Optional group id -> stratum (e.g. the source a person was recorded by); needs
+            ``groups``. Test groups are then chosen within each stratum
+            (:func:`stratified_test_groups`): a stratum of two or more eligible groups gets
+            about ``test_fraction`` of its eligible chunks in test and at least one group on
+            each side; a stratum of one group stays in train. Groups missing from ``strata``
+            form one stratum of their own.
 
     Returns:
         The split dict described above.
 
     Raises:
-        ValueError: Duplicate ids, ``train_only`` ids not in ``chunk_ids``, or a bad fraction.
+        ValueError: Duplicate ids, ``train_only`` ids not in ``chunk_ids``, a bad fraction, or
+            ``strata`` without ``groups``.
     """
     ids = [str(i) for i in chunk_ids]
     if len(set(ids)) != len(ids):
@@ -178,6 +187,8 @@ def make_split(
     unknown = sorted(forced - set(ids))
     if unknown:
         raise ValueError(f"make_split: train_only ids not in chunk_ids: {unknown[:5]}")
+    if strata is not None and groups is None:
+        raise ValueError("make_split: strata need groups")
     eligible = sorted(set(ids) - forced)
     n_test = min(len(eligible), math.ceil(test_fraction * len(eligible) - 1e-9))
     group_lists: dict[str, list[str]] | None = None
@@ -193,14 +204,21 @@ def make_split(
             members.setdefault(str(groups[i]), []).append(i)
         blocked = {g for g, m in members.items() if forced.intersection(m)}
         names = sorted(g for g in members if g not in blocked)
-        perm = np.random.default_rng(seed).permutation(len(names))
         test_set = set()
         test_groups = []
-        for k in perm:
-            if len(test_set) >= n_test:
-                break
-            test_groups.append(names[k])
-            test_set.update(members[names[k]])
+        if strata is not None:
+            sizes = {g: len(members[g]) for g in names}
+            test_groups = stratified_test_groups(sizes, {g: strata.get(g, "") for g in names},
+                                                 test_fraction, seed)  # fmt: skip
+            for g in test_groups:
+                test_set.update(members[g])
+        else:
+            perm = np.random.default_rng(seed).permutation(len(names))
+            for k in perm:
+                if len(test_set) >= n_test:
+                    break
+                test_groups.append(names[k])
+                test_set.update(members[names[k]])
         group_lists = {
             "train": sorted(g for g in members if g not in set(test_groups)),
             "test": sorted(test_groups),
@@ -225,6 +243,65 @@ def make_split(
     if group_lists is not None:
         out["groups"] = group_lists
     return out
+
+
+#: Random greedy fills tried per stratum by :func:`stratified_test_groups`.
+STRATIFIED_TRIES = 256
+
+
+def stratified_test_groups(sizes: Mapping[str, int], strata: Mapping[str, str],
+                           test_fraction: float, seed: int) -> list[str]:  # fmt: skip
+    """The groups of a stratified group split's test side.
+
+    In each stratum with at least two groups, :data:`STRATIFIED_TRIES` random orders of its
+    groups are each filled greedily: a group joins the test side when that brings the test
+    side's size nearer to ``test_fraction`` of the stratum's size (the first group always joins,
+    and one group always stays in train). Each stratum draws from its own generator, seeded by
+    ``seed`` and the stratum's name, so that its choice does not depend on the other strata.
+    The fill nearest to the target wins; the first of equals.
+    So every such stratum has a group on each side and about the test fraction of its size in
+    test, as near as its group sizes allow, and the choice depends only on ``seed``, the sizes
+    and the names (not their order). A stratum of one group stays in train; with
+    ``test_fraction`` 0 nothing goes to test.
+
+    Args:
+        sizes: Group -> size (chunks).
+        strata: Group -> stratum, for every group of ``sizes``.
+        test_fraction: Wanted share of each stratum's size in test, in ``[0, 1]``.
+        seed: Seed of the random orders.
+
+    Returns:
+        The test groups, sorted.
+    """
+    by_stratum: dict[str, list[str]] = {}
+    for g in sorted(sizes):
+        by_stratum.setdefault(str(strata[g]), []).append(g)
+    chosen: list[str] = []
+    if test_fraction <= 0:
+        return chosen
+    for stratum in sorted(by_stratum):
+        names = by_stratum[stratum]
+        if len(names) < 2:
+            continue
+        target = test_fraction * sum(int(sizes[g]) for g in names)
+        rng = np.random.default_rng([seed, *stratum.encode("utf-8")])
+        best: list[str] = []
+        best_err = math.inf
+        for _ in range(STRATIFIED_TRIES):
+            picked: list[str] = []
+            total = 0
+            for i in rng.permutation(len(names)):
+                if len(picked) == len(names) - 1:
+                    break
+                n = int(sizes[names[i]])
+                if not picked or abs(total + n - target) < abs(total - target):
+                    picked.append(names[i])
+                    total += n
+            err = abs(total - target)
+            if err < best_err - 1e-9:
+                best, best_err = picked, err
+        chosen += best
+    return sorted(chosen)
 
 
 def save_split(split: Mapping[str, Any], path: str | os.PathLike[str]) -> None:

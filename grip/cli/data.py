@@ -10,6 +10,11 @@ from pathlib import Path
 
 from grip.cli.recordings import add_limit_arguments, limits_from_args
 
+# grip.dataset.build.SPLIT_MODES, not imported so that `grip --help` imports no numpy
+SPLIT_MODES = ("person", "clip")
+DEFAULT_CATEGORIES = Path("configs") / "categories.toml"
+"""The category map of the checkout (relative to its root)."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from grip.cli.common import add_group
@@ -28,12 +33,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "sensor noise, chunk into <=1000-frame sequences and write a train/test split.\n"
             "Parallel, resumable (finished clips are skipped), every file written atomically.\n"
             "The settings are recorded in OUT/settings.json before the first clip; a rerun with\n"
-            "other options is refused. A motion file that cannot be read or imported is named\n"
-            "(SKIPPED/FAILED, and in manifest.json), the others are built, and the exit status\n"
-            "is 1."
+            "options that change the clips is refused. A motion file that cannot be read or\n"
+            "imported is named (SKIPPED/FAILED, and in manifest.json), the others are built, and\n"
+            "the exit status is 1.\n"
+            "\n"
+            "Categories: each clip's own label (clips.csv, Bandai Namco's JSON, DeepMimic's name)\n"
+            "is translated by --categories into one vocabulary shared by every source (walk,\n"
+            "walk-turn, run, jump, ...; 'unknown' where the file has no entry); the label is kept\n"
+            "next to it. A clips.csv (columns file, category, optionally person) labels the clips\n"
+            "of its folder.\n"
+            "\n"
+            "Split (--split-by person, the default): no performer is on both sides. A clip's\n"
+            "group is its performer where the source names one (a clips.csv 'person' column;\n"
+            "HDM05: the actor of HDM_<actor>_...; CMU: the subject of <subject>_<trial>), else\n"
+            "the finest grouping the source allows (Bandai Namco: dataset and style, e.g.\n"
+            "bandai_namco/dataset-2/active; DeepMimic and unlabelled clips: the clip itself).\n"
+            "Test groups are chosen within each source, so that every source of two or more\n"
+            "groups has about --test-fraction of its sequences in test and a group on each side.\n"
+            "--split-by clip: whole clips at random (the split of datasets built before).\n"
+            "The split is computed from the finished clips: rerunning a finished OUT with other\n"
+            "--split-by/--split-seed/--test-fraction only splits it again, and with an edited\n"
+            "--categories file relabels its recordings; neither builds a clip again."
         ),
         epilog="example: grip data build --out data/prism_synth --workers 2\n"
-        "         grip data build --out data/small --motions ~/mocap/bvh --limit 20",
+        "         grip data build --out data/small --motions ~/mocap/bvh --limit 20\n"
+        "         grip data build --out data/prism_synth --split-by clip   (split again)",
     )
     b.add_argument("--out", required=True, type=Path, help="dataset folder (created/resumed)")
     b.add_argument("--motions", nargs="+", type=Path, default=None, metavar="DIR",
@@ -57,8 +81,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--height", type=float, default=1.70, help="body height, m (--fixed-body)")
     b.add_argument("--mass", type=float, default=70.0, help="body mass, kg (--fixed-body)")
     b.add_argument("--seed", type=int, default=0, help="base seed of noise and subjects")
+    b.add_argument("--split-by", choices=SPLIT_MODES, default="person",
+                   help="keep whole performers (else the source's finest grouping) or whole "
+                   "clips on one side of the split (default person)")  # fmt: skip
     b.add_argument("--test-fraction", type=float, default=0.2,
-                   help="share of clips in the test split (default 0.2)")  # fmt: skip
+                   help="share of the sequences in the test split, of each source's with "
+                   "--split-by person (default 0.2)")  # fmt: skip
+    b.add_argument("--split-seed", type=int, default=42, help="seed of the split (default 42)")
+    b.add_argument("--categories", type=Path, default=None, metavar="TOML",
+                   help="map of the sources' labels to shared categories (default: "
+                   "configs/categories.toml)")  # fmt: skip
     add_limit_arguments(b)
     b.set_defaults(func=cmd_build)
 
@@ -67,7 +99,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="summarise a dataset folder",
         description="Print recordings, frames, motion categories and per-category counts of a "
         "dataset folder: one built by 'grip data build', or any folder of PRISM recordings "
-        "(*.pkl, *.npz), e.g. the real PRISM dataset.",
+        "(*.pkl, *.npz), e.g. the real PRISM dataset. For a built folder also its split: the "
+        "split mode, groups, clips, sequences and frames per side, per source the groups and "
+        "sequences on each side and the test share, the groups of each side (split by person) "
+        "and the sequences of each category on each side.",
         epilog="example: grip data info data/prism_synth --json info.json",
     )
     i.add_argument("dir", type=Path, help="dataset folder")
@@ -119,28 +154,54 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=cmd_reference)
 
 
-def select_clips(roots: list[Path], limit: int | None) -> list[tuple[str, str, str]]:
-    """``(path, clip_id, category)`` of the clips under ``roots`` (``limit``: evenly spread)."""
-    return scan_motions(roots, limit)[0]
+def default_category_map():
+    """The checkout's ``configs/categories.toml`` (:class:`grip.motion.catalog.CategoryMap`),
+    ``None`` where the checkout has none (an installed package: categories stay the labels)."""
+    from grip.assets import REPO_ROOT
+
+    path = REPO_ROOT / DEFAULT_CATEGORIES
+    return category_map(path) if path.is_file() else None
 
 
-def scan_motions(roots: list[Path], limit: int | None
-                 ) -> tuple[list[tuple[str, str, str]], list[tuple[str, str]]]:  # fmt: skip
+def category_map(path: Path):
+    """:func:`grip.motion.catalog.load_category_map`, errors as :class:`CliError`."""
+    from grip.cli.errors import CliError
+    from grip.motion.catalog import load_category_map
+
+    try:
+        return load_category_map(path)
+    except (OSError, ValueError) as e:
+        raise CliError(f"--categories: {e}") from e
+
+
+def select_clips(roots: list[Path], limit: int | None, categories=None) -> list:
+    """The :class:`grip.dataset.build.ClipSpec` s of the clips under ``roots`` (``limit``:
+    evenly spread; ``categories``: a :class:`grip.motion.catalog.CategoryMap`, default
+    :func:`default_category_map`)."""
+    return scan_motions(roots, limit, categories)[0]
+
+
+def scan_motions(roots: list[Path], limit: int | None, categories=None
+                 ) -> tuple[list, list[tuple[str, str]]]:  # fmt: skip
     """The clips under ``roots`` as :func:`select_clips` gives them, and the files skipped.
 
     Returns:
-        ``(clips, skipped)``: ``(path, clip_id, category)`` triples (``limit``: evenly spread)
-        and ``(path, reason)`` of every candidate file the search could not read.
+        ``(clips, skipped)``: :class:`grip.dataset.build.ClipSpec` s (path, clip id, category,
+        label, group; ``limit``: evenly spread) and ``(path, reason)`` of every candidate file
+        the search could not read.
     """
     from grip.cli.errors import CliError
+    from grip.dataset.build import ClipSpec
     from grip.motion.catalog import scan_clips
 
+    if categories is None:
+        categories = default_category_map()
     clips, skipped = [], []
     for root in roots:
         if not root.is_dir():
             raise CliError(f"--motions {root}: not a folder")
-        refs, bad = scan_clips(root)
-        clips += [(str(c.path), c.clip_id, c.category) for c in refs]
+        refs, bad = scan_clips(root, categories)
+        clips += [ClipSpec(str(c.path), c.clip_id, c.category, c.label, c.group) for c in refs]
         skipped += [(str(b.path), b.reason) for b in bad]
     if not clips:
         raise CliError(f"no supported clips (bvh, amc, DeepMimic json, npz) under {roots}")
@@ -174,15 +235,24 @@ def cmd_build(args: argparse.Namespace) -> int:
         raise CliError("--noise-variants must be >= 1 (or 0 together with --clean)")
     if not 0.0 <= args.test_fraction < 1.0:
         raise CliError("--test-fraction must be in [0, 1)")
+    if args.split_seed < 0:
+        raise CliError("--split-seed must be >= 0")
     cfg = BuildConfig(noise_variants=args.noise_variants, clean_variant=args.clean,
                       vary_body=not args.fixed_body, height_m=args.height, mass_kg=args.mass,
-                      test_fraction=args.test_fraction, seed=args.seed)  # fmt: skip
-    clips, skipped = scan_motions(roots, args.limit)
+                      test_fraction=args.test_fraction, seed=args.seed,
+                      split_seed=args.split_seed, split_by=args.split_by)  # fmt: skip
+    cmap = category_map(args.categories) if args.categories else default_category_map()
+    if cmap is None:
+        print("no configs/categories.toml in this installation: categories are the sources' "
+              "own labels (pass --categories FILE)", file=sys.stderr)  # fmt: skip
+    clips, skipped = scan_motions(roots, args.limit, cmap)
+    counts: dict[str, int] = {}
     t0 = time.perf_counter()
     with tqdm(total=len(clips), desc="clips", unit="clip") as bar:
         try:
             results = build_dataset(clips, args.out, cfg, workers=args.workers,
-                                    progress=bar.update, skipped_files=skipped)  # fmt: skip
+                                    progress=bar.update, skipped_files=skipped,
+                                    counts=counts)  # fmt: skip
         except (ValueError, OSError) as e:
             raise CliError(str(e)) from e
     dt = time.perf_counter() - t0
@@ -193,9 +263,17 @@ def cmd_build(args: argparse.Namespace) -> int:
     print(format_summary(dataset_summary(args.out)))
     print(f"\nbuilt {len(built)}/{len(results)} clips in {dt:.1f} s "
           f"({frames / max(dt, 1e-9):.0f} recording frames/s incl. resumed clips)")  # fmt: skip
+    if counts.get("resumed"):
+        print(f"{counts['resumed']} clip(s) were finished before and not built again "
+              f"({counts['relabelled']} relabelled), {counts['built']} built in this run; "
+              f"split.json written anew (split by {cfg.split_by})")  # fmt: skip
     if short:
         print(f"{len(short)} built clip(s) gave no sequence (shorter than "
               f"{cfg.min_chunk_frames} frames at 100 Hz; 'note' in manifest.json)")  # fmt: skip
+    unmapped = sorted({c.label for c in clips if c.category == "unknown" and c.label})
+    if cmap is not None and unmapped:
+        print(f"{len(unmapped)} label(s) not in {cmap.source}, category 'unknown': "
+              + ", ".join(repr(u) for u in unmapped[:20]))  # fmt: skip
     if skipped:
         print(f"{len(skipped)} file(s) under --motions could not be read and were skipped "
               "(manifest.json 'skipped_files'):", file=sys.stderr)  # fmt: skip

@@ -4,18 +4,27 @@ Layout of a dataset folder::
 
     DIR/
       settings.json              build settings, written before the first clip (resume check)
-      manifest.json              build settings, one entry per clip (status, frames, files),
-                                 the files under --motions that could not be read (skipped_files)
-      split.json                 train/test lists of sequence ids + statistics (PRISM's shape)
+      manifest.json              build settings, one entry per clip (status, category, label,
+                                 group, frames, files), the files under --motions that could not
+                                 be read (skipped_files)
+      split.json                 train/test lists of sequence ids + statistics (PRISM's shape),
+                                 the split mode, its groups, their clips and a summary per source
       motions/<clip>.npz         retargeted ground-truth motion (grip.motion.Motion)
       sequences/<clip>_v<k>_seq<nnn>.npz   PRISM-format recordings, <= 1000 frames each
       done/<clip>.json           written last per clip: the clip is finished (resume marker)
 
 Every file is written atomically, a clip is complete only when its ``done`` marker exists, and a
 re-run skips complete clips, so an interrupted build resumes where it stopped. The settings are
-recorded in ``settings.json`` before the first clip is written, and a re-run with other settings
-is refused, so even a build killed before its manifest never mixes two settings. Temporary files
-of a killed build are removed when it resumes, and its worker processes end with it.
+recorded in ``settings.json`` before the first clip is written, and a re-run with settings that
+change the clips is refused, so even a build killed before its manifest never mixes two
+settings. Temporary files of a killed build are removed when it resumes, and its worker
+processes end with it.
+
+The split is computed from the finished clips at the end of every build, so a re-run with only
+other split settings (:data:`SPLIT_SETTINGS`) splits the dataset again without building a clip.
+A finished clip whose category or label no longer is what the clip search gives (the category
+map was edited) is relabelled in place: its recordings and motion file get the new names, its
+sensors are not synthesised again.
 """
 
 from __future__ import annotations
@@ -28,23 +37,25 @@ import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from grip.core.atomic import atomic_write_text
-from grip.core.runs import (
-    exit_with_parent,
-    record_settings,
-    remove_stale_temps,
-    require_same_settings,
-)
+from grip.core.runs import exit_with_parent, remove_stale_temps, require_same_settings
 
 MANIFEST = "manifest.json"
 SPLIT = "split.json"
 SETTINGS = "settings.json"
 _RESUME_HINT = "use another --out or the same options"
+SPLIT_MODES = ("person", "clip")
+"""``split_by`` values: whole groups (performers, else the source's finest grouping) or whole
+clips per side."""
+SPLIT_SETTINGS = ("test_fraction", "split_seed", "split_by")
+"""The :class:`BuildConfig` fields that only choose the split; a finished dataset may be split
+again with other values (its clips are kept)."""
 
 
 @dataclass(frozen=True)
@@ -61,10 +72,15 @@ class BuildConfig:
         min_chunk_frames: Shortest tail (or whole short clip) kept as a sequence.
         float32: Store sensor and pose arrays as float32 (translations stay float64), as
             PRISM does for its poses; halves the dataset size.
-        test_fraction: Share of clips in the test split (split by clip: all variants and
-            chunks of a clip land in the same split, so no motion leaks across).
+        test_fraction: Share of the sequences in the test split (of each source's, with
+            ``split_by="person"``).
         split_seed: Seed of the split (PRISM used 42).
         seed: Base seed of noise and body draws; each clip derives its own from its id.
+        split_by: ``"person"``: whole groups per side, a group being a clip's performer where
+            the source names one, else the source's finest grouping
+            (:func:`grip.motion.catalog.clip_group`), chosen within each source
+            (:func:`dataset_split`); ``"clip"``: whole clips per side, drawn as before split
+            modes existed. Either way all variants and chunks of a clip share a side.
     """
 
     noise_variants: int = 1
@@ -78,6 +94,29 @@ class BuildConfig:
     test_fraction: float = 0.2
     split_seed: int = 42
     seed: int = 0
+    split_by: str = "person"
+
+    def __post_init__(self) -> None:
+        if self.split_by not in SPLIT_MODES:
+            raise ValueError(f"split_by must be one of {SPLIT_MODES}, got {self.split_by!r}")
+
+
+class ClipSpec(NamedTuple):
+    """One clip to build: where it is and what the clip search says about it.
+
+    Attributes:
+        path: The clip's file.
+        clip_id: ``"<top folder>/<name>"``.
+        category: Shared category (``configs/categories.toml``) or ``"unknown"``.
+        label: The source's own label, ``""`` when none.
+        group: The clip's group in a split by person (``""``: the clip itself).
+    """
+
+    path: str
+    clip_id: str
+    category: str = "unknown"
+    label: str = ""
+    group: str = ""
 
 
 @dataclass
@@ -96,6 +135,8 @@ class ClipResult:
     zmp_outside_frames: int = 0  # of those, frames whose ZMP lies > 3 cm outside the insole cells
     error: str = ""  # why it failed; always names the source file
     note: str = ""  # e.g. why a finished clip gave no sequence
+    label: str = ""  # the source's own label of the motion
+    group: str = ""  # its group in a split by person ("": the clip itself)
 
 
 def clip_seed(clip_id: str, base: int) -> int:
@@ -121,10 +162,13 @@ def safe_name(clip_id: str) -> str:
     return clip_id.replace("/", "__")
 
 
-def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
-                 cfg: BuildConfig) -> ClipResult:  # fmt: skip
-    """Import, retarget, synthesise and chunk one clip; runs in a worker process."""
-    from grip.motion.catalog import load_clip
+def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
+    """Import, retarget, synthesise and chunk one clip; runs in a worker process.
+
+    The recordings and the motion file carry ``clip.category`` (recordings also
+    ``extras["label"]``), whatever a search of the clip's file alone would say.
+    """
+    from grip.motion.catalog import clip_ref, load_clip
     from grip.motion.retarget import retarget
     from prism_tools.chunking import chunk_recording
     from prism_tools.io import save_recording
@@ -133,10 +177,13 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
 
     t0 = time.perf_counter()
     out = Path(out_dir)
+    clip_id = clip.clip_id
     name = safe_name(clip_id)
-    res = ClipResult(clip_id=clip_id, status="failed", category=category, source=clip_path)
+    res = ClipResult(clip_id=clip_id, status="failed", category=clip.category, source=clip.path,
+                     label=clip.label, group=clip.group)  # fmt: skip
     try:
-        src = load_clip(clip_path)
+        ref = replace(clip_ref(clip.path), clip_id=clip_id, category=clip.category)
+        src = load_clip(ref)
         variants: list[tuple[str, bool, int]] = [
             (f"v{k}", True, k) for k in range(cfg.noise_variants)
         ]
@@ -152,6 +199,7 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
                     motion.save(out / "motions" / f"{name}.npz")
             motion = motions[k]
             rec = recording_from_motion(motion, SynthConfig(), seed=seed + k, noise=noisy)
+            rec.extras["label"] = clip.label
             res.synth_frames += rec.n_frames
             res.zmp_outside_frames += int(rec.extras.get("insole_zmp_outside_frames", 0))
             if cfg.float32:
@@ -168,13 +216,56 @@ def process_clip(clip_path: str, clip_id: str, category: str, out_dir: str,
             res.note = (f"no sequence: {res.frames} frames at 100 Hz, fewer than the "
                         f"{cfg.min_chunk_frames} a sequence needs")  # fmt: skip
     except Exception as e:  # one bad clip must not stop the build (MemoryError, RecursionError..)
-        res.error = _error_text(clip_path, e)
+        res.error = _error_text(clip.path, e)
         if os.environ.get("GRIP_DEBUG"):
             res.error += "\n" + traceback.format_exc()
     res.seconds = time.perf_counter() - t0
     if res.status == "done":
-        atomic_write_text(out / "done" / f"{name}.json", json.dumps(asdict(res), indent=1))
+        _write_done(out, res)
     return res
+
+
+def _write_done(out: Path, res: ClipResult) -> None:
+    atomic_write_text(out / "done" / f"{safe_name(res.clip_id)}.json",
+                      json.dumps(asdict(res), indent=1))  # fmt: skip
+
+
+def relabel_clip(out_dir: str | os.PathLike, res: ClipResult, category: str,
+                 label: str) -> ClipResult:  # fmt: skip
+    """Give a finished clip another category and label without building it again.
+
+    Its recordings (``extras["category"]``, ``extras["label"]``, ``data_info.trial_name``) and
+    its motion file are rewritten (atomically), then its ``done`` marker.
+
+    Args:
+        out_dir: The dataset folder.
+        res: The clip as its ``done`` marker has it.
+        category: The new category.
+        label: The new label.
+
+    Returns:
+        ``res`` with the new category and label.
+
+    Raises:
+        OSError, ValueError: A file of the clip is missing or unreadable (the message names it).
+    """
+    from grip.motion.motion import Motion
+    from prism_tools.io import load_recording, save_recording
+
+    out = Path(out_dir)
+    for seq in res.sequences:
+        path = out / "sequences" / f"{seq}.npz"
+        rec = load_recording(path)
+        info = replace(rec.data_info, trial_name=category)
+        rec = replace(rec, data_info=info, extras={**rec.extras, "category": category,
+                                                   "label": label})  # fmt: skip
+        save_recording(rec, path)
+    motion_path = out / "motions" / f"{safe_name(res.clip_id)}.npz"
+    if motion_path.is_file():
+        replace(Motion.load(motion_path), category=category).save(motion_path)
+    new = replace(res, category=category, label=label)
+    _write_done(out, new)
+    return new
 
 
 def _error_text(clip_path: str, e: BaseException) -> str:
@@ -194,53 +285,81 @@ def _load_done(out: Path) -> dict[str, ClipResult]:
     return done
 
 
-def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int) -> dict:
-    """Train/test split of the built sequences, whole clips at a time (PRISM statistics shape).
+def group_source(group: str) -> str:
+    """The source a group belongs to, the stratum of a split by person: the group id less its
+    last part (``"hdm05/bd"`` -> ``"hdm05"``, ``"bandai_namco/dataset-2/active"`` ->
+    ``"bandai_namco/dataset-2"``, ``"deepmimic/walk"`` -> ``"deepmimic"``)."""
+    return group.rsplit("/", 1)[0] if "/" in group else ""
+
+
+def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int,
+                  split_by: str = "person") -> dict:  # fmt: skip
+    """Train/test split of the built sequences, whole groups at a time (PRISM statistics shape).
 
     All sequences of one clip (its noise variants and consecutive chunks) share a split, so a
-    test motion is never seen in training.
+    test motion is never seen in training. ``split_by="person"``: all clips of a group
+    (:attr:`ClipResult.group`: a performer, or the source's finest grouping) share a split, and
+    the test groups are chosen within each source (:func:`group_source`) so that every source of
+    two or more groups has about ``test_fraction`` of its sequences in test and a group on each
+    side (:func:`prism_tools.chunking.stratified_test_groups`). ``split_by="clip"``: clips are
+    drawn at random until the test split holds ``test_fraction`` of the sequences (the split of
+    datasets built before split modes existed, reproduced exactly).
+
+    Returns:
+        :func:`prism_tools.chunking.make_split`'s dict plus ``"split_by"``, ``"members"`` (group
+        -> its clip ids) and ``"sources"`` (source -> ``{"train"|"test": {"groups": [...],
+        "clips", "sequences", "frames"}}``).
     """
     from prism_tools.chunking import make_split
 
+    if split_by not in SPLIT_MODES:
+        raise ValueError(f"split_by must be one of {SPLIT_MODES}, got {split_by!r}")
     groups, cats, frames = {}, {}, {}
+    clip_group, clip_source = {}, {}
     for r in results:
-        if r.status != "done":
+        if r.status != "done" or not r.sequences:
             continue
+        person = r.group or r.clip_id
+        clip_group[r.clip_id] = r.clip_id if split_by == "clip" else person
+        clip_source[r.clip_id] = group_source(person)
         for seq, n in zip(r.sequences, r.sequence_frames, strict=True):
-            groups[seq], cats[seq], frames[seq] = r.clip_id, r.category, n
-    return make_split(sorted(groups), test_fraction, seed, categories=cats,
-                      frames_per_chunk=frames, groups=groups)  # fmt: skip
+            groups[seq], cats[seq], frames[seq] = clip_group[r.clip_id], r.category, n
+    strata = None
+    if split_by == "person":
+        strata = {clip_group[c]: clip_source[c] for c in clip_group}
+    split = make_split(sorted(groups), test_fraction, seed, categories=cats,
+                       frames_per_chunk=frames, groups=groups, strata=strata)  # fmt: skip
+    test_groups = set(split["groups"]["test"])
+    members: dict[str, list[str]] = {}
+    sources: dict[str, dict] = {}
+    for r in results:
+        if r.clip_id not in clip_group:
+            continue
+        g = clip_group[r.clip_id]
+        members.setdefault(g, []).append(r.clip_id)
+        part = "test" if g in test_groups else "train"
+        src = sources.setdefault(clip_source[r.clip_id], {
+            p: {"groups": set(), "clips": 0, "sequences": 0, "frames": 0}
+            for p in ("train", "test")})  # fmt: skip
+        src[part]["groups"].add(g)
+        src[part]["clips"] += 1
+        src[part]["sequences"] += len(r.sequences)
+        src[part]["frames"] += int(sum(r.sequence_frames))
+    for src in sources.values():
+        for part in src.values():
+            part["groups"] = sorted(part["groups"])
+    split["split_by"] = split_by
+    split["members"] = {g: sorted(m) for g, m in sorted(members.items())}
+    split["sources"] = dict(sorted(sources.items()))
+    return split
 
 
-def build_dataset(
-    clips: Iterable[tuple[str, str, str]],
-    out_dir: str | os.PathLike,
-    cfg: BuildConfig = BuildConfig(),
-    workers: int = 0,
-    progress: Callable[[int], object] | None = None,
-    skipped_files: Sequence[tuple[str, str]] = (),
-) -> list[ClipResult]:
-    """Build (or resume) a dataset.
-
-    Args:
-        clips: ``(path, clip_id, category)`` triples.
-        out_dir: Dataset folder; created if missing.
-        cfg: Build settings, recorded in ``settings.json`` before the first clip. Resuming with
-            different settings than that file (or the manifest) holds is refused.
-        workers: Worker processes (0 = one per core). They end when this process ends.
-        progress: Optional callback ``progress(n)`` after each finished clip (tqdm.update).
-        skipped_files: ``(path, reason)`` of files the clip search could not read; listed in
-            the manifest as ``skipped_files``.
-
-    Returns:
-        One :class:`ClipResult` per clip (resumed clips come back as ``done``).
-
-    Raises:
-        ValueError: Other settings than the folder's (a
-            :class:`grip.core.runs.SettingsMismatch`), or a corrupt manifest/settings file.
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+def _settings_check(out: Path, cfg: BuildConfig) -> None:
+    """Refuse settings that change the clips against the folder's manifest and settings file,
+    then record this build's settings (the split settings may differ, :data:`SPLIT_SETTINGS`;
+    settings a folder predates take their defaults)."""
+    new = asdict(cfg)
+    defaults = asdict(BuildConfig())
     manifest_path = out / MANIFEST
     if manifest_path.exists():
         try:
@@ -251,46 +370,125 @@ def build_dataset(
             raise ValueError(
                 f"{manifest_path}: corrupt manifest ({e}); remove it to rebuild"
             ) from e
-        require_same_settings(old.get("config") or {}, asdict(cfg), manifest_path, _RESUME_HINT)
-    record_settings(out / SETTINGS, asdict(cfg), _RESUME_HINT)
+        require_same_settings(old.get("config") or {}, new, manifest_path, _RESUME_HINT,
+                              may_change=SPLIT_SETTINGS, defaults=defaults)  # fmt: skip
+    path = out / SETTINGS
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: corrupt settings file ({e}); remove it to start "
+                             "over, or use another --out") from e  # fmt: skip
+        require_same_settings(old, new, path, _RESUME_HINT, may_change=SPLIT_SETTINGS,
+                              defaults=defaults)  # fmt: skip
+        if old == new:
+            return
+    atomic_write_text(path, json.dumps(new, indent=1, sort_keys=True))
+
+
+def build_dataset(
+    clips: Iterable[ClipSpec | tuple[str, str, str]],
+    out_dir: str | os.PathLike,
+    cfg: BuildConfig = BuildConfig(),
+    workers: int = 0,
+    progress: Callable[[int], object] | None = None,
+    skipped_files: Sequence[tuple[str, str]] = (),
+    counts: dict[str, int] | None = None,
+) -> list[ClipResult]:
+    """Build (or resume, relabel or split again) a dataset.
+
+    Clips with a ``done`` marker are not built again. One whose category or label differs from
+    its :class:`ClipSpec` is relabelled in place (:func:`relabel_clip`; where that fails, it is
+    built again), one whose group differs only gets the new group. The split is computed last,
+    from the finished clips (:func:`dataset_split`), so a re-run of a finished folder with other
+    :data:`SPLIT_SETTINGS` only writes a new ``split.json`` (and ``settings.json``,
+    ``manifest.json``).
+
+    Args:
+        clips: :class:`ClipSpec` s, or ``(path, clip_id, category)`` triples.
+        out_dir: Dataset folder; created if missing.
+        cfg: Build settings, recorded in ``settings.json`` before the first clip. Resuming with
+            settings that change the clips (all but :data:`SPLIT_SETTINGS`) other than that file
+            (or the manifest) holds is refused.
+        workers: Worker processes (0 = one per core). They end when this process ends.
+        progress: Optional callback ``progress(n)`` after each finished clip (tqdm.update).
+        skipped_files: ``(path, reason)`` of files the clip search could not read; listed in
+            the manifest as ``skipped_files``.
+        counts: Optional dict that receives how many clips were ``"built"`` (or tried) in this
+            run, ``"resumed"`` (finished before) and, of those, ``"relabelled"``.
+
+    Returns:
+        One :class:`ClipResult` per clip (resumed clips come back as ``done``).
+
+    Raises:
+        ValueError: Other settings than the folder's (a
+            :class:`grip.core.runs.SettingsMismatch`), or a corrupt manifest/settings file.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _settings_check(out, cfg)
     remove_stale_temps(out)  # of a killed build: atomic writes that never finished
-    clips = list(clips)
+    specs = [c if isinstance(c, ClipSpec) else ClipSpec(*c) for c in clips]
     done = _load_done(out)
-    todo = [c for c in clips if c[1] not in done]
-    results: dict[str, ClipResult] = {c[1]: done[c[1]] for c in clips if c[1] in done}
-    if progress is not None and results:
-        progress(len(results))
+    results: dict[str, ClipResult] = {}
+    unchanged = relabelled = 0
+    for spec in specs:
+        res = done.get(spec.clip_id)
+        if res is None:
+            continue
+        if (res.category, res.label) != (spec.category, spec.label):
+            try:
+                res = relabel_clip(out, res, spec.category, spec.label)
+            except (OSError, ValueError):  # a file of the clip is damaged: build it again
+                continue
+            relabelled += 1
+            if progress is not None:
+                progress(1)
+        else:
+            unchanged += 1
+        if res.group != spec.group:
+            res = replace(res, group=spec.group)
+            _write_done(out, res)
+        results[spec.clip_id] = res
+    if progress is not None and unchanged:
+        progress(unchanged)
+    todo = [c for c in specs if c.clip_id not in results]
+    if counts is not None:
+        counts.update(built=len(todo), resumed=len(results), relabelled=relabelled)
     n_workers = workers or os.cpu_count() or 1
     if todo:
         if n_workers == 1:
-            for path, cid, cat in todo:
-                results[cid] = process_clip(path, cid, cat, str(out), cfg)
+            for spec in todo:
+                results[spec.clip_id] = process_clip(spec, str(out), cfg)
                 if progress is not None:
                     progress(1)
         else:
             with ProcessPoolExecutor(max_workers=n_workers, initializer=exit_with_parent) as pool:
-                futs = {pool.submit(process_clip, p, cid, cat, str(out), cfg): (p, cid, cat)
-                        for p, cid, cat in todo}  # fmt: skip
+                futs = {pool.submit(process_clip, spec, str(out), cfg): spec for spec in todo}
                 for fut in as_completed(futs):
-                    path, cid, cat = futs[fut]
+                    spec = futs[fut]
                     try:
-                        results[cid] = fut.result()
+                        results[spec.clip_id] = fut.result()
                     except (BrokenProcessPool, OSError, MemoryError) as e:  # a worker died
-                        results[cid] = ClipResult(
-                            cid, "failed", cat, path,
-                            error=f"{path}: worker process died ({type(e).__name__}: {e}); "
-                            "run the build again to retry the clips it did not finish")  # fmt: skip
+                        results[spec.clip_id] = ClipResult(
+                            spec.clip_id, "failed", spec.category, spec.path,
+                            error=f"{spec.path}: worker process died ({type(e).__name__}: {e}); "
+                            "run the build again to retry the clips it did not finish",
+                            label=spec.label, group=spec.group)  # fmt: skip
                     if progress is not None:
                         progress(1)
-    ordered = [results[c[1]] for c in clips]
+    ordered = [results[c.clip_id] for c in specs]
     manifest = {
         "format": "grip-prism-dataset/1",
         "config": asdict(cfg),
         "clips": [asdict(r) for r in ordered],
         "skipped_files": [{"file": str(f), "reason": why} for f, why in skipped_files],
     }
-    atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
+    atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1))
     from prism_tools.chunking import save_split
 
-    save_split(dataset_split(ordered, cfg.test_fraction, cfg.split_seed), out / SPLIT)
+    split = dataset_split(ordered, cfg.test_fraction, cfg.split_seed, cfg.split_by)
+    save_split(split, out / SPLIT)
     return ordered

@@ -107,13 +107,35 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
     split_path = root / "split.json"
     if split_path.exists():
         try:
-            split = _read_json(split_path)
-            summary["splits"] = split.get("stats", {})
-            for part, clips in split.get("groups", {}).items():
-                summary["splits"].setdefault(part, {})["clips"] = len(clips)
+            summary.update(_split_summary(_read_json(split_path)))
         except (ValueError, TypeError, AttributeError):
             summary["splits"] = {"error": f"{split_path}: unreadable"}
     return summary
+
+
+def _split_summary(split: dict) -> dict:
+    """``splits`` (per side: ``n_chunks``, ``n_frames``, ``categories``, ``groups``, ``clips``),
+    ``split_by``, ``split_groups`` (side -> group names) and ``split_sources`` (source -> side
+    -> ``groups``, ``clips``, ``sequences``, ``frames``; when the split recorded them) of a
+    ``split.json``. A split written before split modes existed has clip groups (``"clip"``)."""
+    stats = {k: dict(v) for k, v in split.get("stats", {}).items()}
+    groups = split.get("groups", {})
+    members = split.get("members")
+    for part, names in groups.items():
+        entry = stats.setdefault(part, {})
+        entry["groups"] = len(names)
+        entry["clips"] = (sum(len(members.get(g, ())) for g in names) if members is not None
+                          else len(names))  # fmt: skip
+    out: dict = {"splits": stats}
+    if groups:
+        out["split_by"] = split.get("split_by", "clip")
+        out["split_groups"] = {part: list(names) for part, names in groups.items()}
+    if "sources" in split:
+        out["split_sources"] = split["sources"]
+    for key in ("seed", "test_fraction"):
+        if key in split:
+            out[f"split_{key}"] = split[key]
+    return out
 
 
 def _summary_from_scan(root: Path, limit: int | None) -> dict:
@@ -186,12 +208,57 @@ def format_summary(s: dict) -> str:
             lines.append(f"| {cat} | {c['recordings']} | {c['frames']} |")
     splits = s.get("splits")
     if splits and "train" in splits:
-        lines += ["", "| split | clips | sequences | frames |", "|---|---:|---:|---:|"]
+        lines += ["", "| split | groups | clips | sequences | frames |",
+                  "|---|---:|---:|---:|---:|"]  # fmt: skip
         for part in ("train", "test"):
             p = splits[part]
-            lines.append(f"| {part} | {p.get('clips', '-')} | {p['n_chunks']} | {p['n_frames']} |")
+            lines.append(f"| {part} | {p.get('groups', '-')} | {p.get('clips', '-')} | "
+                         f"{p['n_chunks']} | {p['n_frames']} |")  # fmt: skip
+        lines += _format_split(s)
     bad = s.get("clips_failed") or s.get("unreadable") or []
     if bad:
         lines += ["", f"{len(bad)} clip(s)/file(s) failed:"]
         lines += [f"- {b.get('clip_id') or b.get('file')}: {b['error']}" for b in bad[:20]]
     return "\n".join(lines)
+
+
+def _format_split(s: dict) -> list[str]:
+    """The split's mode, sources, groups and categories per side (Markdown lines)."""
+    lines: list[str] = []
+    mode = s.get("split_by")
+    if mode is not None:
+        what = {"person": "whole performers (else the source's finest grouping) per side",
+                "clip": "whole clips per side"}.get(mode, mode)  # fmt: skip
+        extra = ", ".join(f"{k.removeprefix('split_').replace('_', ' ')} {s[k]}"
+                          for k in ("split_seed", "split_test_fraction") if k in s)  # fmt: skip
+        lines += ["", f"split by {mode}: {what}" + (f" ({extra})" if extra else "")]
+    sources = s.get("split_sources") or {}
+    if sources:
+        lines += ["", "| source | train groups | test groups | train sequences | test sequences "
+                  "| test share |", "|---|---:|---:|---:|---:|---:|"]  # fmt: skip
+        for name, parts in sources.items():
+            tr, te = parts["train"], parts["test"]
+            total = tr["sequences"] + te["sequences"]
+            share = f"{100 * te['sequences'] / total:.1f} %" if total else "-"
+            lines.append(f"| {name or '-'} | {len(tr['groups'])} | {len(te['groups'])} | "
+                         f"{tr['sequences']} | {te['sequences']} | {share} |")  # fmt: skip
+    groups = s.get("split_groups") or {}
+    if mode == "person" and sources:
+        lines += ["", "groups per split:"]
+        for name, parts in sources.items():
+            for part in ("train", "test"):
+                names = [g.removeprefix(f"{name}/") if name else g for g in parts[part]["groups"]]
+                lines.append(f"- {name or '-'} {part} ({len(names)}): {', '.join(names) or '-'}")
+    elif groups and mode != "clip":
+        lines += ["", "groups per split:"]
+        lines += [f"- {part} ({len(names)}): {', '.join(names) or '-'}"
+                  for part, names in groups.items()]  # fmt: skip
+    splits = s.get("splits") or {}
+    cats = sorted(set(splits.get("train", {}).get("categories", {}))
+                  | set(splits.get("test", {}).get("categories", {})))  # fmt: skip
+    if cats:
+        lines += ["", "| category | train sequences | test sequences |", "|---|---:|---:|"]
+        for c in cats:
+            lines.append(f"| {c} | {splits['train'].get('categories', {}).get(c, 0)} | "
+                         f"{splits['test'].get('categories', {}).get(c, 0)} |")  # fmt: skip
+    return lines

@@ -1,4 +1,4 @@
-"""Find motion clips in a folder tree, name them, categorise them, and load them.
+"""Find motion clips in a folder tree, name, label, categorise and group them, and load them.
 
 Supported clips: ``*.bvh``; ``*.amc`` (with their ASF, see
 :func:`grip.motion.asf_amc.find_asf_for_amc` or a ``clips.csv`` ``asf`` column); DeepMimic
@@ -8,15 +8,31 @@ sidecars, licences and READMEs are skipped); AMASS-style ``*.npz`` holding ``pos
 Clip ids are ``"<top folder>/<stem>"``, the top folder being the first folder below the searched
 root (``cmu/02_01``, ``hdm05/HDM_bd_squat1Reps_001_120``,
 ``bandai_namco/dataset-1_walk_normal_001``, ``deepmimic/walk`` - DeepMimic's ``humanoid3d_``
-prefix is dropped). Categories come from:
+prefix is dropped).
 
-* a ``clips.csv`` (columns ``file``, ``category``) in the clip's dataset folder or above: the
-  first item of ``category`` (text in parentheses removed, cut at ``;`` or ``/``), lower case,
-  spaces and dashes as ``_`` (``"jump_in_place; one_leg_balance"`` -> ``"jump_in_place"``);
-* a Bandai-Namco JSON sidecar ``{"content": id}`` indexing ``cfg/content_label.txt`` (searched
-  in the clip's folder and upwards), ``dataset-N_`` prefix removed (``"walk-back"``);
-* DeepMimic names: the first word of the name (``getup_faceup`` -> ``"getup"``);
-* otherwise ``"unknown"``.
+A clip's **label** is the source's own name for its motion:
+
+* from a ``clips.csv`` (column ``file`` and the label columns of the :class:`CategoryMap`,
+  ``category`` by default) in the clip's dataset folder or above;
+* else a Bandai-Namco JSON sidecar ``{"content": id}`` indexing ``cfg/content_label.txt``
+  (searched in the clip's folder and upwards), ``dataset-N_`` prefix removed (``"walk-back"``);
+* else a DeepMimic clip's name (``"getup_faceup"``);
+* else none (``""``).
+
+Its **category** is the label translated by a :class:`CategoryMap` (``configs/categories.toml``,
+read by :func:`load_category_map`) into a vocabulary shared by every source, ``"unknown"`` where
+the map has no entry. Without a map the category is the label's first item (text in parentheses
+removed, cut at ``;`` or ``/``), lower case, spaces and dashes as ``_``
+(``"jump_in_place; one_leg_balance"`` -> ``"jump_in_place"``), a Bandai Namco content label as it
+is (``"walk-back"``) and a DeepMimic name's first word (``"getup"``).
+
+Its **group** is what a split by person keeps on one side (:func:`clip_group`): the performer
+where the source names one (a ``clips.csv`` ``person`` column; HDM05's actor in
+``HDM_<actor>_...``; the CMU subject of ``<subject>_<trial>``), as ``"<top>/<person>"``
+(``hdm05/bd``, ``cmu/02``); else the finest grouping the source allows: Bandai Namco's dataset and
+acting style (``dataset-2_run_active_001`` -> ``bandai_namco/dataset-2/active``: its clips carry
+no actor label, so that a style is never on both sides), and otherwise the clip itself (DeepMimic:
+every clip a different skill, retargeted from unnamed CMU and SFU performers).
 
 Files that look like clips but cannot be examined (an ``.npz`` that is not a readable zip, a
 ``.txt``/``.json`` starting with ``{`` that is not valid UTF-8 JSON, an unreadable ``clips.csv``
@@ -28,9 +44,12 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
+import tomllib
 import zipfile
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +63,15 @@ from grip.motion.source import MotionImportError, SourceMotion
 _DATASET_MARKERS = ("SOURCE_AND_LICENSE.md", "clips.csv")
 _DEEPMIMIC_PREFIX = "humanoid3d_"
 _BANDAI_PREFIX = re.compile(r"^dataset-\d+_")
+#: Bandai Namco file names: ``dataset-<N>_<content>_<style>_<take>`` (no ``_`` inside a label).
+_BANDAI_NAME = re.compile(r"^(dataset-\d+)_[^_]+_([^_]+)_\d+$")
+#: HDM05 file names: ``HDM_<actor>_<class>_<take>_<fps>``.
+_HDM05_NAME = re.compile(r"^HDM_([A-Za-z]+)_")
+#: CMU file names: ``<subject>_<trial>`` (``02_01``).
+_CMU_NAME = re.compile(r"^(\d+)_\d+$")
+#: A category name: lower case words joined by dashes (glob-friendly: ``walk*`` selects them).
+_CATEGORY_NAME = re.compile(r"^[a-z][a-z0-9]*(-[a-z0-9]+)*$")
+UNKNOWN = "unknown"
 #: Read at most this much of a .txt/.json to decide whether it is a DeepMimic clip.
 _MAX_JSON_BYTES = 64 * 1024 * 1024
 #: What examining a file may raise (beyond the importers' own errors): a hostile file must be
@@ -70,6 +98,111 @@ def _why(e: BaseException) -> str:
 
 
 @dataclass(frozen=True)
+class CategoryMap:
+    """Each source's motion labels translated into one shared vocabulary of categories.
+
+    Attributes:
+        vocabulary: The category names (lower case, words joined by ``-``), without
+            ``"unknown"``, which every unmapped label gets.
+        labels: Label (lower case, runs of white space as one space) -> category of
+            ``vocabulary``.
+        label_columns: The ``clips.csv`` columns that hold a clip's label; the first non-empty
+            one wins.
+        source: Where the map was read from (for messages).
+    """
+
+    vocabulary: tuple[str, ...]
+    labels: Mapping[str, str] = field(default_factory=dict)
+    label_columns: tuple[str, ...] = ("category",)
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        where = self.source or "category map"
+        for name in self.vocabulary:
+            if not isinstance(name, str) or not _CATEGORY_NAME.match(name) or name == UNKNOWN:
+                raise ValueError(f"{where}: vocabulary name {name!r} must be lower case words "
+                                 "joined by '-' (and not 'unknown')")  # fmt: skip
+        vocab = set(self.vocabulary)
+        for label, cat in self.labels.items():
+            if cat not in vocab and cat != UNKNOWN:
+                raise ValueError(f"{where}: label {label!r} maps to {cat!r}, which is not in "
+                                 "the vocabulary")  # fmt: skip
+        if not self.label_columns or not all(isinstance(c, str) for c in self.label_columns):
+            raise ValueError(f"{where}: label_columns must be a non-empty list of column names")
+
+    def category(self, label: str) -> str:
+        """The category of a source label: the whole label, then its first item (text in
+        parentheses removed, cut at ``;`` or ``/``), each looked up in :attr:`labels` and then
+        in :attr:`vocabulary`, case-insensitively; ``"unknown"`` when nothing matches."""
+        vocab = set(self.vocabulary)
+        for key in _label_keys(label):
+            if key in self.labels:
+                return self.labels[key]
+            if key in vocab:
+                return key
+        return UNKNOWN
+
+
+def _label_key(text: str) -> str:
+    return " ".join(text.lower().split())
+
+
+def _first_item(text: str) -> str:
+    text = re.sub(r"\([^)]*\)", " ", text)
+    return " ".join(re.split(r"[;/]", text)[0].lower().split())
+
+
+def _label_keys(label: str) -> list[str]:
+    """The look-up keys of a label, most specific first (no duplicates, no empty ones)."""
+    first = _first_item(label)
+    keys = [_label_key(label), first, re.sub(r"[\s\-]+", "_", first).strip("_")]
+    return [k for i, k in enumerate(keys) if k and k not in keys[:i]]
+
+
+def load_category_map(path: str | os.PathLike) -> CategoryMap:
+    """Read a category map (``configs/categories.toml``: ``vocabulary``, ``label_columns`` and a
+    ``[labels]`` table of label = category).
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: Not valid TOML, an unknown key, a label mapped outside the vocabulary, or a
+            vocabulary name that is not lower case words joined by ``-`` (the message names the
+            file).
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such category map") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ValueError(f"{path}: not a readable TOML category map ({_why(e)})") from None
+    unknown = sorted(set(data) - {"vocabulary", "labels", "label_columns"})
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown} (expected vocabulary, label_columns, "
+                         "[labels])")  # fmt: skip
+    vocab = data.get("vocabulary")
+    labels = data.get("labels", {})
+    columns = data.get("label_columns", ["category"])
+    if not isinstance(vocab, list) or not vocab:
+        raise ValueError(f"{path}: 'vocabulary' must be a non-empty list of category names")
+    if not isinstance(labels, dict) or not all(isinstance(v, str) for v in labels.values()):
+        raise ValueError(f"{path}: [labels] must map labels to category names (strings)")
+    if not isinstance(columns, list):
+        raise ValueError(f"{path}: 'label_columns' must be a list of column names")
+    table: dict[str, str] = {}
+    for label, cat in labels.items():
+        if cat not in vocab and cat != UNKNOWN:
+            raise ValueError(f"{path}: label {label!r} maps to {cat!r}, which is not in the "
+                             "vocabulary")  # fmt: skip
+        key = _label_key(label)
+        if table.get(key, cat) != cat:
+            raise ValueError(f"{path}: label {label!r} is mapped twice ({table[key]!r}, {cat!r}; "
+                             "labels are compared case-insensitively)")  # fmt: skip
+        table[key] = cat
+    return CategoryMap(tuple(vocab), table, tuple(columns), str(path))
+
+
+@dataclass(frozen=True)
 class ClipRef:
     """A motion clip found on disk.
 
@@ -77,23 +210,74 @@ class ClipRef:
         clip_id: Stable id, ``"<top folder>/<stem>"``.
         path: The clip's main file.
         fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass"``.
-        category: Motion category or ``"unknown"``.
+        category: Motion category (of the :class:`CategoryMap` given to the search) or
+            ``"unknown"``.
         asf_path: The skeleton of an AMC clip (``None`` for other formats, or when it could not be
             found; :func:`load_clip` then raises a clear error).
+        label: The source's own label of the motion, ``""`` when it has none (module docstring).
+        person: The performer where the source names one (``"bd"``, ``"02"``), else ``""``.
+        group: What a split by person keeps on one side: ``"<top>/<person>"``, Bandai Namco's
+            ``"<top>/<dataset>/<style>"``, else the clip id (:func:`clip_group`).
     """
 
     clip_id: str
     path: Path
     fmt: str
-    category: str = "unknown"
+    category: str = UNKNOWN
     asf_path: Path | None = None
+    label: str = ""
+    person: str = ""
+    group: str = ""
 
 
 def _norm_category(text: str) -> str:
-    text = re.sub(r"\([^)]*\)", " ", text)
-    first = re.split(r"[;/]", text)[0].strip().lower()
-    first = re.sub(r"[\s\-]+", "_", first).strip("_")
-    return first or "unknown"
+    """A category without a map: the label's first item, spaces and dashes as ``_``."""
+    first = re.sub(r"[\s\-]+", "_", _first_item(text)).strip("_")
+    return first or UNKNOWN
+
+
+def clip_person(stem: str, csv_row: Mapping[str, str] | None = None) -> str:
+    """The performer of a clip where its source names one, else ``""``.
+
+    A ``clips.csv`` ``person`` column wins; otherwise the file name: HDM05's
+    ``HDM_<actor>_...`` (``HDM_bd_squat1Reps_001_120`` -> ``"bd"``) and CMU's
+    ``<subject>_<trial>`` (``02_01`` -> ``"02"``).
+
+    Args:
+        stem: The clip file's name without its suffix.
+        csv_row: The clip's ``clips.csv`` row, if any.
+    """
+    if csv_row is not None:
+        person = csv_row.get("person")
+        if isinstance(person, str) and person.strip():
+            return person.strip()
+    for pattern in (_HDM05_NAME, _CMU_NAME):
+        m = pattern.match(stem)
+        if m:
+            return m.group(1)
+    return ""
+
+
+def clip_group(clip_id: str, stem: str, person: str = "") -> str:
+    """The group a split by person keeps on one side (module docstring).
+
+    Args:
+        clip_id: ``"<top>/<name>"``.
+        stem: The clip file's name without its suffix.
+        person: :func:`clip_person`'s answer.
+
+    Returns:
+        ``"<top>/<person>"`` (``"hdm05/bd"``), Bandai Namco's ``"<top>/<dataset>/<style>"``
+        (``"bandai_namco/dataset-2/active"``), else ``clip_id``.
+    """
+    top = clip_id.split("/")[0] if "/" in clip_id else ""
+    prefix = f"{top}/" if top else ""
+    if person:
+        return f"{prefix}{person}"
+    m = _BANDAI_NAME.match(stem)
+    if m:
+        return f"{prefix}{m.group(1)}/{m.group(2)}"
+    return clip_id
 
 
 def _dataset_root(path: Path, stop: Path | None) -> Path | None:
@@ -141,7 +325,9 @@ class _CsvIndex:
         return self._tables[csv_path]
 
 
-def _bandai_category(clip: Path, stop: Path | None) -> str | None:
+def _bandai_label(clip: Path, stop: Path | None) -> str | None:
+    """The content label of a Bandai-Namco clip (its JSON sidecar's ``content`` id named by
+    ``cfg/content_label.txt``, ``dataset-N_`` removed), or ``None``."""
     sidecar = clip.with_suffix(".json")
     if not sidecar.is_file():
         return None
@@ -159,7 +345,7 @@ def _bandai_category(clip: Path, stop: Path | None) -> str | None:
             names = [ln.strip() for ln in text.splitlines()]
             names = [n for n in names if n]
             if isinstance(content, int) and 0 <= content < len(names):
-                return _BANDAI_PREFIX.sub("", names[content]).lower()
+                return _BANDAI_PREFIX.sub("", names[content])
             return None
         if stop is not None and folder == stop:
             break
@@ -217,18 +403,27 @@ def _detect_format(path: Path) -> str | None:
     return None
 
 
-def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex) -> ClipRef:
+def _csv_label(row: Mapping[str, str], columns: tuple[str, ...]) -> str | None:
+    for col in columns:
+        value = row.get(col)
+        if isinstance(value, str) and value.strip():
+            return value.strip()
+    return None
+
+
+def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex,
+              cmap: CategoryMap | None) -> ClipRef:  # fmt: skip
     stem = path.stem
     if fmt == "deepmimic":
         stem = stem.removeprefix(_DEEPMIMIC_PREFIX)
     clip_id = f"{top}/{stem}" if top else stem
-    category: str | None = None
+    label: str | None = None
+    row: dict[str, str] | None = None
     asf_path: Path | None = None
     hit = csvs.row(path, stop)
     if hit is not None:
         folder, row = hit
-        if row.get("category"):
-            category = _norm_category(row["category"])
+        label = _csv_label(row, cmap.label_columns if cmap is not None else ("category",))
         if fmt == "asf_amc" and row.get("asf"):
             cand = folder / row["asf"]
             asf_path = cand if cand.is_file() else None
@@ -237,16 +432,29 @@ def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex
             asf_path = find_asf_for_amc(path)
         except MotionImportError:
             asf_path = None
-    if category is None and fmt == "bvh":
-        category = _bandai_category(path, stop)
-    if category is None and fmt == "deepmimic":
+    from_csv = label is not None
+    if label is None and fmt == "bvh":
+        label = _bandai_label(path, stop)
+    if label is None and fmt == "deepmimic":
+        label = stem
+    label = label or ""
+    if cmap is not None:
+        category = cmap.category(label)
+    elif not label:
+        category = UNKNOWN
+    elif from_csv:
+        category = _norm_category(label)
+    elif fmt == "deepmimic":
         category = _norm_category(stem.split("_")[0])
-    return ClipRef(
-        clip_id=clip_id, path=path, fmt=fmt, category=category or "unknown", asf_path=asf_path
-    )
+    else:  # a Bandai Namco content label, already one name
+        category = label.lower()
+    person = clip_person(path.stem, row)
+    return ClipRef(clip_id=clip_id, path=path, fmt=fmt, category=category, asf_path=asf_path,
+                   label=label, person=person,
+                   group=clip_group(clip_id, path.stem, person))  # fmt: skip
 
 
-def find_clips(root: str | Path) -> list[ClipRef]:
+def find_clips(root: str | Path, categories: CategoryMap | None = None) -> list[ClipRef]:
     """Every supported motion clip under ``root``, sorted by clip id.
 
     Hidden files and folders are skipped. Where two files would get the same id, the ids of both
@@ -255,6 +463,8 @@ def find_clips(root: str | Path) -> list[ClipRef]:
 
     Args:
         root: Folder to search recursively.
+        categories: Translates the sources' labels into categories (module docstring);
+            ``None``: categories as the labels give them.
 
     Returns:
         The clips found (an empty list for an empty folder).
@@ -262,14 +472,16 @@ def find_clips(root: str | Path) -> list[ClipRef]:
     Raises:
         FileNotFoundError: ``root`` is not a folder.
     """
-    return scan_clips(root)[0]
+    return scan_clips(root, categories)[0]
 
 
-def scan_clips(root: str | Path) -> tuple[list[ClipRef], list[SkippedFile]]:
+def scan_clips(root: str | Path, categories: CategoryMap | None = None
+               ) -> tuple[list[ClipRef], list[SkippedFile]]:  # fmt: skip
     """Like :func:`find_clips`, and also the files it had to skip, with the reason.
 
     Args:
         root: Folder to search recursively.
+        categories: See :func:`find_clips`.
 
     Returns:
         ``(clips, skipped)``: the clips sorted by clip id, and the candidate clip files or clip
@@ -297,7 +509,7 @@ def scan_clips(root: str | Path) -> tuple[list[ClipRef], list[SkippedFile]]:
             continue
         top = rel.parts[0] if len(rel.parts) > 1 else root.name
         try:
-            refs.append(_make_ref(path, fmt, top, root, csvs))
+            refs.append(_make_ref(path, fmt, top, root, csvs, categories))
         except _READ_ERRORS as e:
             skipped.append(SkippedFile(path, f"not examined ({_why(e)})"))
     counts: dict[str, int] = {}
@@ -310,18 +522,19 @@ def scan_clips(root: str | Path) -> tuple[list[ClipRef], list[SkippedFile]]:
                 rel = ref.path.relative_to(root)
                 inner = Path(*rel.parts[1:]) if len(rel.parts) > 1 else rel
                 new_id = f"{ref.clip_id.split('/')[0]}/{inner.with_suffix('').as_posix()}"
-                ref = ClipRef(new_id, ref.path, ref.fmt, ref.category, ref.asf_path)
+                group = new_id if ref.group == ref.clip_id else ref.group
+                ref = replace(ref, clip_id=new_id, group=group)
             fixed.append(ref)
         refs = fixed
     refs = sorted(refs, key=lambda r: (r.clip_id, str(r.path)))
     return refs, sorted(skipped, key=lambda s: str(s.path))
 
 
-def clip_ref(path: str | Path) -> ClipRef:
+def clip_ref(path: str | Path, categories: CategoryMap | None = None) -> ClipRef:
     """A :class:`ClipRef` for a single file, as :func:`find_clips` would name it.
 
     The top folder is the dataset folder: the nearest ancestor holding ``SOURCE_AND_LICENSE.md``
-    or ``clips.csv``, else the file's own folder.
+    or ``clips.csv``, else the file's own folder. ``categories``: see :func:`find_clips`.
 
     Raises:
         MotionImportError: The file does not exist or is not a supported clip.
@@ -339,7 +552,7 @@ def clip_ref(path: str | Path) -> ClipRef:
         )
     dataset = _dataset_root(path, None)
     top = dataset.name if dataset is not None else path.parent.name
-    return _make_ref(path, fmt, top, dataset, _CsvIndex())
+    return _make_ref(path, fmt, top, dataset, _CsvIndex(), categories)
 
 
 def load_clip(ref_or_path: ClipRef | str | Path) -> SourceMotion:

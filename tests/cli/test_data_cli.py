@@ -20,9 +20,12 @@ pytestmark = pytest.mark.skipif(not MOTIONS.is_dir(), reason="shared motion clip
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory) -> Path:
+    """Three DeepMimic clips, two of them in test (the per-clip split: the tests below rely on a
+    training split of one clip; the split by person is tested in test_data_split_cli.py)."""
     out = tmp_path_factory.mktemp("ds") / "dataset"
     rc = main(["data", "build", "--out", str(out), "--motions", str(MOTIONS / "deepmimic"),
-               "--limit", "3", "--workers", "1", "--test-fraction", "0.34"])  # fmt: skip
+               "--limit", "3", "--workers", "1", "--test-fraction", "0.34",
+               "--split-by", "clip"])  # fmt: skip
     assert rc == 0
     return out
 
@@ -44,7 +47,8 @@ def test_build_resumes_and_refuses_other_settings(built: Path, capsys) -> None:
     stamp = {p: p.stat().st_mtime_ns for p in (built / "done").glob("*.json")}
     marker.unlink()
     rc = main(["data", "build", "--out", str(built), "--motions", str(MOTIONS / "deepmimic"),
-               "--limit", "3", "--workers", "1", "--test-fraction", "0.34"])  # fmt: skip
+               "--limit", "3", "--workers", "1", "--test-fraction", "0.34",
+               "--split-by", "clip"])  # fmt: skip
     assert rc == 0
     after = {p: p.stat().st_mtime_ns for p in (built / "done").glob("*.json")}
     rebuilt = [p for p in after if p not in stamp or after[p] != stamp[p]]

@@ -125,3 +125,72 @@ def test_save_load_split(tmp_path: Path) -> None:
     (tmp_path / "broken.json").write_text('{"train": [')
     with pytest.raises(ValueError, match=r"broken\.json: not a valid split JSON"):
         load_split(tmp_path / "broken.json")
+
+
+# ------------------------------------------------------------------------- stratified split
+def _grouped(sizes: dict[str, int]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    """Chunk ids, chunk -> group and group -> stratum for groups ``"<stratum>/<name>"``."""
+    ids, groups = [], {}
+    for g, n in sizes.items():
+        for k in range(n):
+            ids.append(f"{g.replace('/', '__')}_seq{k:03d}")
+            groups[ids[-1]] = g
+    return ids, groups, {g: g.rsplit("/", 1)[0] for g in sizes}
+
+
+# Roughly the shared corpus: 4 HDM05 actors, 7 + 15 Bandai styles, CMU subjects of very
+# different sizes, one-clip DeepMimic groups, and a source of one group.
+_HDM = dict(zip(("bd", "bk", "dg", "mm"), (52, 52, 47, 40), strict=True))
+_BANDAI2 = dict(zip("abcdefg", (173, 106, 140, 134, 132, 113, 132), strict=True))
+_CMU = dict(zip((2, 5, 6, 7, 8, 9, 10, 12, 13, 14), (3, 3, 1, 2, 3, 2, 2, 2, 25, 16), strict=True))
+CORPUS = {
+    **{f"hdm05/{a}": n for a, n in _HDM.items()},
+    **{f"bandai2/{s}": n for s, n in _BANDAI2.items()},
+    **{f"bandai1/s{k:02d}": 7 + (k == 0) * 6 for k in range(15)},
+    **{f"cmu/{s:02d}": n for s, n in _CMU.items()},
+    **{f"deepmimic/clip{k}": 1 for k in range(14)},
+    "solo/only": 9,
+}
+
+
+def test_stratified_split_keeps_groups_whole_and_every_source_on_both_sides() -> None:
+    ids, groups, strata = _grouped(CORPUS)
+    split = make_split(ids, 0.2, seed=42, groups=groups, strata=strata)
+    train_g, test_g = set(split["groups"]["train"]), set(split["groups"]["test"])
+    assert not train_g & test_g and train_g | test_g == set(CORPUS)
+    for chunk in split["test"]:
+        assert groups[chunk] in test_g  # whole groups: every chunk of a test group is in test
+    for stratum in {s for s in strata.values() if s != "solo"}:
+        mine = {g for g in CORPUS if strata[g] == stratum}
+        assert mine & train_g and mine & test_g, stratum
+        share = sum(CORPUS[g] for g in mine & test_g) / sum(CORPUS[g] for g in mine)
+        big = max(CORPUS[g] for g in mine) / sum(CORPUS[g] for g in mine)
+        assert abs(share - 0.2) <= max(0.05, big / 2), (stratum, share)  # as near as sizes allow
+    assert "solo/only" in train_g  # a source of one group cannot be split: it trains
+    overall = len(split["test"]) / len(ids)
+    assert abs(overall - 0.2) < 0.03
+    assert split["stats"]["test"]["n_chunks"] == len(split["test"])
+
+
+def test_stratified_split_is_deterministic_and_order_free() -> None:
+    ids, groups, strata = _grouped(CORPUS)
+    a = make_split(ids, 0.2, seed=7, groups=groups, strata=strata)
+    assert make_split(list(reversed(ids)), 0.2, seed=7, groups=groups, strata=strata) == a
+    others = {tuple(make_split(ids, 0.2, seed=s, groups=groups, strata=strata)["groups"]["test"])
+              for s in range(8)}  # fmt: skip
+    assert len(others) > 1  # the seed chooses among near-equal options
+    none = make_split(ids, 0.0, seed=7, groups=groups, strata=strata)
+    assert none["test"] == [] and none["groups"]["test"] == []
+
+
+def test_stratified_split_of_two_unequal_groups_picks_the_nearer_one() -> None:
+    from prism_tools.chunking import stratified_test_groups
+
+    sizes = {"s/big": 90, "s/small": 10, "t/x": 5, "t/y": 5, "t/z": 5, "t/w": 5}
+    strata = {g: g.split("/")[0] for g in sizes}
+    for seed in range(5):
+        test = stratified_test_groups(sizes, strata, 0.2, seed)
+        assert "s/small" in test and "s/big" not in test
+        assert sum(g.startswith("t/") for g in test) == 1  # 5 of 20 is nearest to 4
+    with pytest.raises(ValueError, match="strata need groups"):
+        make_split(["a"], strata={"a": "s"})
