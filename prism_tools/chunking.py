@@ -35,6 +35,12 @@ SPLIT_FORMAT = "grip-prism-split"
 SPLIT_VERSION = 1
 
 
+def safe_name(clip_id: str) -> str:
+    """The file-name form of a clip id (``DATA/motions/<safe_name>.npz``, the stem of its
+    sequences' names)."""
+    return clip_id.replace("/", "__")
+
+
 def chunk_id(take_name: str, index: int) -> str:
     """``chunk_id("subj001_take002", 3) -> "subj001_take002_seq003"``."""
     return f"{take_name}_seq{index:03d}"

@@ -173,7 +173,7 @@ def cmd_train_baseline(args: argparse.Namespace) -> int:
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.errors import CliError
-    from grip.kinematics.dataset import holdout_split, load_split_sequences
+    from grip.kinematics.dataset import dataset_groups, holdout_split, load_split_sequences
     from grip.kinematics.train import Trainer
 
     t0 = time.perf_counter()
@@ -181,7 +181,7 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     try:
         train = load_split_sequences(data, "train", cfg.features)
         if tc.val_source == "holdout":
-            train, val = holdout_split(train, tc.val_fraction, tc.seed)
+            train, val = holdout_split(train, tc.val_fraction, tc.seed, dataset_groups(data))
         else:
             val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:

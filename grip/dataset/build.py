@@ -45,6 +45,7 @@ import numpy as np
 
 from grip.core.atomic import atomic_write_text
 from grip.core.runs import exit_with_parent, remove_stale_temps, require_same_settings
+from prism_tools.chunking import safe_name
 
 MANIFEST = "manifest.json"
 SPLIT = "split.json"
@@ -155,11 +156,6 @@ def subject_for(clip_id: str, variant: int, cfg: BuildConfig):
     height = float(np.clip(rng.normal(1.72, 0.08), 1.52, 1.95))
     bmi = float(np.clip(rng.normal(23.5, 2.5), 18.5, 31.0))
     return BodyParams(height_m=round(height, 3), mass_kg=round(bmi * height**2, 1))
-
-
-def safe_name(clip_id: str) -> str:
-    """The file-name form of a clip id (``DATA/motions/<safe_name>.npz``)."""
-    return clip_id.replace("/", "__")
 
 
 def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:

@@ -44,8 +44,8 @@ class TrainConfig:
         val_source: Where the validation windows (and so ``best.pt``) come from: ``"test"``,
             the dataset's test split (the runs of the shipped models), or ``"holdout"``, a
             fraction ``val_fraction`` of the training clips held out of training
-            (:func:`grip.kinematics.dataset.holdout_split`), so that the test split stays
-            unseen by model selection.
+            (:func:`grip.kinematics.dataset.holdout_split`; whole people in a folder split by
+            person), so that the test split stays unseen by model selection.
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
         seed: Seed of windows, noise and initialisation.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast

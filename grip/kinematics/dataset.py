@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,33 +106,56 @@ def clip_of(sequence_name: str) -> str:
     return m.group("clip") if m else sequence_name
 
 
-def holdout_names(names: Sequence[str], fraction: float, seed: int) -> set[str]:
-    """The sequence names that :func:`holdout_split` holds out (whole clips, :func:`clip_of`)."""
+def dataset_groups(data_dir: str | os.PathLike) -> dict[str, str]:
+    """Clip (:func:`clip_of` of its sequences) -> group (performer, or the source's finest
+    grouping) of a ``grip data build`` folder split by person; ``{}`` for a folder split by clip
+    or built before groups were recorded (every clip is then its own group)."""
+    from prism_tools.chunking import load_split, safe_name
+
+    split = load_split(Path(data_dir) / "split.json")
+    if split.get("split_by") != "person":
+        return {}
+    return {safe_name(c): g for g, clips in split.get("members", {}).items() for c in clips}
+
+
+def holdout_names(names: Sequence[str], fraction: float, seed: int,
+                  groups: Mapping[str, str] | None = None) -> set[str]:  # fmt: skip
+    """The sequence names that :func:`holdout_split` holds out (whole groups of clips)."""
     from prism_tools.chunking import make_split
 
     names = list(names)
-    return set(make_split(names, fraction, seed, groups={n: clip_of(n) for n in names})["test"])
+    groups = groups or {}
+    of = {n: groups.get(clip_of(n), clip_of(n)) for n in names}
+    return set(make_split(names, fraction, seed, groups=of)["test"])
 
 
 def holdout_split(
-    seqs: list[SequenceArrays], fraction: float, seed: int
-) -> tuple[list[SequenceArrays], list[SequenceArrays]]:
+    seqs: list[SequenceArrays], fraction: float, seed: int,
+    groups: Mapping[str, str] | None = None,
+) -> tuple[list[SequenceArrays], list[SequenceArrays]]:  # fmt: skip
     """``(train, held_out)``: whole clips (:func:`clip_of`; all their chunks and noise variants)
     held out until they hold ``fraction`` of the sequences, drawn as ``grip data build`` draws
     its test split (:func:`prism_tools.chunking.make_split` with clip groups).
 
+    Args:
+        groups: Clip -> group (:func:`dataset_groups`): every clip of a held-out group is held
+            out, so that validation, like the test split, has people never trained on. Clips
+            not in it are their own group.
+
     Raises:
-        ValueError: nothing would be left on one of the two sides (fewer than two clips, or a
+        ValueError: nothing would be left on one of the two sides (fewer than two groups, or a
             fraction that takes them all).
     """
     names = [s.name for s in seqs]
-    held = holdout_names(names, fraction, seed)
+    held = holdout_names(names, fraction, seed, groups)
     train = [s for s in seqs if s.name not in held]
     val = [s for s in seqs if s.name in held]
     if not train or not val:
-        clips = sorted({clip_of(n) for n in names})
-        raise ValueError(f"holding out {fraction} of {len(clips)} clip(s) {clips[:5]} leaves "
-                         "nothing to train or validate on (it needs at least 2 clips)")  # fmt: skip
+        groups = groups or {}
+        units = sorted({groups.get(clip_of(n), clip_of(n)) for n in names})
+        raise ValueError(f"holding out {fraction} of {len(units)} clip group(s) {units[:5]} "
+                         "leaves nothing to train or validate on (it needs at least 2 clips "
+                         "or groups)")  # fmt: skip
     return train, val
 
 

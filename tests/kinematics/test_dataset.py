@@ -56,3 +56,33 @@ def test_holdout_split_keeps_each_clip_on_one_side():
         holdout_split(seqs[:12], 0.99, seed=0)
     with pytest.raises(ValueError, match="at least 2 clips"):
         holdout_split(seqs[:6], 0.5, seed=0)
+
+
+def test_holdout_split_keeps_each_group_on_one_side(tmp_path):
+    """With the groups of a folder split by person, a held-out person takes all their clips."""
+    import json
+    from types import SimpleNamespace
+
+    from grip.kinematics.dataset import clip_of, dataset_groups, holdout_split
+
+    members = {f"src/p{p}": [f"src/p{p}_clip{c}" for c in range(3)] for p in range(8)}
+    (tmp_path / "split.json").write_text(json.dumps(
+        {"format": "grip-prism-split", "version": 1, "train": [], "test": [],
+         "split_by": "person", "members": members}))  # fmt: skip
+    groups = dataset_groups(tmp_path)
+    assert groups["src__p3_clip1"] == "src/p3" and len(groups) == 24
+    seqs = [SimpleNamespace(name=f"src__p{p}_clip{c}_v0_seq{i:03d}")
+            for p in range(8) for c in range(3) for i in range(2)]  # fmt: skip
+    train, val = holdout_split(seqs, 0.25, seed=3, groups=groups)
+    held = {groups[clip_of(s.name)] for s in val}
+    assert 1 <= len(held) < 8 and not held & {groups[clip_of(s.name)] for s in train}
+    assert len(val) == 6 * len(held)  # every clip and chunk of a held-out person
+    # per clip, the same draw splits people across the two sides
+    _, val_clip = holdout_split(seqs, 0.25, seed=3)
+    by_clip = {groups[clip_of(s.name)] for s in val_clip}
+    assert len(val_clip) < 6 * len(by_clip) or by_clip != held
+    # a folder split by clip has no groups
+    (tmp_path / "split.json").write_text(json.dumps(
+        {"format": "grip-prism-split", "version": 1, "train": [], "test": [],
+         "split_by": "clip"}))  # fmt: skip
+    assert dataset_groups(tmp_path) == {}
