@@ -48,6 +48,9 @@ class TrainConfig:
             person), so that the test split stays unseen by model selection.
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
         seed: Seed of windows, noise and initialisation.
+        standing_init: Share of the training windows whose LSTMs start from the standing rest
+            pose at the heading of the foot IMUs (no ground truth, as ``--init standing`` and
+            recordings without ground truth start) instead of the first frame's ground truth.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
             AVX512-BF16 the LSTMs run several times faster
@@ -74,10 +77,13 @@ class TrainConfig:
     val_fraction: float = 0.1
     seed: int = 0
     bf16: bool = False
+    standing_init: float = 0.25
 
     def __post_init__(self) -> None:
         check(
             self,
+            (0.0 <= self.standing_init <= 1.0,
+             f"train.standing_init must be in [0, 1], got {self.standing_init}"),
             (self.val_source in VAL_SOURCES, f"train.val_source must be one of "
              f"{list(VAL_SOURCES)}, got {self.val_source!r}"),
             (0.0 < self.val_fraction < 1.0,

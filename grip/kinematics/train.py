@@ -68,6 +68,53 @@ def fk_positions(rot6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
     return torch.stack(pos, dim=2).reshape(b, t, 72)
 
 
+_STANDING_ROT: np.ndarray | None = None
+
+
+def standing_rotations() -> np.ndarray:
+    """``(24, 3, 3)`` global joint rotations of the standing rest pose facing world +y
+    (:func:`grip.core.mjcf.standing_qpos`; the same for every body)."""
+    global _STANDING_ROT
+    if _STANDING_ROT is None:
+        from grip.core.fk import forward_kinematics
+        from grip.core.mjcf import standing_qpos
+        from grip.core.reference import local_rot_from_qpos
+
+        q = standing_qpos()
+        offsets = np.zeros((sk.N_JOINTS, 3))
+        _STANDING_ROT = forward_kinematics(local_rot_from_qpos(q[None]), q[None, :3], offsets)[0][0]
+    return _STANDING_ROT
+
+
+def heading_of_feet(x_raw: torch.Tensor, sites: tuple[str, ...]) -> torch.Tensor:
+    """``(B,)`` heading (rad about world z from facing +y) of each window's first frame from
+    its foot IMUs, as :func:`grip.kinematics.features.sensor_heading` reads a recording without
+    ground truth (raw, unnormalised features ``(B, T, F)``; other sites when there is no foot)."""
+    from grip.kinematics.features import HEADING_SITES
+
+    idx = [i for i, s in enumerate(sites) if s in HEADING_SITES] or list(range(len(sites)))
+    imu = x_raw[:, 0, : 15 * len(sites)].reshape(x_raw.shape[0], len(sites), 15)[:, idx]
+    fwd = imu[..., 6:15].reshape(*imu.shape[:2], 3, 3)[..., :, 2]  # canonical z in the world
+    psi = torch.atan2(-fwd[..., 0], fwd[..., 1])
+    return torch.atan2(torch.sin(psi).mean(1), torch.cos(psi).mean(1))
+
+
+def standing_first(psi: torch.Tensor, offsets: torch.Tensor) -> dict[str, torch.Tensor]:
+    """KinematicsNet's first-frame states ``{stage: (B, dim)}`` of the standing rest pose turned
+    to ``psi (B,)``, at rest (:func:`grip.kinematics.features.first_state` of
+    :func:`grip.kinematics.features.standing_calibration`, batched), for bodies ``offsets (B,
+    24, 3)``."""
+    c, s = torch.cos(psi), torch.sin(psi)
+    z, o = torch.zeros_like(c), torch.ones_like(c)
+    yaw = torch.stack([c, -s, z, s, c, z, z, z, o], -1).reshape(-1, 1, 3, 3)
+    g = yaw @ torch.from_numpy(standing_rotations()).to(psi.dtype)  # (B, 24, 3, 3)
+    fa = torch.cat([g[..., :, 0], g[..., :, 1]], -1).reshape(-1, 1, 24 * 6)
+    fp = fk_positions(fa, offsets.to(psi.dtype))[:, 0]
+    leaf = fp.reshape(-1, 24, 3)[:, list(sk.LEAF_JOINTS)].reshape(len(psi), -1)
+    lv = torch.zeros(len(psi), 3 * len(sk.VELOCITY_JOINTS), dtype=psi.dtype)
+    return {"lp": leaf, "fp": fp, "fa": fa[:, 0], "lv": lv}
+
+
 # ---------------------------------------------------------------------------- training
 def log_epoch(writer, record: dict) -> None:
     """Write an epoch's ``record["train"]`` and ``record["val"]`` losses to TensorBoard
@@ -128,6 +175,8 @@ class Trainer:
             ori = imu[..., 6:15].reshape(b, t, n_sites, 3, 3) @ dr[:, None]
             imu = torch.cat([imu[..., :6], ori.reshape(b, t, n_sites, 9)], -1)
             xt = torch.cat([imu.reshape(b, t, -1), xt[..., 15 * n_sites :]], -1)
+        if augment and self.cfg.train.standing_init > 0:
+            yt = self._standing_starts(xt, yt)
         xt = (xt - torch.from_numpy(self.norm.mean)) / torch.from_numpy(self.norm.std)
         if augment and self.cfg.train.acc_noise > 0:
             idx = torch.tensor([s * 15 + k for s in range(n_sites) for k in range(3)])
@@ -135,6 +184,20 @@ class Trainer:
                 self.rng.standard_normal((*xt.shape[:2], len(idx))).astype(np.float32)
             )
         return xt, yt
+
+    def _standing_starts(self, xt: torch.Tensor, yt: dict[str, torch.Tensor]):
+        """A share ``train.standing_init`` of the windows starts its LSTMs from the standing
+        pose at the heading of the foot IMUs instead of the first frame's ground truth (what
+        ``--init standing`` and a recording without ground truth do), so that the network
+        learns to converge from there: ``yt`` gains ``first/<stage>`` start states."""
+        first = {k: yt[k][:, 0].clone() for k in TARGET_KEYS}
+        pick = torch.from_numpy(self.rng.random(xt.shape[0]) < self.cfg.train.standing_init)
+        if pick.any():
+            stand = standing_first(heading_of_feet(xt[pick], self.cfg.features.sites),
+                                   yt["offsets"][pick])  # fmt: skip
+            for k in TARGET_KEYS:
+                first[k][pick] = stand[k].to(first[k].dtype)
+        return {**yt, **{f"first/{k}": v for k, v in first.items()}}
 
     def _mirror_half(self, xt: torch.Tensor, yt: dict[str, torch.Tensor]):
         """Copies of a batch with a random half of its windows mirrored (:func:`mirror_batch`)."""
@@ -152,7 +215,7 @@ class Trainer:
 
     def losses(self, x: torch.Tensor, y: dict[str, torch.Tensor],
                only: str | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
-        first = {k: y[k][:, 0] for k in TARGET_KEYS}
+        first = {k: y.get(f"first/{k}", y[k][:, 0]) for k in TARGET_KEYS}
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.cfg.train.bf16):
             out, _ = self.model(x, self.model.initial_state(first), only=only)
         out = {k: v.float() for k, v in out.items()}

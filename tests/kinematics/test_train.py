@@ -262,3 +262,44 @@ def test_stored_configs_with_removed_settings():
         drop_removed(on, REMOVED_SETTINGS, "ck.pt")  # a resume could not go on as it began
     with pytest.raises(TypeError, match="no_such_knob"):
         run_config_from_dict({**d, "train": {**d["train"], "no_such_knob": 1}})
+
+
+def test_standing_starts_equal_the_standing_calibration_of_a_recording():
+    """A window started from the standing pose gets the states a recording without ground truth
+    starts from (first_state of standing_calibration, heading from its foot IMUs)."""
+    from grip.kinematics.features import (first_state, input_features, recording_body,
+                                          standing_calibration)  # fmt: skip
+    from grip.kinematics.train import heading_of_feet, standing_first
+
+    cfg = FeatureConfig()
+    for seed in (3, 4):
+        rec = make_recording(20, seed=seed)
+        want = first_state(standing_calibration(rec, cfg), recording_body(rec))
+        x = torch.from_numpy(input_features(rec, cfg)[None])
+        offs = torch.from_numpy(build_body(recording_body(rec)).offsets[None].astype(np.float32))
+        got = standing_first(heading_of_feet(x, cfg.sites), offs)
+        assert set(got) == set(want)
+        for k, v in want.items():
+            np.testing.assert_allclose(got[k][0].numpy(), v, atol=1e-5, err_msg=k)
+
+
+def test_standing_init_share_of_windows_start_from_standing(seqs, tmp_path):
+    cfg = _cfg(standing_init=0.5, batch_size=64)
+    tr = Trainer(cfg, seqs, seqs, tmp_path / "run")
+    x, y = sample_windows_for_test(tr, seqs, 64)
+    _, yt = tr._tensors(x, y, augment=True)
+    truth = torch.all(yt["first/fp"] == yt["fp"][:, 0], dim=1)
+    assert 16 < int((~truth).sum()) < 48  # about half start standing, at rest
+    assert torch.all(yt["first/lv"][~truth] == 0)
+    torch.testing.assert_close(yt["first/fa"][truth], yt["fa"][truth, 0])
+    # the validation pass starts from the truth
+    _, yv = tr._tensors(x, y, augment=False)
+    assert "first/fp" not in yv
+    with pytest.raises(ValueError, match="standing_init"):
+        TrainConfig(standing_init=1.5)
+
+
+def sample_windows_for_test(tr, seqs, n):
+    from grip.kinematics.dataset import sample_windows
+
+    return sample_windows(seqs, n, tr.cfg.train.window_frames, np.random.default_rng(0))
