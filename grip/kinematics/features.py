@@ -219,11 +219,25 @@ class SensorStream:
             yield SensorFrame(self.acc[t], self.ori[t], None if ins is None else ins[t])
 
 
-def recording_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibration:
+INITS: tuple[str, ...] = ("truth", "standing")
+"""How an estimate starts (``--init``): from the ground truth of the first frame, as GRIP
+evaluates, or from the standing pose at the sensors' heading, as a user without motion capture
+must (:func:`standing_calibration`)."""
+
+
+def recording_calibration(rec, cfg: FeatureConfig = FeatureConfig(),
+                          init: str = "truth") -> Calibration:  # fmt: skip
     """The :class:`Calibration` of a recording: its ground-truth pose of frames 0 and 1
     (``smpl_params``; frame 0 twice for a one-frame recording) and
-    :func:`calibration_orientations`; without ground truth :func:`standing_calibration`."""
-    if rec.smpl_params is None:
+    :func:`calibration_orientations`; without ground truth, or with ``init="standing"``,
+    :func:`standing_calibration`.
+
+    Raises:
+        ValueError: ``init`` is not one of :data:`INITS`.
+    """
+    if init not in INITS:
+        raise ValueError(f"init must be one of {list(INITS)}, got {init!r}")
+    if rec.smpl_params is None or init == "standing":
         return standing_calibration(rec, cfg)
     n = min(rec.n_frames, 2)
     sp = rec.smpl_params
@@ -282,9 +296,9 @@ def standing_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibrati
                        calibration_orientations(rec, cfg))  # fmt: skip
 
 
-def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig()) -> SensorStream:
+def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig(), init: str = "truth") -> SensorStream:
     """The :class:`SensorStream` of a PRISM-format recording (its ground truth, when it has
-    one, is only read for the calibration, :func:`recording_calibration`).
+    one, is only read for the calibration, :func:`recording_calibration` with ``init``).
 
     Raises:
         KeyError: naming a missing site or foot.
@@ -296,7 +310,7 @@ def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig()) -> SensorStream:
     return SensorStream(str(rec.name), rec.category or "unknown", float(rec.fps),
                         recording_body(rec), objects, acc, ori,
                         insole_features(rec) if cfg.insoles else None,
-                        recording_calibration(rec, cfg))  # fmt: skip
+                        recording_calibration(rec, cfg, init))  # fmt: skip
 
 
 def stream_features(stream: SensorStream, cfg: FeatureConfig = FeatureConfig()) -> np.ndarray:

@@ -192,20 +192,22 @@ class KinematicsEstimator:
         return (x - self._mean) / self._std
 
     # ------------------------------------------------------------------ offline
-    def _first(self, recs) -> dict[str, torch.Tensor]:
+    def _first(self, recs, init: str = "truth") -> dict[str, torch.Tensor]:
         """First-frame states of the recordings' calibration poses (:func:`first_state` of
-        :func:`recording_calibration`: the ground truth of frame 0, or without it the standing
-        pose at the sensors' heading)."""
+        :func:`recording_calibration`: the ground truth of frame 0, or without it or with
+        ``init="standing"`` the standing pose at the sensors' heading)."""
         cfg = self.cfg.features
-        firsts = [first_state(recording_calibration(r, cfg), recording_body(r)) for r in recs]
+        firsts = [first_state(recording_calibration(r, cfg, init), recording_body(r))
+                  for r in recs]  # fmt: skip
         return {k: torch.from_numpy(np.stack([f[k] for f in firsts])) for k in TARGET_KEYS}
 
-    def predict(self, recs) -> list[KinematicEstimate]:
+    def predict(self, recs, init: str = "truth") -> list[KinematicEstimate]:
         """Estimates for a list of recordings, run as one padded batch per call.
 
-        The calibration pose (the first frame's ground truth, or without it the standing pose:
-        :func:`recording_calibration`) initialises the LSTMs; the initial velocities are taken
-        as zero, as at the start of a real recording.
+        The calibration pose (the first frame's ground truth, or without it or with
+        ``init="standing"`` the standing pose: :func:`recording_calibration`) initialises the
+        LSTMs and the integrated root; the initial velocities are taken as zero, as at the
+        start of a real recording.
         """
         feats = [input_features(r, self.cfg.features) for r in recs]
         t_max = max(len(f) for f in feats)
@@ -213,12 +215,12 @@ class KinematicsEstimator:
         for i, f in enumerate(feats):
             x[i, : len(f)] = f
             x[i, len(f) :] = f[-1]  # causal model: padding never affects earlier frames
-        out = self.run_features(torch.from_numpy(x), self._first(recs))
+        out = self.run_features(torch.from_numpy(x), self._first(recs, init))
         res = []
         for i, rec in enumerate(recs):
             n = rec.n_frames
             o = {k: v[i, :n].numpy().astype(np.float64) for k, v in out.items()}
-            res.append(self._estimate(o, rec, n))
+            res.append(self._estimate(o, rec, n, init))
         return res
 
     def run_features(
@@ -231,9 +233,9 @@ class KinematicsEstimator:
             out, _ = self.model(xs, self.model.initial_state(self.tta.first(first)))
             return self.tta.reduce(out)
 
-    def _estimate(self, o: dict[str, np.ndarray], rec, n: int) -> KinematicEstimate:
+    def _estimate(self, o: dict[str, np.ndarray], rec, n: int, init: str) -> KinematicEstimate:
         joint_pos, global_rot, vel = decode_outputs(o, n, build_body(recording_body(rec)).offsets)
-        root0 = recording_calibration(rec, self.cfg.features).root_pos[0]
+        root0 = recording_calibration(rec, self.cfg.features, init).root_pos[0]
         return KinematicEstimate(
             leaf_pos=o["lp"].reshape(n, 5, 3),
             joint_pos=joint_pos,
@@ -250,9 +252,10 @@ class KinematicsEstimator:
             self._frame_step = FrameStep(self.model)
         return self._frame_step
 
-    def stream(self, rec_first_frame):
-        """A :class:`StreamingEstimator` initialised from a recording's first frame."""
-        return StreamingEstimator(self, self._first([rec_first_frame]))
+    def stream(self, rec_first_frame, init: str = "truth"):
+        """A :class:`StreamingEstimator` initialised from a recording's first frame (its ground
+        truth, or the standing pose: ``init`` as :meth:`predict`)."""
+        return StreamingEstimator(self, self._first([rec_first_frame], init))
 
     def stream_from(self, first: dict[str, np.ndarray]) -> StreamingEstimator:
         """A :class:`StreamingEstimator` from first-frame states ``{stage: (dim,)}``

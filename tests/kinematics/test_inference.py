@@ -125,3 +125,21 @@ def test_test_time_augmentation_errors(ckpt):
     with pytest.raises(ValueError, match="needs a mirror image"):
         Symmetries("mirror", ("L_Foot", "R_Foot", "L_Wrist"), True)
     assert Symmetries("yaw4", ("L_Foot", "R_Foot", "L_Wrist"), True).n == 4
+
+
+def test_standing_init_starts_as_a_recording_without_ground_truth(ckpt):
+    import dataclasses
+
+    est = KinematicsEstimator.from_checkpoint(ckpt)
+    rec = make_recording(60, seed=21)
+    truth = est.predict([rec])[0]
+    standing = est.predict([rec], init="standing")[0]
+    no_gt = est.predict([dataclasses.replace(rec, smpl_params=None)])[0]
+    np.testing.assert_allclose(standing.joint_pos, no_gt.joint_pos, atol=1e-6)
+    np.testing.assert_allclose(standing.root_pos, no_gt.root_pos, atol=1e-9)
+    assert np.abs(standing.joint_pos[0] - truth.joint_pos[0]).max() > 1e-3
+    stream = est.stream(rec, init="standing")
+    first = stream.step(input_features(rec, est.cfg.features)[0])
+    np.testing.assert_allclose(first["fp"].reshape(24, 3), standing.fp_joint_pos[0], atol=1e-5)
+    with pytest.raises(ValueError, match="init must be one of"):
+        est.predict([rec], init="oracle")
