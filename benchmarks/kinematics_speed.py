@@ -9,7 +9,8 @@ rounds that take turns with its reference and the medians are kept.
 - stream: one frame at batch 1 through the streaming path (:class:`FrameStep`, what
   ``StreamingEstimator`` runs); ``module_stream``: ``KinematicsNet.forward`` on a one-frame
   sequence, for comparison.
-- offline: 32 sequences of 500 frames through ``KinematicsNet.forward``.
+- offline: 32 sequences of 500 frames through ``KinematicsNet.forward``, on ``--threads``
+  threads (default 1; the bare LSTM reference runs on as many).
 
     python benchmarks/kinematics_speed.py [--model CKPT] [--hidden 256 --layers 2] [--json PATH]
     python benchmarks/kinematics_speed.py --model CKPT --tta full
@@ -58,6 +59,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5, help="rounds of every timing, in turns")
     ap.add_argument("--tta", default="full", help="test-time augmentation timed with --model")
     ap.add_argument("--json", default=None, help="also write the figures here")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="torch threads of the offline figures (streaming always runs on one)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     if args.model:
@@ -97,6 +100,7 @@ def main() -> None:
                               args.frames, args.rounds)  # fmt: skip
     torch.backends.mkldnn.set_flags(prev[0])
 
+    torch.set_num_threads(args.threads)
     xb = torch.randn(32, 500, cfg.n_inputs)
     rb = torch.randn(32, 500, cfg.hidden)
     with torch.inference_mode():
@@ -104,6 +108,7 @@ def main() -> None:
         off = _interleaved({"net": lambda: net(xb, s32), "ref": lambda: ref(rb)}, 1,
                            args.rounds)  # fmt: skip
     frames = 32 * 500
+    torch.set_num_threads(1)
     steps = _estimator_steps(args.model, args.tta, args.frames) if args.model else {}
     res = {
         "stream_ms_per_frame": stream["frame"] * 1e3,
@@ -118,6 +123,7 @@ def main() -> None:
         "layers": cfg.layers,
         "parameters": int(sum(p.numel() for p in net.parameters())),
         "threads": 1,
+        "offline_threads": args.threads,
         "rounds": args.rounds,
         **steps,
     }
