@@ -123,6 +123,34 @@ class AmpHistory:
 
 
 _KEY = np.array(KEY_JOINTS)
+_HINGES = slice(PARTS["hinge_q"].start, PARTS["hinge_qd"].stop)
+
+
+def amp_frames(sim_pvw: np.ndarray, sim_rot: np.ndarray, hinges: np.ndarray, h: np.ndarray,
+               out: np.ndarray) -> np.ndarray:  # fmt: skip
+    """:func:`amp_features` of B simulated states (the tracking environments' step): every
+    vector turned into the heading frame by one stacked product.
+
+    Args:
+        sim_pvw: ``(B, 3, J, 3)`` world positions, linear and angular velocities of the bodies.
+        sim_rot: ``(B, J, 3, 3)`` world rotations.
+        hinges: ``(B, 138)`` hinge angles (rad) then hinge rates (rad/s).
+        h: ``(B, 3, 3)`` heading matrices of the pelvis (:func:`envs.observations.
+            heading_matrices`).
+        out: ``(B, FRAME_DIM)`` buffer (any float dtype), filled and returned.
+    """
+    b = sim_pvw.shape[0]
+    pos = sim_pvw[:, 0]
+    v = np.empty((b, 8, 3))
+    v[:, :2] = np.swapaxes(sim_rot[:, 0, :, :2], 1, 2)  # the rotation's first two columns
+    v[:, 2:4] = sim_pvw[:, 1:, 0]
+    np.subtract(pos[:, _KEY], pos[:, :1], out=v[:, 4:])
+    v = v @ h  # world row vectors -> heading frame (h^T R for the rotation's columns)
+    out[:, 0] = pos[:, 0, 2]
+    out[:, 1:13] = v[:, :4].reshape(b, 12)  # root_rot (6), root_vel, root_angvel
+    out[:, _HINGES] = hinges
+    out[:, PARTS["key_pos"]] = v[:, 4:].reshape(b, 12)
+    return out
 
 
 def amp_frame(sim_pvw: np.ndarray, sim_rot: np.ndarray, hinge_q: np.ndarray,

@@ -33,16 +33,25 @@ from envs import observations as O
 from envs import rewards as R
 from envs.tracking_env import GripTrackingEnv
 from grip.core import skeleton as sk
+from grip.sim.humanoid import ROW, ROW_DIM, absurd_rows, body_state
 
-_C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
-_KEY = np.array(A.KEY_JOINTS)
 _N_TERMS = len(R.TERMS)
 _INFO_KEYS = tuple(f"reward/{k}" for k in R.TERMS)
+_KEYS = (*_INFO_KEYS, "clip", "clip_index", "frame", "max_joint_err_m", "mpjpe_m", "sim_unstable",
+         "blowups", "root_height_m", "amp_obs")  # fmt: skip
+_HINGES = slice(ROW["hinge_q"].start, ROW["hinge_qd"].stop)
+_TORQUE, _HQD = ROW["torque"], ROW["hinge_qd"]
+_ROOT = O.OBS_ROW["est_root_pos"]
 
 
-def _step_all(sims: Sequence) -> None:
-    for s in sims:
+def _play(sims: Sequence, targets: np.ndarray, rows: np.ndarray, warned: np.ndarray) -> None:
+    """Step humanoids ``sims`` toward ``targets (n, 69)``; gather each state into ``rows (n,
+    ROW_DIM)`` and note MuJoCo's blow-up warnings in ``warned (n,)`` (one thread's share)."""
+    for j, s in enumerate(sims):
+        s.ctrl[s.act] = targets[j]
         s.step()
+        warned[j] = s.warned()
+        s.gather(rows[j])
 
 
 class BatchedTrackingEnv:
@@ -103,13 +112,15 @@ class BatchedTrackingEnv:
         self._good_pvw = np.zeros((n, 3, nj, 3))
         self._good_rot = np.zeros((n, nj, 3, 3))
         self._good_t = np.zeros(n, dtype=np.int64)
+        self._z_range = np.zeros((n, 2))
+        self._hcfg = self._sims[0].cfg
         # step buffers
         self._tgt = np.zeros((n, nh))
-        self._xpos, self._cvel = np.zeros((n, nj, 3)), np.zeros((n, nj, 6))
-        self._xmat, self._com = np.zeros((n, nj, 9)), np.zeros((n, 3))
-        self._hq, self._hqd, self._tau = np.zeros((n, nh)), np.zeros((n, nh)), np.zeros((n, nh))
-        self._gt, self._gt_rot = np.zeros((n, 3, nj, 3)), np.zeros((n, nj, 3, 3))
+        self._rows = np.zeros((n, ROW_DIM))
+        self._warned = np.zeros(n, dtype=bool)
+        self._gt = np.zeros((n, envs[0]._gt_rows.shape[1]))
         self._ref_disp = np.zeros((n, 2))
+        self._est_rows = np.zeros((n, O.OBS_ROW_DIM))
         self._hm = np.zeros(len(envs[0]._grid))
         for i in range(n):
             self._sync(i)
@@ -124,6 +135,7 @@ class BatchedTrackingEnv:
         self._n_frames[i] = e.clip.n_frames
         self._gain[i] = e._action_gain
         self._lo[i], self._hi[i], self._half[i] = sim.lo, sim.hi, sim.half
+        self._z_range[i] = sim.z_range
         self._root_offset[i] = e._root_offset
         self._hist_len[i] = len(e._root_hist)
         self._hist[i, : self._hist_len[i]] = np.asarray(e._root_hist)
@@ -173,41 +185,45 @@ class BatchedTrackingEnv:
         sums /= frames[:, None]
         reward = total / frames
         infos = []
-        sums_l, t_l = sums.tolist(), self._t.tolist()
-        for i, e in enumerate(self.envs):
-            info = dict(zip(_INFO_KEYS, sums_l[i], strict=True))
-            info.update(clip=e.clip.name, clip_index=e._clip_i, frame=t_l[i],
-                        max_joint_err_m=float(err[i]), mpjpe_m=float(mpjpe[i]),
-                        sim_unstable=bool(unstable[i]), blowups=e.blowups,
-                        root_height_m=float(height[i]), amp_obs=amp[i])  # fmt: skip
+        cols = zip(*sums.T.tolist(), self._t.tolist(), err.tolist(), mpjpe.tolist(),
+                   unstable.tolist(), height.tolist(), amp, frames.tolist(),
+                   strict=True)  # fmt: skip
+        for e, (*terms, t, er, mp, un, z, am, fr) in zip(self.envs, cols, strict=True):
+            info = dict(zip(_KEYS, (*terms, e._clip.name, e._clip_i, t, er, mp, un, e.blowups, z,
+                                    am), strict=True))  # fmt: skip
             if self.k > 1:
-                info["frames"] = int(frames[i])
+                info["frames"] = fr
             infos.append(info)
         return obs, reward, term, trunc, infos
 
     def _frame(self, idx, a, sums, total, term, trunc, unstable, err, mpjpe, height) -> None:
         """Advance environments ``idx`` one frame; accumulate their rewards and info values."""
         cfg, sims, envs, t = self.cfg, self._sims, self.envs, self._t
+        m = idx.size
         tn = t[idx] + 1
+        tn_l = tn.tolist()
+        idx_l = idx.tolist()
+        tgt = self._tgt[:m]
         if self._relative:
-            tgt = self._tgt[: idx.size]
-            for j, (i, ti) in enumerate(zip(idx.tolist(), tn.tolist(), strict=True)):
+            for j, (i, ti) in enumerate(zip(idx_l, tn_l, strict=True)):
                 tgt[j] = envs[i]._est.target[ti]
-            tgt = tgt + a[idx] * self._gain[idx]
+            tgt += a[idx] * self._gain[idx]
         else:
-            tgt = self._lo[idx] + (a[idx] + 1.0) * self._half[idx]
-        tgt = np.minimum(np.maximum(tgt, self._lo[idx]), self._hi[idx])
-        active = [sims[i] for i in idx.tolist()]
-        for j, s in enumerate(active):
-            s.ctrl[s.act] = tgt[j]
-        if self._pool is None or len(active) == 1:
-            _step_all(active)
-        else:
-            m = self.threads
-            list(self._pool.map(_step_all, [active[c::m] for c in range(m)]))
+            tgt[:] = self._lo[idx] + (a[idx] + 1.0) * self._half[idx]
+        np.maximum(tgt, self._lo[idx], out=tgt)
+        np.minimum(tgt, self._hi[idx], out=tgt)
+        active = [sims[i] for i in idx_l]
+        rows, warned = self._rows[:m], self._warned[:m]
+        if self._pool is None or m == 1:
+            _play(active, tgt, rows, warned)
+        else:  # one task per thread, each a contiguous share of the environments
+            c = -(-m // min(self.threads, m))
+            shares = [slice(j, j + c) for j in range(0, m, c)]
+            list(self._pool.map(_play, [active[sl] for sl in shares], [tgt[sl] for sl in shares],
+                                [rows[sl] for sl in shares], [warned[sl] for sl in shares]))
         t[idx] = tn
         self._steps[idx] += 1
-        blown = np.array([s.blown_up() for s in active])
+        blown = warned | absurd_rows(rows, self._hcfg, self._z_range[idx])
         if blown.any():
             bad = idx[blown]
             for i in bad.tolist():
@@ -215,45 +231,30 @@ class BatchedTrackingEnv:
             term[bad] = unstable[bad] = True
             err[bad] = mpjpe[bad] = np.inf
             height[bad] = 0.0
-            active = [s for s, b in zip(active, blown.tolist(), strict=True) if not b]
-            idx, tn = idx[~blown], tn[~blown]
+            keep = ~blown
+            idx, tn = idx[keep], tn[keep]
             if idx.size == 0:
                 return
-        self._advance(idx, tn, active, sums, total, term, trunc, err, mpjpe, height, cfg)
+            rows = rows[keep]
+            tn_l = tn.tolist()
+        self._advance(idx, tn, tn_l, rows, sums, total, term, trunc, err, mpjpe, height, cfg)
 
-    def _advance(self, idx, tn, active, sums, total, term, trunc, err, mpjpe, height, cfg):
-        """Rewards, termination and AMP frames of the stable environments ``idx``."""
+    def _advance(self, idx, tn, tn_l, rows, sums, total, term, trunc, err, mpjpe, height, cfg):
+        """Rewards, termination and AMP frames of the stable environments ``idx`` (their
+        gathered states ``rows``)."""
         m = idx.size
-        xpos, cvel, xmat, com = self._xpos[:m], self._cvel[:m], self._xmat[:m], self._com[:m]
-        hq, hqd, tau, gt, gt_rot = self._hq[:m], self._hqd[:m], self._tau[:m], self._gt[:m], \
-            self._gt_rot[:m]  # fmt: skip
+        gt = self._gt[:m]
         pos_n = self._hist_len[idx]
         hn = self._hist_n
         h_len = np.minimum(pos_n + 1, hn)
         back = (tn - (h_len - 1)).tolist()
-        for j, (i, s, ti) in enumerate(zip(idx.tolist(), active, tn.tolist(), strict=True)):
-            ids = s.index.body_ids
-            xpos[j] = s.xpos[ids]
-            cvel[j] = s.cvel[ids]
-            xmat[j] = s.xmat[ids]
-            com[j] = s.com
-            hq[j] = s.hinge_angles()
-            hqd[j] = s.hinge_velocities()
-            tau[j] = s.torques()
-            e = self.envs[i]
-            gp = e._gt_pvw
+        ref_disp = self._ref_disp[:m]
+        for j, (i, ti) in enumerate(zip(idx.tolist(), tn_l, strict=True)):
+            gp = self.envs[i]._gt_rows
             gt[j] = gp[ti]
-            gt_rot[j] = e.clip.gt_rot[ti]
-            self._ref_disp[j] = gp[ti, 0, 0, :2] - gp[back[j], 0, 0, :2]
-        # Humanoid.state() for all of them
-        pvw = np.empty((m, 3, sk.N_JOINTS, 3))
+            ref_disp[j] = gp[ti, :2] - gp[back[j], :2]
+        pvw, rot = body_state(rows)
         pos = pvw[:, 0]
-        pos[:] = xpos
-        w = cvel[:, :, :3]
-        pvw[:, 2] = w
-        r = pos - com[:, None]
-        pvw[:, 1] = cvel[:, :, 3:] + (w[..., _C1] * r[..., _C2] - w[..., _C2] * r[..., _C1])
-        rot = xmat.reshape(m, -1, 3, 3)
         # pelvis xy window
         ring = self._hist
         p = self._hist_pos[idx]
@@ -261,20 +262,13 @@ class BatchedTrackingEnv:
         self._hist_pos[idx] = (p + 1) % hn
         self._hist_len[idx] = h_len
         oldest = ring[idx, (p + 1 - h_len) % hn]
-        root_vel = R.root_velocity_terms(pos[:, 0, :2] - oldest, self._ref_disp[:m], self._vel_s,
-                                         cfg.reward.k_root_vel)  # fmt: skip
-        if cfg.align_root_xy:  # (the same shift and shift back as the env's, bit for bit)
-            shift = gt[:, 0, 0, :2] - pos[:, 0, :2]
-            pos[:, :, :2] += shift[:, None]
-            imit, sq = R.imitation_terms_batch(pvw, rot, gt, gt_rot, cfg.reward)
-            pos[:, :, :2] -= shift[:, None]
-        else:
-            imit, sq = R.imitation_terms_batch(pvw, rot, gt, gt_rot, cfg.reward)
         terms = np.zeros((m, _N_TERMS))
-        terms[:, :4] = imit
-        terms[:, 4] = root_vel
-        power = np.abs(tau * hqd).sum(axis=1)
-        terms[:, 5] = np.where(self._steps[idx] > cfg.reward.energy_skip_frames, power, 0.0)
+        terms[:, :5], sq = R.tracking_terms_rows(rows, gt, cfg.reward, cfg.align_root_xy,
+                                                 pos[:, 0, :2] - oldest, ref_disp,
+                                                 self._vel_s)  # fmt: skip
+        power = rows[:, _TORQUE] * rows[:, _HQD]
+        terms[:, 5] = np.where(self._steps[idx] > cfg.reward.energy_skip_frames,
+                               np.abs(power, out=power).sum(axis=1), 0.0)  # fmt: skip
         reward = np.zeros(m)
         for c, wc in enumerate(self._w.tolist()):
             reward += wc * terms[:, c]
@@ -293,8 +287,8 @@ class BatchedTrackingEnv:
         mpjpe[idx] = dist.sum(axis=1) / dist.shape[1]
         height[idx] = z
         # AMP window
-        frame = A.amp_features(pos[:, 0], rot[:, 0], pvw[:, 1, 0], pvw[:, 2, 0], hq, hqd,
-                               pos[:, _KEY])  # fmt: skip
+        h = O.heading_matrices(rot[:, 0])
+        frame = A.amp_frames(pvw, rot, rows[:, _HINGES], h, np.empty((m, A.FRAME_DIM)))
         buf = self._amp
         buf[idx, :-1] = buf[idx, 1:]
         buf[idx, -1] = frame
@@ -306,24 +300,17 @@ class BatchedTrackingEnv:
         n, cfg = self.num_envs, self.cfg
         pvw, rot = self._good_pvw, self._good_rot
         t = np.minimum(self._good_t + 1, self._n_frames - 1).tolist()
-        nj = sk.N_JOINTS
-        est_pos, leaf_rot = np.empty((n, nj, 3)), np.empty((n, O._N_IMU, 3, 3))
-        est_vel, leaf_w = np.empty((n, len(O._VEL), 3)), np.empty((n, O._N_IMU, 3))
-        root = np.empty((n, 3))
+        er = self._est_rows
         sensor = np.empty((n, self.observation_space["sensor"].shape[0]), np.float32)
         for i, e in enumerate(self.envs):
             f, ti = e._est, t[i]
-            est = f.est
-            est_pos[i] = est.est_pos[ti]
-            leaf_rot[i] = f.leaf_rot[ti]
-            est_vel[i] = est.est_vel[ti]
-            leaf_w[i] = f.leaf_angvel[ti]
-            root[i] = est.est_root_pos[ti]
-            sensor[i] = est.sensor[ti]
-        root += self._root_offset
+            er[i] = f.obs_rows[ti]
+            sensor[i] = f.est.sensor[ti]
+        er[:, _ROOT] += self._root_offset
         h = O.heading_matrices(rot[:, 0])
-        kin, self_vec = O.observation_parts_batch(cfg.kinematic_obs, h, pvw, rot, est_pos,
-                                                  leaf_rot, est_vel, leaf_w, root)  # fmt: skip
+        kin = np.empty((n, self.observation_space["kinematic"].shape[0]), np.float32)
+        self_vec = np.empty((n, self.observation_space["self"].shape[0]), np.float32)
+        O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er, kin, self_vec)
         z = pvw[:, 0, 0, 2]
         hm = np.repeat((-z)[:, None], self.observation_space["environment"].shape[0], axis=1)
         for i, e in enumerate(self.envs):
@@ -333,8 +320,8 @@ class BatchedTrackingEnv:
                 hm[i] = terrain(rp[:2], h[i, :2, :2], e._grid, self._hm) - rp[2]
         return {
             "sensor": sensor,
-            "kinematic": kin.astype(np.float32),
-            "self": self_vec.astype(np.float32),
+            "kinematic": kin,
+            "self": self_vec,
             "environment": hm.astype(np.float32),
         }
 

@@ -54,10 +54,13 @@ def heading_matrices(root_rot: np.ndarray) -> np.ndarray:
     fx, fy = root_rot[..., 0, 2], root_rot[..., 1, 2]
     n = np.hypot(fx, fy)
     ok = n > 1e-9
-    c = np.where(ok, fx / np.where(ok, n, 1.0), 1.0)
-    s = np.where(ok, fy / np.where(ok, n, 1.0), 0.0)
     h = np.zeros((*root_rot.shape[:-2], 3, 3))
-    h[..., 0, 0], h[..., 0, 1], h[..., 1, 0], h[..., 1, 1] = c, -s, s, c
+    c, s = h[..., 0, 0], h[..., 1, 0]
+    c[...] = 1.0
+    np.divide(fx, n, out=c, where=ok)
+    np.divide(fy, n, out=s, where=ok)
+    h[..., 1, 1] = c
+    np.negative(s, out=h[..., 0, 1])
     h[..., 2, 2] = 1.0
     return h
 
@@ -134,8 +137,10 @@ def observation_parts_batch(
     est_vel: np.ndarray,
     est_leaf_angvel: np.ndarray,
     est_root_pos: np.ndarray,
+    out_kin: np.ndarray | None = None,
+    out_self: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`observation_parts` of B states at once (the batched training env's).
+    """:func:`observation_parts` of B states at once (the tracking environments' step).
 
     Args:
         variant: As :func:`observation_parts`.
@@ -144,6 +149,8 @@ def observation_parts_batch(
             est_leaf_rot: ``(B, 4, 3, 3)``; est_vel: ``(B, 6, 3)``; est_leaf_angvel:
             ``(B, 4, 3)``; est_root_pos: ``(B, 3)``: the arguments of
             :func:`observation_parts` stacked.
+        out_kin, out_self: Buffers to write the results into (e.g. float32: the same numbers
+            cast); new float64 arrays when ``None``.
 
     Returns:
         ``kinematic (B, kinematic_dim(variant))`` and ``self (B, SELF_DIM)`` (equal to the
@@ -166,10 +173,10 @@ def observation_parts_batch(
     six = (np.swapaxes(cols, -1, -2).reshape(b, -1, 3) @ h).reshape(b, -1, 6)
     n = sk.N_JOINTS
     self_vec = np.concatenate([pos[:, 0, 2:3], vecs[:, :_N_SELF_VEC].reshape(b, -1),
-                               six[:, :n].reshape(b, -1)], axis=1)  # fmt: skip
+                               six[:, :n].reshape(b, -1)], axis=1, out=out_self)  # fmt: skip
     kin = np.concatenate([six[:, n + _N_IMU :].reshape(b, -1),
                           six[:, n : n + _N_IMU].reshape(b, -1),
-                          vecs[:, _N_SELF_VEC:].reshape(b, -1)], axis=1)  # fmt: skip
+                          vecs[:, _N_SELF_VEC:].reshape(b, -1)], axis=1, out=out_kin)  # fmt: skip
     return kin, self_vec
 
 
@@ -217,6 +224,39 @@ def observe(
     }
 
 
+_OBS_ROW_PARTS = (("est_pos", 3 * sk.N_JOINTS), ("leaf_rot", 9 * _N_IMU),
+                  ("est_vel", 3 * len(sk.VELOCITY_JOINTS)), ("leaf_angvel", 3 * _N_IMU),
+                  ("est_root_pos", 3))  # fmt: skip
+_OBS_ENDS = np.cumsum([n for _, n in _OBS_ROW_PARTS])
+OBS_ROW: dict[str, slice] = {
+    k: slice(int(e) - n, int(e)) for (k, n), e in zip(_OBS_ROW_PARTS, _OBS_ENDS, strict=True)
+}
+"""Where each estimate input of :func:`observation_parts` lies in a row of
+:attr:`EstimateFrames.obs_rows`: ``est_pos (J, 3)``, ``est_leaf_rot (4, 3, 3)``, ``est_vel (6,
+3)``, ``est_leaf_angvel (4, 3)``, ``est_root_pos (3,)``, flattened."""
+OBS_ROW_DIM = int(_OBS_ENDS[-1])
+
+
+def observation_rows(
+    variant: str,
+    h: np.ndarray,
+    sim_pvw: np.ndarray,
+    sim_rot: np.ndarray,
+    est_rows: np.ndarray,
+    out_kin: np.ndarray | None = None,
+    out_self: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`observation_parts_batch` with the estimate's inputs as rows of
+    :attr:`EstimateFrames.obs_rows` (``est_rows (B, OBS_ROW_DIM)``, the root already offset)."""
+    b, r = est_rows.shape[0], OBS_ROW
+    return observation_parts_batch(
+        variant, h, sim_pvw, sim_rot, est_rows[:, r["est_pos"]].reshape(b, sk.N_JOINTS, 3),
+        est_rows[:, r["leaf_rot"]].reshape(b, _N_IMU, 3, 3),
+        est_rows[:, r["est_vel"]].reshape(b, -1, 3),
+        est_rows[:, r["leaf_angvel"]].reshape(b, _N_IMU, 3), est_rows[:, r["est_root_pos"]],
+        out_kin, out_self)  # fmt: skip
+
+
 class EstimateFrames:
     """A kinematic estimate laid out for the control step: what the observation and a relative
     action read per frame, gathered once per clip (and per new frame of a growing one) rather
@@ -232,12 +272,16 @@ class EstimateFrames:
         leaf_angvel: ``(T, 4, 3)`` their angular velocities, rad/s.
         target: ``(T, 69)`` PD target of a relative action of 0: the estimated hinge angles
             (plus ``kd/kp`` x their rates with velocity feed-forward), rad.
+        obs_rows: ``(T, OBS_ROW_DIM)`` what :func:`observation_parts` reads of each frame, one
+            row per frame (:data:`OBS_ROW`; ``leaf_rot`` and ``leaf_angvel`` are views of it;
+            the root is the integrated one, without an episode's offset).
     """
 
     def __init__(self) -> None:
         self.est = None
         self._key: tuple | None = None
         self.leaf_rot = self.leaf_angvel = self.target = np.zeros(0)
+        self.obs_rows = np.zeros((0, OBS_ROW_DIM))
 
     def update(self, est, kd_over_kp: np.ndarray, feedforward: bool, start: int = 0,
                key=None) -> None:  # fmt: skip
@@ -246,12 +290,17 @@ class EstimateFrames:
         rows = len(est.est_pos)  # a growing estimate's capacity, else its length
         if self._key != (est, key) or len(self.target) != rows:
             self._key, self.est, start = (est, key), est, 0
-            self.leaf_rot = np.empty((rows, _N_IMU, 3, 3))
-            self.leaf_angvel = np.empty((rows, _N_IMU, 3))
+            self.obs_rows = o = np.zeros((rows, OBS_ROW_DIM))
+            self.leaf_rot = o[:, OBS_ROW["leaf_rot"]].reshape(rows, _N_IMU, 3, 3)
+            self.leaf_angvel = o[:, OBS_ROW["leaf_angvel"]].reshape(rows, _N_IMU, 3)
             self.target = np.empty((rows, 3 * (sk.N_JOINTS - 1)))
         sl = slice(start, est.n_frames)
         self.leaf_rot[sl] = est.est_rot[sl, IMU_JOINTS]
         self.leaf_angvel[sl] = est.est_angvel[sl, IMU_JOINTS]
+        o, n = self.obs_rows[sl], est.n_frames - start
+        o[:, OBS_ROW["est_pos"]] = est.est_pos[sl].reshape(n, -1)
+        o[:, OBS_ROW["est_vel"]] = est.est_vel[sl].reshape(n, -1)
+        o[:, OBS_ROW["est_root_pos"]] = est.est_root_pos[sl]
         ref = self.target[sl]
         ref[:] = est.est_hinge[sl]
         if feedforward:

@@ -108,3 +108,59 @@ def root_velocity_terms(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: flo
     """:func:`root_velocity_term` of ``(B, 2)`` displacements: ``(B,)``."""
     e = (sim_disp - ref_disp) / seconds
     return np.exp(-k * (e * e).sum(axis=1))
+
+
+_K_ORDER = np.array([0, 3, 1, 2, 4])  # (pos, vel, angvel, rot, root_vel) -> TERMS[:5] order
+
+
+def tracking_terms_rows(sim_rows: np.ndarray, ref_rows: np.ndarray, cfg: RewardConfig,
+                        align_root_xy: bool, sim_disp: np.ndarray, ref_disp: np.ndarray,
+                        seconds: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:func:`imitation_terms` and :func:`root_velocity_term` of B states at once, on flat
+    rows, with one ``exp`` for all (the tracking environments' step).
+
+    Args:
+        sim_rows, ref_rows: ``(B, >= 432)``: ``(3, J, 3)`` world positions (m), linear (m/s) and
+            angular (rad/s) velocities flattened, then ``(J, 3, 3)`` world rotations
+            flattened (J = 24; :data:`grip.sim.humanoid.ROW_PARTS` starts so).
+        cfg: Kernel coefficients and form.
+        align_root_xy: Compare positions with the simulated pelvis moved over the reference's
+            horizontally (each joint's xy error minus the pelvis' xy error).
+        sim_disp, ref_disp: ``(B, 2)`` horizontal pelvis displacements over ``seconds``, m.
+        seconds: Length of the root-velocity window, s.
+
+    Returns:
+        ``(B, 5)`` terms in :data:`TERMS` order (the imitation terms, then ``root_vel``) and
+        ``(B, 3, J)`` per-joint squared position (aligned as asked), velocity and angular
+        velocity errors.
+    """
+    b = sim_rows.shape[0]
+    j = 24
+    n = 9 * j
+    e = sim_rows[:, :n] - ref_rows[:, :n]
+    if align_root_xy:
+        ep = e[:, : 3 * j].reshape(b, j, 3)
+        ep[:, :, :2] -= ep[:, :1, :2].copy()
+    e *= e
+    sq = e.reshape(b, 3 * j, 3).sum(axis=2).reshape(b, 3, j)
+    x = np.empty((b, 5))  # pos, vel, angvel, rot, root_vel
+    np.sum(sq, axis=2, out=x[:, :3])
+    tr = (sim_rows[:, n : 2 * n] * ref_rows[:, n : 2 * n]).reshape(b, j, 9).sum(axis=2)
+    tr -= 1.0
+    tr *= 0.5
+    np.maximum(tr, -1.0, out=tr)
+    np.minimum(tr, 1.0, out=tr)
+    np.arccos(tr, out=tr)
+    tr *= tr
+    np.sum(tr, axis=1, out=x[:, 3])
+    if cfg.form == "mean_sq":
+        x[:, :4] *= 1.0 / j
+    else:
+        np.sqrt(x[:, :4], out=x[:, :4])
+    d = sim_disp - ref_disp
+    d /= seconds
+    d *= d
+    np.sum(d, axis=1, out=x[:, 4])
+    x *= -np.array([cfg.k_pos, cfg.k_vel, cfg.k_angvel, cfg.k_rot, cfg.k_root_vel])
+    np.exp(x, out=x)
+    return x[:, _K_ORDER], sq

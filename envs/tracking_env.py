@@ -30,12 +30,23 @@ from envs.heightfield import heightmap_grid
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
-from grip.sim.humanoid import Humanoid
+from grip.sim.humanoid import ROW, ROW_DIM, Humanoid, body_state
 
 SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_reference.npz"
 """The small bundled reference set used when the env is made without a reference."""
 
-_INFO_KEYS = tuple((k, f"reward/{k}") for k in R.TERMS)
+_INFO_KEYS = tuple(f"reward/{k}" for k in R.TERMS)
+_HINGES = slice(ROW["hinge_q"].start, ROW["hinge_qd"].stop)  # (of a state row)
+_TORQUE, _HQD = ROW["torque"], ROW["hinge_qd"]
+_ROOT = O.OBS_ROW["est_root_pos"]
+_GT_DIM = 2 * 9 * sk.N_JOINTS  # a ground-truth row: pvw (3, J, 3) then rot (J, 3, 3), flat
+
+
+def _clip_cache_put(cache: dict, key, value) -> None:
+    """Keep at most 64 clips' arrays (the oldest go first)."""
+    if len(cache) >= 64:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
 
 
 class GripTrackingEnv(gym.Env):
@@ -111,8 +122,9 @@ class GripTrackingEnv(gym.Env):
         self._last_obs: dict[str, np.ndarray] | None = None
         self._renderer = None
         self._renderer_model = None
-        self._gt_key: tuple | None = None  # (clip, humanoid) of _gt_pvw
-        self._gt_pvw = np.zeros(0)  # (T, 3, J, 3) ground-truth positions and velocities
+        # per clip index: (humanoid, EstimateFrames, (T, _GT_DIM) ground-truth rows, gain)
+        self._clip_arrays: dict[int, tuple] = {}
+        self._gt_rows = np.zeros((0, _GT_DIM))  # the episode's clip: ground-truth rows
         self._est = O.EstimateFrames()  # the estimate laid out for the step
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
@@ -120,7 +132,19 @@ class GripTrackingEnv(gym.Env):
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)  # (reused by every step)
         self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
-        self._weights = tuple((k, float(getattr(cfg.reward.weights, k))) for k in R.TERMS)
+        self._weights = tuple(float(getattr(cfg.reward.weights, k)) for k in R.TERMS)
+        self._relative = cfg.action_mode == "relative"
+        self._vel_s = cfg.reward.root_vel_window_frames * cfg.control_dt_s
+        # step buffers (reused by every step)
+        self._row = np.empty((1, ROW_DIM))  # the state (grip.sim.humanoid.ROW_PARTS)
+        self._est_row = np.empty((1, O.OBS_ROW_DIM))
+        self._amp_row = self._amp_buf[None]
+        sizes = [int(sp.shape[0]) for sp in self.observation_space.spaces.values()]
+        ends = np.cumsum(sizes)
+        names = list(self.observation_space.spaces)
+        self._obs_parts = tuple((k, slice(int(e) - n, int(e)))
+                                for k, n, e in zip(names, sizes, ends, strict=True))  # fmt: skip
+        self._obs_size = int(ends[-1])
         self.termination_dist_m = cfg.termination_dist_m
 
     def set_termination_dist(self, dist_m: float) -> None:
@@ -214,7 +238,7 @@ class GripTrackingEnv(gym.Env):
         # the estimated root is integrated from the clip's first frame; an episode follows it
         # from where the episode starts (the ground truth there), not with the drift before
         self._root_offset = clip.gt_qpos[start, :3] - clip.est_root_pos[start]
-        self._per_clip_arrays(clip)
+        self._per_clip_arrays(clip, i)
         pvw, rot = self._sim.state()
         window = cfg.reward.root_vel_window_frames + 1
         self._root_hist = deque([pvw[0, 0, :2].copy()], maxlen=window)
@@ -237,30 +261,58 @@ class GripTrackingEnv(gym.Env):
         sim = self._sim
         return A.amp_frame(pvw, rot, sim.hinge_angles(), sim.hinge_velocities(), self._amp_buf)
 
-    def _per_clip_arrays(self, clip: ReferenceClip) -> None:
-        """Per-clip arrays laid out for the step (gathered once per episode, not per step)."""
+    def _per_clip_arrays(self, clip: ReferenceClip, i: int) -> None:
+        """Per-clip arrays laid out for the step (gathered once per clip and humanoid, not
+        per episode or step)."""
         sim, cfg = self._sim, self.cfg
+        got = self._clip_arrays.get(i)
+        if got is None or got[0] is not sim or got[1].est is not clip:
+            t = clip.n_frames
+            gt = np.empty((t, _GT_DIM))
+            gt[:, : _GT_DIM // 2] = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel],
+                                             axis=1).reshape(t, -1)  # fmt: skip
+            gt[:, _GT_DIM // 2 :] = clip.gt_rot.reshape(t, -1)
+            got = (sim, O.EstimateFrames(), gt, cfg.action_scale * sim.half)
+            _clip_cache_put(self._clip_arrays, i, got)
+        _, self._est, self._gt_rows, self._action_gain = got
         self._est.update(clip, sim.kd_over_kp, cfg.velocity_feedforward, key=sim)
-        if self._gt_key != (clip, sim):
-            self._gt_key = (clip, sim)
-            self._gt_pvw = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1)
-            self._action_gain = cfg.action_scale * sim.half
 
-    def _observe(self, pvw: np.ndarray, rot: np.ndarray) -> dict[str, np.ndarray]:
+    def _observe(self, pvw: np.ndarray, rot: np.ndarray,
+                 h: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+        """The observation of a state (``pvw (3, J, 3)``, ``rot (J, 3, 3)``; ``h (1, 3, 3)``
+        its heading matrix when known) against the estimate of the next frame: the numbers
+        of :meth:`envs.observations.EstimateFrames.observe`, as new float32 arrays (views of
+        one block)."""
         t = min(self._t + 1, self._clip.n_frames - 1)
-        return self._est.observe(t, self.cfg.kinematic_obs, pvw, rot, self._root_offset,
-                                 self._grid, self._sim.terrain, self._hm)  # fmt: skip
+        est, cfg = self._est, self.cfg
+        er = self._est_row
+        er[0] = est.obs_rows[t]
+        er[0, _ROOT] += self._root_offset
+        pvw, rot = pvw[None], rot[None]
+        if h is None:
+            h = O.heading_matrices(rot[:, 0])
+        block = np.empty(self._obs_size, np.float32)
+        obs = {k: block[sl] for k, sl in self._obs_parts}
+        obs["sensor"][:] = est.est.sensor[t]
+        O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er, obs["kinematic"][None],
+                           obs["self"][None])  # fmt: skip
+        root = pvw[0, 0, 0]
+        terrain = self._sim.terrain
+        if terrain is None:  # flat floor: the height map is the pelvis height
+            obs["environment"][:] = -root[2]
+        else:
+            obs["environment"][:] = terrain(root[:2], h[0, :2, :2], self._grid, self._hm) - root[2]
+        return obs
 
     def step(self, action):
         cfg, sim, clip = self.cfg, self._sim, self._clip
-        ix = sim.index
         a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (ix.actuator_ids.size,) or not np.isfinite(a).all():
-            raise ValueError(f"action must be ({ix.actuator_ids.size},) finite values, got "
-                             f"shape {a.shape}")  # fmt: skip
+        if a.shape != (A.N_HINGES,) or not np.isfinite(a).all():
+            raise ValueError(f"action must be ({A.N_HINGES},) finite values, got shape "
+                             f"{a.shape}")  # fmt: skip
         t = self._t + 1
-        sim.set_targets(self._est.pd_target(a, t, cfg.action_mode == "relative",
-                                            self._action_gain, sim.lo, sim.half))  # fmt: skip
+        sim.set_targets(self._est.pd_target(a, t, self._relative, self._action_gain, sim.lo,
+                                            sim.half))  # fmt: skip
         if cfg.pin_root:
             sim.step_pinned(clip.gt_qpos[t - 1], clip.gt_qpos[t], clip.gt_qvel[t, :6])
         else:
@@ -271,52 +323,52 @@ class GripTrackingEnv(gym.Env):
         # (its observation is the last good one)
         if sim.blown_up():
             self.blowups += 1
-            info = {f"reward/{k}": 0.0 for k in R.TERMS}
+            info = dict.fromkeys(_INFO_KEYS, 0.0)
             info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=np.inf,
                         mpjpe_m=np.inf, sim_unstable=True, blowups=self.blowups,
                         root_height_m=0.0)  # fmt: skip
             if self._amp is not None:
                 info["amp_obs"] = self._amp.vector()
             return {k: v.copy() for k, v in self._last_obs.items()}, 0.0, True, False, info
-        pvw, rot = sim.state()
-        gt = self._gt_pvw[t]
+        row = self._row
+        sim.gather(row[0])
+        pvw, rot = body_state(row)  # (1, 3, J, 3), (1, J, 3, 3) views of the row
+        gt = self._gt_rows
         hist = self._root_hist
-        hist.append(pvw[0, 0, :2].copy())
+        hist.append(row[0, :2].copy())
         # displacements over the window's frames (fewer after a reset or teleport), divided by
         # the full window's length: millimetres over the first frames are not read as velocity
-        ref_disp = gt[0, 0, :2] - self._gt_pvw[t - (len(hist) - 1), 0, 0, :2]
-        root_vel = R.root_velocity_term(hist[-1] - hist[0], ref_disp,
-                                        cfg.reward.root_vel_window_frames * cfg.control_dt_s,
-                                        cfg.reward.k_root_vel)  # fmt: skip
-        if cfg.align_root_xy:  # compare with the pelvis over the ground truth's (see config)
-            shift = gt[0, 0, :2] - pvw[0, 0, :2]
-            pvw[0, :, :2] += shift
-            terms, sq = R.imitation_terms(pvw, rot, gt, clip.gt_rot[t], cfg.reward)
-            pvw[0, :, :2] -= shift
+        ref_disp = gt[t, :2] - gt[t - (len(hist) - 1), :2]
+        terms, sq = R.tracking_terms_rows(row, gt[t : t + 1], cfg.reward, cfg.align_root_xy,
+                                          (hist[-1] - hist[0])[None], ref_disp[None],
+                                          self._vel_s)  # fmt: skip
+        values = terms[0].tolist()
+        if self._steps > cfg.reward.energy_skip_frames:
+            values.append(R.mechanical_power(row[0, _TORQUE], row[0, _HQD]))
         else:
-            terms, sq = R.imitation_terms(pvw, rot, gt, clip.gt_rot[t], cfg.reward)
-        power = R.mechanical_power(sim.torques(), sim.hinge_velocities())
-        terms["root_vel"] = root_vel
-        terms["energy"] = power if self._steps > cfg.reward.energy_skip_frames else 0.0
-        terms["amp"] = 0.0
+            values.append(0.0)
+        values.append(0.0)  # amp (a wrapper fills it)
         reward = 0.0
-        for k, wk in self._weights:
-            reward += wk * terms[k]
-        dist = np.sqrt(sq[0])
+        for wk, v in zip(self._weights, values, strict=True):
+            reward += wk * v
+        dist = np.sqrt(sq[0, 0])
         err = float(dist.max())  # (the unstable check above also makes this never NaN)
+        z = float(row[0, 2])
         tau = self.termination_dist_m
-        terminated = (tau > 0 and err > tau) or (pvw[0, 0, 2] < cfg.fall_height_m)
+        terminated = (tau > 0 and err > tau) or (z < cfg.fall_height_m)
         truncated = t >= clip.n_frames - 1 or (
             cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
         )
-        obs = self._observe(pvw, rot)
+        h = O.heading_matrices(rot[:, 0])
+        obs = self._observe(pvw[0], rot[0], h)
         self._last_obs = obs
-        info = {key: terms[k] for k, key in _INFO_KEYS}
+        info = dict(zip(_INFO_KEYS, values, strict=True))
         info.update(clip=clip.name, clip_index=self._clip_i, frame=t, max_joint_err_m=err,
                     mpjpe_m=float(dist.sum()) / dist.size, sim_unstable=False,
-                    blowups=self.blowups, root_height_m=float(pvw[0, 0, 2]))  # fmt: skip
+                    blowups=self.blowups, root_height_m=z)  # fmt: skip
         if self._amp is not None:
-            self._amp.push(self._amp_frame(pvw, rot))
+            A.amp_frames(pvw, rot, row[:, _HINGES], h, self._amp_row)
+            self._amp.push(self._amp_buf)
             info["amp_obs"] = self._amp.vector()
         return obs, reward, bool(terminated), bool(truncated and not terminated), info
 

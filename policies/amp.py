@@ -16,6 +16,7 @@ Loss forms (:attr:`policies.config.AmpConfig.loss`):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -55,9 +56,18 @@ class RunningNorm(nn.Module):
 
 
 class Discriminator(nn.Module):
-    """MLP over normalised AMP windows; one output (LSGAN score or BCE logit)."""
+    """MLP over normalised AMP windows; one output (LSGAN score or BCE logit).
 
-    def __init__(self, in_dim: int, hidden: Sequence[int], loss: str = "lsgan") -> None:
+    Args:
+        in_dim: Length of a window.
+        hidden: Widths of the hidden layers.
+        loss: ``"lsgan"`` or ``"bce"``.
+        generator: Draws the initial weights (PyTorch's default initialisation, from this
+            generator); ``None``: from torch's global generator.
+    """
+
+    def __init__(self, in_dim: int, hidden: Sequence[int], loss: str = "lsgan",
+                 generator: torch.Generator | None = None) -> None:  # fmt: skip
         super().__init__()
         self.in_dim, self.loss = in_dim, loss
         self.norm = RunningNorm(in_dim)
@@ -68,7 +78,14 @@ class Discriminator(nn.Module):
             d = h
         self.trunk = nn.Sequential(*layers)
         self.head = nn.Linear(d, 1)
-        nn.init.uniform_(self.head.weight, -1.0, 1.0)  # PHC: small logit layer at start
+        if generator is not None:
+            for layer in self.trunk:
+                if isinstance(layer, nn.Linear):  # (nn.Linear.reset_parameters, seeded)
+                    nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5), generator=generator)
+                    bound = 1.0 / math.sqrt(layer.in_features)
+                    nn.init.uniform_(layer.bias, -bound, bound, generator=generator)
+        # PHC: a small logit layer at the start
+        nn.init.uniform_(self.head.weight, -1.0, 1.0, generator=generator)
         self.head.weight.data.mul_(0.01)
         nn.init.zeros_(self.head.bias)
 
@@ -151,7 +168,9 @@ class AmpTrainer:
     def __init__(self, cfg: AmpConfig, real: RealSampler, seed: int = 0) -> None:
         self.cfg = cfg
         dim = cfg.window * A.FRAME_DIM
-        self.disc = Discriminator(dim, cfg.hidden, cfg.loss)
+        # the initial weights come from the run's seed (the same seed: the same discriminator)
+        gen = torch.Generator().manual_seed(int(seed))
+        self.disc = Discriminator(dim, cfg.hidden, cfg.loss, generator=gen)
         self.opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr,
                                     weight_decay=cfg.weight_decay)  # fmt: skip
         self.real = real

@@ -15,6 +15,7 @@ order (:func:`grip.core.reference.pose_vector`).
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
@@ -42,6 +43,100 @@ _UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
 also zeroes the counters, and counts the warning: a second blow-up leaves the count at 1)."""
 _W_QPOS, _W_QVEL, _W_QACC = (int(w) for w in _UNSTABLE)
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
+
+_NJ = sk.N_JOINTS
+ROW_PARTS: tuple[tuple[str, int], ...] = (
+    ("pos", 3 * _NJ),  # body origins, world, m
+    ("vel", 3 * _NJ),  # body-origin linear velocities, world, m/s (body_state fills it)
+    ("angvel", 3 * _NJ),  # angular velocities, world, rad/s
+    ("rot", 9 * _NJ),  # world rotations, row-major 3 x 3
+    ("hinge_q", 69),  # hinge angles, SMPL order, rad
+    ("hinge_qd", 69),  # hinge rates, rad/s
+    ("root_angvel", 3),  # the free root's angular qvel (root frame), rad/s
+    ("root_linvel", 3),  # the free root's linear qvel (world), m/s
+    ("root_z", 1),  # the free root's qpos height, m
+    ("torque", 69),  # actuator torques, SMPL order, N m
+    # inputs of body_state: the velocities at the pelvis subtree's COM (cvel) and the cross
+    # product's operands, gathered in the permuted order it needs
+    ("com_vel", 3 * _NJ),
+    ("angvel_c1", 3 * _NJ),
+    ("angvel_c2", 3 * _NJ),
+    ("pos_c1", 3 * _NJ),
+    ("pos_c2", 3 * _NJ),
+    ("com_c1", 3 * _NJ),
+    ("com_c2", 3 * _NJ),
+)
+"""Layout of a state row (:meth:`Humanoid.gather`): ``(name, length)`` in order, float64,
+joints in SMPL order. Once :func:`body_state` has run, ``pos, vel, angvel`` are ``pvw (3, 24,
+3)`` and ``rot`` is ``(24, 3, 3)``; ``hinge_qd`` and ``root_angvel`` together are every angular
+rate :meth:`Humanoid.blown_up` bounds."""
+_ENDS = np.cumsum([n for _, n in ROW_PARTS])
+ROW: dict[str, slice] = {
+    k: slice(int(e) - n, int(e)) for (k, n), e in zip(ROW_PARTS, _ENDS, strict=True)
+}
+"""Where each part of a state row lies."""
+ROW_DIM = int(_ENDS[-1])
+_PVW, _ROT = slice(0, ROW["rot"].start), ROW["rot"]
+_RATES = slice(ROW["hinge_qd"].start, ROW["root_angvel"].stop)
+
+
+def body_state(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Finish gathered state rows: body-origin velocities ``v + w x (p - com)`` (cvel is the
+    velocity at the pelvis subtree's COM) into their ``vel`` part.
+
+    Args:
+        rows: ``(B, ROW_DIM)`` rows of :meth:`Humanoid.gather`, changed in place.
+
+    Returns:
+        Views into ``rows``: ``pvw (B, 3, 24, 3)`` positions (m), linear (m/s) and angular
+        (rad/s) velocities, world, and ``rot (B, 24, 3, 3)`` world rotations (the numbers of
+        :meth:`Humanoid.state`, bit for bit).
+    """
+    r = ROW
+    r2 = rows[:, r["pos_c2"]] - rows[:, r["com_c2"]]
+    r1 = rows[:, r["pos_c1"]] - rows[:, r["com_c1"]]
+    r2 *= rows[:, r["angvel_c1"]]
+    r1 *= rows[:, r["angvel_c2"]]
+    r2 -= r1
+    np.add(rows[:, r["com_vel"]], r2, out=rows[:, r["vel"]])
+    b = rows.shape[0]
+    return rows[:, _PVW].reshape(b, 3, _NJ, 3), rows[:, _ROT].reshape(b, _NJ, 3, 3)
+
+
+def absurd_rows(rows: np.ndarray, cfg: HumanoidConfig, z_range: np.ndarray) -> np.ndarray:
+    """Whether each gathered state is absurd (the bounds of :meth:`Humanoid.blown_up` after
+    MuJoCo's warnings: the pelvis speed, any angular rate, the pelvis height; NaN counts as
+    absurd).
+
+    Args:
+        rows: ``(B, ROW_DIM)`` gathered rows (:func:`body_state` not needed).
+        cfg: The bounds.
+        z_range: ``(B, 2)`` lowest and highest pelvis height allowed, m
+            (:attr:`Humanoid.z_range` of each).
+
+    Returns:
+        ``(B,)`` bool.
+    """
+    lin = rows[:, ROW["root_linvel"]]
+    ok = (lin * lin).sum(axis=1) <= cfg.blowup_lin_vel_mps**2
+    ok &= np.abs(rows[:, _RATES]).max(axis=1) <= cfg.blowup_ang_vel_radps
+    z = rows[:, ROW["root_z"].start]
+    ok &= z >= z_range[:, 0]
+    ok &= z <= z_range[:, 1]
+    return ~ok
+
+
+def _float64_span(arrays: list[np.ndarray]) -> tuple[np.ndarray, int]:
+    """A float64 view of the memory from the first to the end of the last of ``arrays`` (all
+    parts of one ``MjData`` buffer, which MuJoCo allocates once) and the address it starts
+    at: one ``take`` on it gathers any of their elements."""
+    addr = [a.__array_interface__["data"][0] for a in arrays]
+    base = min(addr)
+    end = max(p + a.nbytes for p, a in zip(addr, arrays, strict=True))
+    if any((p - base) % 8 for p in addr) or any(a.dtype != np.float64 for a in arrays):
+        raise ValueError("MjData arrays are not float64 arrays 8-byte aligned to each other")
+    buf = (ctypes.c_double * ((end - base) // 8)).from_address(base)
+    return np.ctypeslib.as_array(buf), base
 
 
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
@@ -111,6 +206,46 @@ class Humanoid:
         self.z_range = (-cfg.blowup_depth_m, terrain_top_m + cfg.blowup_height_m)
         self._feet: FootContacts | None = None
         self._geoms = np.flatnonzero(model.geom_bodyid > 0)
+        self._span, self._row_idx = self._row_index()
+        self._row = np.empty((1, ROW_DIM))  # (state())
+
+    def _row_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """The span of ``MjData`` memory a state row is gathered from and the index of each
+        row element in it (:data:`ROW_PARTS`). The span is a view of ``self.data``'s memory
+        (it lives as long as the humanoid keeps its data)."""
+        d, ix = self.data, self.index
+        arrays = [d.qpos, d.qvel, d.xpos, d.xmat, d.cvel, d.subtree_com, d.actuator_force]
+        span, base = _float64_span(arrays)
+
+        def at(a: np.ndarray, idx) -> np.ndarray:
+            return (a.__array_interface__["data"][0] - base) // 8 + np.asarray(idx).ravel()
+
+        ids = ix.body_ids[:, None]
+        xyz = np.arange(3)
+        com = 3 * self.pelvis_body
+        parts = {
+            "pos": at(d.xpos, 3 * ids + xyz),
+            "vel": at(d.cvel, 6 * ids + 3 + xyz),  # (overwritten by body_state)
+            "angvel": at(d.cvel, 6 * ids + xyz),
+            "rot": at(d.xmat, 9 * ids + np.arange(9)),
+            "hinge_q": at(d.qpos, ix.hinge_qpos_adr),
+            "hinge_qd": at(d.qvel, ix.hinge_dof_adr),
+            "root_angvel": at(d.qvel, ix.root_dof_adr + 3 + xyz),
+            "root_linvel": at(d.qvel, ix.root_dof_adr + xyz),
+            "root_z": at(d.qpos, [ix.root_qpos_adr + 2]),
+            "torque": at(d.actuator_force, ix.actuator_ids),
+            "com_vel": at(d.cvel, 6 * ids + 3 + xyz),
+            "angvel_c1": at(d.cvel, 6 * ids + _C1),
+            "angvel_c2": at(d.cvel, 6 * ids + _C2),
+            "pos_c1": at(d.xpos, 3 * ids + _C1),
+            "pos_c2": at(d.xpos, 3 * ids + _C2),
+            "com_c1": at(d.subtree_com, np.tile(com + _C1, _NJ)),
+            "com_c2": at(d.subtree_com, np.tile(com + _C2, _NJ)),
+        }
+        idx = np.concatenate([parts[k] for k, _ in ROW_PARTS]).astype(np.intp)
+        if idx.shape != (ROW_DIM,) or idx.min() < 0 or idx.max() >= span.size:
+            raise ValueError("state row index outside the MjData span")
+        return span, idx
 
     # ------------------------------------------------------------------ subjects
     def _kd_over_kp(self) -> np.ndarray:
@@ -208,6 +343,16 @@ class Humanoid:
             mujoco.mj_step(m, d)
         mujoco.mj_step1(m, d)  # derived quantities of the final state (see step())
 
+    def warned(self) -> bool:
+        """Whether MuJoCo could not integrate the state since the last check (its bad-qpos/
+        qvel/qacc warnings; it then reset ``MjData`` itself). Clears them. The first half of
+        :meth:`blown_up`."""
+        w = self.warnings
+        if w[_W_QPOS] or w[_W_QVEL] or w[_W_QACC]:  # (scalar reads: cheaper than w[_UNSTABLE])
+            w[_UNSTABLE] = 0
+            return True
+        return False
+
     def blown_up(self) -> bool:
         """Whether the state is a simulation blow-up: MuJoCo could not integrate it (its
         bad-qpos/qvel/qacc warnings, counted since the last check, then cleared), or it is
@@ -230,20 +375,22 @@ class Humanoid:
         return not ok
 
     # ------------------------------------------------------------------ state out
+    def gather(self, out: np.ndarray) -> np.ndarray:
+        """The state as one row (:data:`ROW_PARTS`; finish it with :func:`body_state`): one
+        ``take`` from ``MjData``, ~1 us.
+
+        Args:
+            out: ``(ROW_DIM,)`` float64 buffer, filled and returned.
+        """
+        return self._span.take(self._row_idx, out=out, mode="clip")
+
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """``pvw (3, 24, 3)`` world positions, linear and angular velocities of the bodies and
         ``rot (24, 3, 3)`` their world rotations (new arrays)."""
-        ids = self.index.body_ids
-        pvw = np.empty((3, sk.N_JOINTS, 3))
-        pos = pvw[0]
-        pos[:] = self.xpos[ids]
-        cvel = self.cvel[ids]
-        w = cvel[:, :3]
-        pvw[2] = w
-        r = pos - self.com
-        # cvel is the velocity at the subtree COM; move it to each body origin: v + w x r
-        pvw[1] = cvel[:, 3:] + (w[:, _C1] * r[:, _C2] - w[:, _C2] * r[:, _C1])
-        return pvw, self.xmat[ids].reshape(-1, 3, 3)
+        row = self._row
+        self._span.take(self._row_idx, out=row[0], mode="clip")
+        pvw, rot = body_state(row)  # (cvel is the velocity at the subtree COM: v + w x r)
+        return pvw[0].copy(), rot[0].copy()
 
     def hinge_angles(self) -> np.ndarray:
         """``(69,)`` hinge angles, SMPL order, rad (a copy)."""

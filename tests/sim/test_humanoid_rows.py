@@ -1,0 +1,69 @@
+"""A humanoid's state gathered as one row equals what MjData holds."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from grip.sim.humanoid import ROW, ROW_DIM, Humanoid, HumanoidConfig, absurd_rows, body_state
+from grip.sim.model import load_model
+
+
+def _moving_humanoid() -> Humanoid:
+    h = Humanoid(load_model())
+    d = h.data
+    mujoco.mj_resetDataKeyframe(h.model, d, h.model.key("stand").id)
+    rng = np.random.default_rng(0)
+    d.qvel[:] = rng.normal(0.0, 0.2, d.qvel.shape)
+    h.ctrl[h.act] = np.clip(d.qpos[h.index.hinge_qpos_adr] + rng.normal(0, 0.1, 69), h.lo, h.hi)
+    mujoco.mj_forward(h.model, d)
+    for _ in range(5):
+        h.step()
+    return h
+
+
+def test_gathered_row_equals_the_mjdata_arrays() -> None:
+    h = _moving_humanoid()
+    d, ix = h.data, h.index
+    row = h.gather(np.empty(ROW_DIM))
+    ids = ix.body_ids
+    np.testing.assert_array_equal(row[ROW["rot"]], d.xmat[ids].ravel())
+    np.testing.assert_array_equal(row[ROW["hinge_q"]], h.hinge_angles())
+    np.testing.assert_array_equal(row[ROW["hinge_qd"]], h.hinge_velocities())
+    np.testing.assert_array_equal(row[ROW["torque"]], h.torques())
+    rv = ix.root_dof_adr
+    np.testing.assert_array_equal(row[ROW["root_linvel"]], d.qvel[rv : rv + 3])
+    np.testing.assert_array_equal(row[ROW["root_angvel"]], d.qvel[rv + 3 : rv + 6])
+    assert row[ROW["root_z"]][0] == d.qpos[ix.root_qpos_adr + 2]
+    pvw, rot = body_state(row[None].copy())
+    np.testing.assert_array_equal(pvw[0, 0], d.xpos[ids])
+    np.testing.assert_array_equal(pvw[0, 2], d.cvel[ids, :3])
+    # the body-origin velocity: cvel (at the pelvis subtree's COM) moved to the origin; and
+    # MuJoCo's own velocity of each body's COM (mj_objectVelocity) moved there alike
+    w = d.cvel[ids, :3]
+    want = d.cvel[ids, 3:] + np.cross(w, d.xpos[ids] - d.subtree_com[h.pelvis_body])
+    np.testing.assert_allclose(pvw[0, 1], want, rtol=1e-12, atol=1e-12)
+    v6 = np.zeros(6)
+    for j, b in enumerate(ids.tolist()):
+        mujoco.mj_objectVelocity(h.model, d, mujoco.mjtObj.mjOBJ_BODY, b, v6, 0)
+        at_origin = v6[3:] + np.cross(v6[:3], d.xpos[b] - d.xipos[b])
+        np.testing.assert_allclose(pvw[0, 1, j], at_origin, atol=1e-9)
+    s_pvw, s_rot = h.state()
+    np.testing.assert_array_equal(s_pvw, pvw[0])
+    np.testing.assert_array_equal(s_rot, rot[0])
+    assert not np.shares_memory(s_pvw, h.state()[0])
+
+
+def test_absurd_rows_agree_with_blown_up() -> None:
+    h = _moving_humanoid()
+    cfg = HumanoidConfig()
+    z = np.array([h.z_range])
+    assert not absurd_rows(h.gather(np.empty((1, ROW_DIM))[0])[None], cfg, z)[0]
+    assert not h.blown_up()
+    for adr, value in ((h.index.root_dof_adr, 60.0), (h.index.hinge_dof_adr[5], 300.0),
+                       (h.index.root_dof_adr + 4, np.nan)):  # fmt: skip
+        keep = h.data.qvel[adr]
+        h.data.qvel[adr] = value
+        assert absurd_rows(h.gather(np.empty(ROW_DIM))[None], cfg, z)[0]
+        assert h.blown_up()
+        h.data.qvel[adr] = keep
