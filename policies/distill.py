@@ -37,6 +37,9 @@ from grip.core.checks import check
 from grip.core.rundir import RunDir
 from policies.config import REMOVED_IN
 
+VEC_ENVS: tuple[str, ...] = ("batched", "dummy")
+"""How :class:`Distiller` steps its rollout environments (:attr:`DistillConfig.vec_env`)."""
+
 RESUMABLE: tuple[str, ...] = ("iterations",)
 """Settings a resumed distillation may change: its length."""
 
@@ -83,6 +86,10 @@ class DistillConfig:
             played backwards, join the reference set (``RUN/reference_train.npz``).
         mirror_references: As ``grip policy train``'s: the mirror image of every clip joins.
         threads: Torch threads (0: all cores).
+        vec_env: ``"batched"``: the rollout environments stepped by one call (the env maker's
+            ``batched`` form, :class:`envs.batched.BatchedTrackingEnv`; the same transitions
+            as ``"dummy"`` to float rounding, the physics in a thread pool); ``"dummy"``: one
+            after another (SB3's ``DummyVecEnv``).
         seed: Seed of the environments, the mixing and the minibatches.
     """
 
@@ -104,6 +111,7 @@ class DistillConfig:
     mirror_references: bool = True
     action_noise: float = 0.0
     threads: int = 0
+    vec_env: str = "batched"
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -123,6 +131,7 @@ class DistillConfig:
             (self.action_noise >= 0, "action_noise must be >= 0"),
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
              "fall_height_m and max_episode_frames must be >= 0"),
+            (self.vec_env in VEC_ENVS, f"vec_env must be one of {list(VEC_ENVS)}"),
         )  # fmt: skip
 
     def beta(self, iteration: int) -> float:
@@ -265,12 +274,30 @@ class Distiller:
         return xa, ya
 
     def _make_env(self):
-        from policies.vec_env import stage2_rollout_env
+        """The iteration's rollout environments: GRIP's stage-2 episodes with the teacher's
+        settings (:func:`policies.vec_env.stage2_rollout_env`), batched or one by one
+        (:attr:`DistillConfig.vec_env`)."""
+        import dataclasses
+
+        from policies.vec_env import BatchedVecEnv, stage2_rollout_env
 
         c = self.cfg
-        return stage2_rollout_env(self.make_env, self.teacher.env_cfg, self.reference,
-                                  c.categories, c.n_envs, c.seed + 7919 * self.iteration,
-                                  c.fall_height_m, c.max_episode_frames)  # fmt: skip
+        seed = c.seed + 7919 * self.iteration
+        if c.vec_env == "dummy":
+            return stage2_rollout_env(self.make_env, self.teacher.env_cfg, self.reference,
+                                      c.categories, c.n_envs, seed, c.fall_height_m,
+                                      c.max_episode_frames)  # fmt: skip
+        batched = getattr(self.make_env, "batched", None)
+        if batched is None:
+            raise ValueError("vec_env = 'batched' needs an env maker with a 'batched' form "
+                             "(envs.factory.make_tracking_env has one)")  # fmt: skip
+        # stage2_rollout_env's settings, for the environments of one batch
+        stage2 = {"reference": self.reference, "random_start": True, "clip_index": -1,
+                  "termination_dist_m": 0.0, "fall_height_m": c.fall_height_m,
+                  "max_episode_frames": c.max_episode_frames}  # fmt: skip
+        env_cfg = dataclasses.replace(self.teacher.env_cfg, **stage2)
+        seeds = [seed + 1000 * i for i in range(c.n_envs)]
+        return BatchedVecEnv(batched(env_cfg, tuple(c.categories), seeds, 0))
 
     def collect(self, bar=None) -> tuple[np.ndarray, np.ndarray, dict]:
         """One rollout of ``decisions_per_iteration`` decisions with the student acting (the

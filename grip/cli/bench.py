@@ -52,6 +52,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes, one thread each (1: run in this process; "
                    "default: the number of cores)")  # fmt: skip
+    p.add_argument("--batch", type=int, default=16, metavar="N",
+                   help="segments method grip plays side by side in each worker, one "
+                   "controller forward per frame over all of them (default 16; 1: one after "
+                   "another); the numbers of each alone up to the float32 rounding of a "
+                   "batched forward, which a simulation can amplify")  # fmt: skip
     p.add_argument("--kin", type=Path, default=None,
                    help="KinematicsNet checkpoint (default: the shipped one)")  # fmt: skip
     p.add_argument("--policy", type=Path, default=None,
@@ -88,6 +93,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     limits_from_args(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
+    if args.batch < 1:
+        raise CliError(f"--batch must be >= 1, got {args.batch}")
     if args.segment_frames < 3:
         raise CliError(f"--segment-frames must be >= 3, got {args.segment_frames}")
     sensors: list[str] = []
@@ -137,7 +144,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         try:
             rows = run_bench(runs, segs, args.out, workers=args.workers,
                              save_recons=args.save_recons, retry_failed=args.retry_failed,
-                             built=built, progress=progress, log=bar.write)  # fmt: skip
+                             built=built, progress=progress, log=bar.write,
+                             batch=args.batch)  # fmt: skip
         except BenchError as e:
             raise CliError(str(e)) from e
     title = f"Benchmark on {args.data} ({args.split} split)"

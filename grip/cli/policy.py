@@ -103,6 +103,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "overlap); e.g. 100 gives about 5x more, overlapping 500-frame segments, "
                    "for a success rate with less sampling noise")  # fmt: skip
     e.add_argument("--segments", type=int, default=0, help="at most this many segments (0: all)")
+    e.add_argument("--batch", type=int, default=16, metavar="N",
+                   help="segments played side by side, one controller forward per frame over "
+                   "all of them (default 16; 1: one after another). Each segment's numbers are "
+                   "those it gets alone up to the float32 rounding of a batched forward, which "
+                   "a simulation can amplify; --action-noise draws its noise in another order "
+                   "than with --batch 1")  # fmt: skip
     e.add_argument("--reference", default="estimate", choices=("estimate", "truth"),
                    help="what the controller follows: the KinematicsNet estimate (default, the "
                    "method) or the ground truth (a perfect KinematicsNet; tells the "
@@ -305,6 +311,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(f"--action-noise with {pol}: {e}") from e
     if args.stride < 0:
         raise CliError(f"--stride must be >= 0, got {args.stride}")
+    if args.batch < 1:
+        raise CliError(f"--batch must be >= 1, got {args.batch}")
     held = set(runner.info.get("holdout") or ()) if args.split == "holdout" else set()
     if args.split == "holdout" and not held:
         raise CliError(f"{pol}: no clips were held out of this policy's training (train "
@@ -332,7 +340,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
             if i:
                 runner.use_action_noise(args.action_noise, args.seed + i)
             got = evaluate_segments(runner, est, segs, progress=bar.update,
-                                    reference=args.reference)  # fmt: skip
+                                    reference=args.reference,
+                                    play_batch=args.batch)  # fmt: skip
             passes.append([dict(r, replay=i) for r in got] if args.repeats > 1 else got)
     rows = [r for p in passes for r in p]
     summary = summarize_rows(rows)

@@ -45,6 +45,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="KinematicsNet checkpoint (default: the shipped one)")
     p.add_argument("--workers", type=int, default=1,
                    help="parallel processes, each on a share of the recordings (default 1)")
+    p.add_argument("--batch", type=int, default=16, metavar="N",
+                   help="recordings played side by side in each process, one controller "
+                   "forward per frame over all of them (default 16; 1: one after another); "
+                   "the numbers of each alone up to the float32 rounding of a batched "
+                   "forward, which a simulation can amplify")  # fmt: skip
     p.add_argument("--no-recovery", action="store_true",
                    help="report falls but do not recover from them (the humanoid stays down)")
     p.add_argument("--history", type=int, default=30,
@@ -149,10 +154,10 @@ _LOADED: dict = {}
 
 
 def _work(job: tuple) -> list[dict]:
-    """One worker: reconstruct a share of the recordings and write their files. A recording
-    that cannot be read or does not carry the sensors the models need gives a row with an
-    ``"error"`` (the others go on)."""
-    files, out, policy, kin, recovery, max_frames, formats, fill_gaps = job  # files: (f, stem)
+    """One worker: reconstruct a share of the recordings (``batch`` of them side by side) and
+    write their files. A recording that cannot be read or does not carry the sensors the models
+    need gives a row with an ``"error"`` (the others go on)."""
+    files, out, policy, kin, recovery, max_frames, formats, fill_gaps, batch, threads = job
     import torch
 
     torch.set_num_threads(1)
@@ -165,21 +170,24 @@ def _work(job: tuple) -> list[dict]:
     if g is None:  # each worker process loads the models once
         _LOADED.clear()
         g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
-    rows = []
+    caught = (CliError, KeyError, ValueError, OSError)
+    loaded: list = []  # (f, stem, recording or the error reading it)
     for f, stem in files:
         try:
             (rec,) = load_recordings([f], max_frames=max_frames, fill_gaps=fill_gaps)
-            (recon,) = g.reconstruct([rec])
-        except (CliError, KeyError, ValueError, OSError) as e:
-            msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
-            if isinstance(e, KeyError):  # a sensor the models read is missing
-                feats = g.estimator.cfg.features
-                msg += (f"; the models read the IMUs {list(feats.sites)}"
-                        f"{' and both insoles' if feats.insoles else ''}, so a model trained "
-                        "for the sensors present is needed (grip kin train --set "
-                        "features.sites=[...] --set features.insoles=false, and a policy on "
-                        "its estimates)")  # fmt: skip
-            rows.append({"file": str(f), "error": msg})
+        except caught as e:
+            rec = e
+        loaded.append((f, stem, rec))
+    recs = [r for _, _, r in loaded if not isinstance(r, Exception)]
+    # each recording's KinematicsNet pass alone: the numbers of --batch 1
+    got = iter(g.reconstruct(recs, batch=1, play_batch=batch, threads=threads, errors=True))
+    rows = []
+    for f, stem, rec in loaded:
+        recon = rec if isinstance(rec, Exception) else next(got)
+        if isinstance(recon, Exception):
+            if not isinstance(recon, caught):
+                raise recon
+            rows.append({"file": str(f), "error": _error_message(recon, g)})
             continue
         dst = Path(out) / f"{stem}.npz"
         recon.save(dst)
@@ -191,6 +199,19 @@ def _work(job: tuple) -> list[dict]:
                      "failed": failed,
                      "filled_gaps": rec.extras.get("filled_gaps", [])})  # fmt: skip
     return rows
+
+
+def _error_message(e: Exception, g) -> str:
+    """What a summary says of a recording that failed with ``e``."""
+    msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+    if isinstance(e, KeyError):  # a sensor the models read is missing
+        feats = g.estimator.cfg.features
+        msg += (f"; the models read the IMUs {list(feats.sites)}"
+                f"{' and both insoles' if feats.insoles else ''}, so a model trained "
+                "for the sensors present is needed (grip kin train --set "
+                "features.sites=[...] --set features.insoles=false, and a policy on "
+                "its estimates)")  # fmt: skip
+    return msg
 
 
 def _exports(recon, rec, out: Path, formats: list[str],
@@ -233,8 +254,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     missing = [str(f) for f in args.recordings if not f.is_file()]
     if missing:
         raise CliError(f"no such recording file(s): {', '.join(missing)}")
-    if args.workers < 1 or args.history < 1:
-        raise CliError("--workers and --history must be >= 1")
+    if args.workers < 1 or args.history < 1 or args.batch < 1:
+        raise CliError("--workers, --history and --batch must be >= 1")
     if args.fill_gaps < 0:
         raise CliError("--fill-gaps must be >= 0")
     policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
@@ -290,9 +311,16 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
                                                     "errors": errors}, indent=1))  # fmt: skip
 
-    jobs = [([(given[f], stems[f])], str(args.out), str(policy), str(kin), recovery,
-             args.max_frames, formats, args.fill_gaps) for f in todo]  # fmt: skip
+    from grip.pipeline import usable_cores
+
     parallel = args.workers > 1 and len(todo) > 1
+    workers = args.workers if parallel else 1
+    # --batch recordings side by side per job (fewer when a worker would wait for work)
+    size = max(1, min(args.batch, -(-len(todo) // workers)))
+    threads = max(1, usable_cores() // workers)
+    jobs = [([(given[f], stems[f]) for f in todo[i : i + size]], str(args.out), str(policy),
+             str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch, threads)
+            for i in range(0, len(todo), size)]  # fmt: skip
     with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
         if not parallel:
             results = map(_work, jobs)
@@ -310,7 +338,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                     done[str(Path(r["file"]).resolve())] = r
                     bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
                 save()
-                bar.update(1)
+                bar.update(len(rows))
         except (OSError, ValueError) as e:
             raise CliError(str(e)) from e
         finally:

@@ -219,6 +219,18 @@ class Grip:
     def reconstruct(self, rec) -> Reconstruction:
         return self.reconstructor.reconstruct([rec])[0]
 
+    def reconstruct_many(self, recs: list, threads: int = 0) -> list:
+        """:meth:`reconstruct` of each recording, all played side by side (each recording's
+        KinematicsNet pass alone, as :meth:`reconstruct` runs it); the exception a recording
+        raises takes its place in the list.
+
+        Args:
+            recs: The segment recordings.
+            threads: Threads stepping the humanoids (0: the usable cores).
+        """
+        return self.reconstructor.reconstruct(recs, batch=1, play_batch=max(len(recs), 1),
+                                              threads=threads, errors=True)  # fmt: skip
+
 
 def grip_method(options: MethodOptions) -> Grip:
     """Factory of :class:`Grip` (policy: ``options.policy_checkpoint`` or the shipped one)."""

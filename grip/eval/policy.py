@@ -7,9 +7,12 @@ discriminator's probability below 0.7, BASELINES_AND_METRICS 5.4) ends a segment
 metrics cover the frames simulated until then.
 
 The episode is :meth:`grip.pipeline.GripPipeline.play` with recovery off, stopped at the
-first fall. Metrics are ``grip bench``'s (:func:`grip.eval.scoring.segment_metrics`: ``MPJPE_mm``,
-``PEL_MPJPE_mm``, ``PA_MPJPE_mm``, ``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N``
-from MuJoCo's foot-ground contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
+first fall; ``play_batch`` episodes play side by side (:class:`grip.pipeline.BatchedPlayer`: one
+controller forward per frame over the batch; the numbers of each episode played alone, up to
+the float32 rounding of the batched forward). Metrics are ``grip bench``'s
+(:func:`grip.eval.scoring.segment_metrics`: ``MPJPE_mm``, ``PEL_MPJPE_mm``, ``PA_MPJPE_mm``,
+``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N`` from MuJoCo's foot-ground
+contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
 (KinematicsNet pose on the integrated root) over the same frames, and where the world error comes
 from: ``root_err_m`` / ``kin_root_err_m`` (mean horizontal pelvis distance from the truth,
 :func:`grip.core.metrics.root_error_xy`) and ``travel_ratio`` / ``kin_travel_ratio`` (ground
@@ -26,7 +29,7 @@ blown-up frame: no frame of a blown-up state enters the metrics.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,11 +37,11 @@ from grip.core import metrics as M
 from grip.core.reference import ReferenceSet
 from grip.eval.report import category_summary, csv_text, weighted_means
 from grip.eval.report import markdown_table as table
-from grip.eval.runner import play_segments
+from grip.eval.runner import segment_keys
 from grip.eval.scoring import segment_metrics as bench_metrics
-from grip.eval.segments import Segment
+from grip.eval.segments import Segment, SegmentReader
 from grip.kinematics.features import ground_truth
-from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
+from grip.pipeline import Episode, GripPipeline, RecoveryConfig, start_from_clip
 
 if TYPE_CHECKING:
     from policies.controller import Controller
@@ -77,30 +80,41 @@ REFERENCES: tuple[str, ...] = ("estimate", "truth")
 
 def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
                     progress: Callable[[int], object] | None = None,
-                    reference: str = "estimate") -> list[dict]:  # fmt: skip
+                    reference: str = "estimate", play_batch: int = 1,
+                    threads: int = 0) -> list[dict]:  # fmt: skip
     """One row of metrics per recording (segment), with ``name`` and ``category``.
 
     ``reference``: what the controller follows: ``"estimate"`` (KinematicsNet's, the method) or
     ``"truth"`` (the ground-truth motion, a perfect KinematicsNet: separates the controller's
     own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0). ``batch``:
-    recordings per KinematicsNet forward pass; ``progress``: called after each episode.
+    recordings per KinematicsNet forward pass; ``progress``: called after each episode;
+    ``play_batch``: episodes played side by side (:meth:`grip.pipeline.GripPipeline.
+    play_many`; 1: one after another), their humanoids stepped by ``threads`` threads (0: the
+    usable cores). An episode that raises raises here.
     """
     pipe = _pipeline(runner, estimator, reference)
-    return _episodes(pipe, _reference_set(estimator, recs, batch, reference), recs, progress)
+    chunks = [([{}] * len(recs), recs, _reference_set(estimator, recs, batch, reference))]
+    return _play_rows(pipe, chunks, len(recs), play_batch, threads, progress)
 
 
 def evaluate_segments(runner: Controller, estimator, segments: Sequence[Segment],
                       batch: int = 16, progress: Callable[[int], object] | None = None,
-                      reference: str = "estimate") -> list[dict]:  # fmt: skip
-    """:func:`evaluate_policy` on :mod:`grip.eval.segments` (read ``batch`` at a time by
-    :func:`grip.eval.runner.play_segments`): one row per segment, with its segment keys."""
+                      reference: str = "estimate", play_batch: int = 1,
+                      threads: int = 0) -> list[dict]:  # fmt: skip
+    """:func:`evaluate_policy` on :mod:`grip.eval.segments` (read and estimated ``batch`` at a
+    time, when the player needs the next): one row per segment, in order, starting with its
+    segment keys (:func:`grip.eval.runner.segment_keys`)."""
     pipe = _pipeline(runner, estimator, reference)
 
-    def score(recs: list) -> list[dict]:
-        ref = _reference_set(estimator, recs, batch, reference)
-        return _episodes(pipe, ref, recs, progress)
+    def chunks() -> Iterator[tuple[list[dict], list, ReferenceSet]]:
+        read = SegmentReader()
+        for i in range(0, len(segments), batch):
+            part = list(segments[i : i + batch])
+            recs = [read(s) for s in part]
+            heads = [segment_keys(seg, rec) for seg, rec in zip(part, recs, strict=True)]
+            yield heads, recs, _reference_set(estimator, recs, batch, reference)
 
-    return play_segments(segments, score, batch)
+    return _play_rows(pipe, chunks(), len(segments), play_batch, threads, progress)
 
 
 def _pipeline(runner: Controller, estimator, reference: str) -> GripPipeline:
@@ -119,15 +133,31 @@ def _reference_set(estimator, recs: list, batch: int, reference: str) -> Referen
     return build_reference_set(recs, estimator, batch=batch)
 
 
-def _episodes(pipe: GripPipeline, ref: ReferenceSet, recs: list,
-              progress: Callable[[int], object] | None) -> list[dict]:  # fmt: skip
-    rows = []
-    for i, rec in enumerate(recs):
-        clip = ref.clip(i)
-        recon, _ = pipe.play(clip, start_from_clip(clip), clip.body, clip.objects,
-                             stop_at_fall=True)  # fmt: skip
-        rows.append({"name": rec.name, "category": rec.category or "unknown",
-                     **segment_row(recon, clip, rec)})  # fmt: skip
+def _play_rows(pipe: GripPipeline, chunks: Iterable[tuple[list[dict], list, ReferenceSet]],
+               n: int, play_batch: int, threads: int,
+               progress: Callable[[int], object] | None) -> list[dict]:  # fmt: skip
+    """Play the episodes of ``chunks`` (``(row heads, recordings, their reference set)``, taken
+    as the player needs them) from the ground truth's first frame to the first fall; one row
+    per recording, in order: its head, ``name``, ``category`` and :func:`segment_row`."""
+    held: dict[int, tuple[dict, object, object]] = {}  # until the episode's row is made
+
+    def episodes() -> Iterator[Episode]:
+        k = 0
+        for heads, recs, ref in chunks:
+            for j, (head, rec) in enumerate(zip(heads, recs, strict=True)):
+                clip = ref.clip(j)
+                held[k] = (head, rec, clip)
+                k += 1
+                yield Episode(clip, start_from_clip(clip), clip.body, clip.objects,
+                              stop_at_fall=True)  # fmt: skip
+
+    rows: list = [None] * n
+    for i, recon, _ in pipe.play_many(episodes(), play_batch, threads):
+        if isinstance(recon, Exception):
+            raise recon
+        head, rec, clip = held.pop(i)
+        rows[i] = {**head, "name": rec.name, "category": rec.category or "unknown",
+                   **segment_row(recon, clip, rec)}  # fmt: skip
         if progress is not None:
             progress(1)
     return rows

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from grip.core.reconstruction import Reconstruction
 from grip.kinematics.features import sensor_stream
 from grip.pipeline import GripPipeline, RecoveryConfig
 
@@ -51,10 +50,36 @@ class GripReconstructor:
         return GripStream(self.runner, self.estimator, calibration, self.recovery)
 
     def reconstruct(
-        self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16
-    ) -> list[Reconstruction]:
-        """One :class:`Reconstruction` per recording, in order (only their sensors and
-        calibration frames are read)."""
+        self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16,
+        play_batch: int = 1, threads: int = 0, errors: bool = False,
+    ) -> list:  # fmt: skip
+        """One :class:`~grip.core.reconstruction.Reconstruction` per recording, in order (only
+        their sensors and calibration frames are read).
+
+        Args:
+            recs: The recordings.
+            progress: Called with 1 after each recording.
+            batch: Recordings per KinematicsNet forward pass (1: the numbers of each alone).
+            play_batch: Recordings played side by side (:meth:`grip.pipeline.GripPipeline.
+                play_many`; 1: one after another).
+            threads: Threads stepping a batch's humanoids (0: the usable cores).
+            errors: Return the exception a recording raised (reading its sensors included) in
+                its place, the others going on; False: raise it.
+        """
         cfg = self.estimator.cfg.features
-        streams = [sensor_stream(r, cfg) for r in recs]
-        return self.pipeline.reconstruct(streams, batch=batch, progress=progress)
+        if not errors:
+            streams = [sensor_stream(r, cfg) for r in recs]
+            return self.pipeline.reconstruct(streams, batch, progress, play_batch, threads)
+        out: list = [None] * len(recs)
+        ok: list[int] = []
+        streams = []
+        for i, r in enumerate(recs):
+            try:
+                streams.append(sensor_stream(r, cfg))
+                ok.append(i)
+            except Exception as e:
+                out[i] = e
+        got = self.pipeline.reconstruct(streams, batch, progress, play_batch, threads, True)
+        for i, recon in zip(ok, got, strict=True):
+            out[i] = recon
+        return out

@@ -47,6 +47,7 @@ __all__ = [
     "prepare_runs",
     "recon_file",
     "run_bench",
+    "score_segment",
     "segment_keys",
 ]
 
@@ -182,10 +183,22 @@ def evaluate_segment(
         ``can_fall``, ``notes``; or "error" with ``error`` and ``traceback``) and the
         reconstruction (``None`` on error).
     """
+    t0 = time.perf_counter()
     try:
-        t0 = time.perf_counter()
         recon = method.reconstruct(rec)
-        wall_s = time.perf_counter() - t0
+    except Exception as e:
+        recon = e
+    return score_segment(method, rec, label, seg, recon, time.perf_counter() - t0)
+
+
+def score_segment(method: Method, rec, label: str, seg: Segment,
+                  recon: Reconstruction | Exception, wall_s: float,
+                  ) -> tuple[dict, Reconstruction | None]:  # fmt: skip
+    """:func:`evaluate_segment`'s row of what ``method`` returned for ``rec`` (or the
+    exception it raised) in ``wall_s`` seconds."""
+    try:
+        if isinstance(recon, Exception):
+            raise recon
         if not isinstance(recon, Reconstruction):
             raise TypeError(f"{method.name}.reconstruct returned {type(recon).__name__}, "
                             "not a Reconstruction")  # fmt: skip
@@ -204,6 +217,27 @@ def evaluate_segment(
            "metrics": metrics, "per_joint": per_joint,
            "method_ms_per_frame": float(recon.ms_per_frame), "notes": recon.notes}  # fmt: skip
     return row, recon
+
+
+def _batchable(method: Method) -> bool:
+    """Whether ``method`` plays several segments side by side (``reconstruct_many(recs,
+    threads)``: a list of reconstructions or exceptions, as :class:`grip.eval.methods.Grip`)."""
+    return callable(getattr(method, "reconstruct_many", None))
+
+
+def _evaluate_many(method: Method, recs: list, label: str, segs: list[Segment],
+                   threads: int) -> list[tuple[dict, Reconstruction | None]]:  # fmt: skip
+    """:func:`evaluate_segment` of each recording, played side by side; the wall time is
+    shared out by frames (each row's ``ms_per_frame`` is the batch's per frame)."""
+    t0 = time.perf_counter()
+    try:
+        got = method.reconstruct_many(recs, threads=threads)
+    except Exception as e:  # (outside every segment: each fails with it)
+        got = [e] * len(recs)
+    wall_s = time.perf_counter() - t0
+    total = max(sum(int(r.n_frames) for r in recs), 1)
+    return [score_segment(method, rec, label, seg, res, wall_s * int(rec.n_frames) / total)
+            for rec, seg, res in zip(recs, segs, got, strict=True)]  # fmt: skip
 
 
 def _segment_file(out_dir: Path, label: str, seg_id: str) -> Path:
@@ -272,28 +306,43 @@ def _init_worker() -> None:
     _WORKER_STATE = _State(one_thread=True)
 
 
-def _run_task(run: MethodRun, seg: Segment, out_dir: Path, save_recon: bool,
-              state: _State | None = None) -> dict:  # fmt: skip
-    """Run one (method, segment) task and store its row (and reconstruction)."""
+def _run_task(run: MethodRun, segs: Sequence[Segment], out_dir: Path, saves: Sequence[bool],
+              state: _State | None = None, threads: int = 0) -> list[dict]:  # fmt: skip
+    """Run one method on segments (one segment, or several that a batchable method plays side
+    by side, ``threads`` threads stepping them) and store their rows (and reconstructions,
+    where ``saves`` says so)."""
     state = state or _WORKER_STATE
     if state is None:
         raise RuntimeError("_run_task outside a worker needs a state")
-    marker = _marker(out_dir, run.label, seg.id)
-    marker.parent.mkdir(parents=True, exist_ok=True)
-    marker.touch()
+    for seg in segs:
+        marker = _marker(out_dir, run.label, seg.id)
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
     method = state.method(run)
-    try:
-        rec = state.segment(seg)
-    except Exception as e:
-        row, recon = error_row(run.label, seg, f"{type(e).__name__}: {e}"), None
+    results: dict[str, tuple[dict, Reconstruction | None]] = {}
+    readable: list[tuple[Segment, object]] = []
+    for seg in segs:
+        try:
+            readable.append((seg, state.segment(seg)))
+        except Exception as e:
+            results[seg.id] = (error_row(run.label, seg, f"{type(e).__name__}: {e}"), None)
+    if len(readable) > 1 and _batchable(method):
+        got = _evaluate_many(method, [r for _, r in readable], run.label,
+                             [s for s, _ in readable], threads)  # fmt: skip
+        results.update({seg.id: res for (seg, _), res in zip(readable, got, strict=True)})
     else:
-        row, recon = evaluate_segment(method, rec, run.label, seg)
-    if recon is not None and save_recon:
-        recon.name = seg.id
-        recon.save(recon_file(out_dir, run.label, seg.id))
-    _write_row(out_dir, row)
-    marker.unlink(missing_ok=True)
-    return row
+        for seg, rec in readable:
+            results[seg.id] = evaluate_segment(method, rec, run.label, seg)
+    rows = []
+    for seg, save in zip(segs, saves, strict=True):
+        row, recon = results[seg.id]
+        if recon is not None and save:
+            recon.name = seg.id
+            recon.save(recon_file(out_dir, run.label, seg.id))
+        _write_row(out_dir, row)
+        _marker(out_dir, run.label, seg.id).unlink(missing_ok=True)
+        rows.append(row)
+    return rows
 
 
 def _check_method_settings(out_dir: Path, run: MethodRun) -> None:
@@ -326,6 +375,7 @@ def run_bench(
     built: Mapping[str, Method] | None = None,
     progress: Callable[[dict], object] | None = None,
     log: Callable[[str], object] = print,
+    batch: int = 1,
 ) -> list[dict]:
     """Run every method on every segment, keeping what a previous run finished.
 
@@ -341,6 +391,9 @@ def run_bench(
         built: ``{label: method}`` already built here (reused when ``workers == 1``).
         progress: Called with each newly finished row.
         log: Messages (resumed and failed counts).
+        batch: Segments a method that can (``reconstruct_many``, method ``grip``) plays side
+            by side, in each worker (fewer when that leaves a worker idle); its humanoids are
+            stepped by the cores a worker has to itself. 1: one segment at a time.
 
     Returns:
         One row per (run, segment), in segment-major order.
@@ -387,34 +440,59 @@ def run_bench(
         if progress is not None:
             progress(row)
 
+    from grip.pipeline import usable_cores
+
+    state = _State(built)
+    units = _units(tasks, batch, workers, lambda run: _batchable(state.method(run)))
+    threads = max(1, usable_cores() // max(workers, 1))
     if workers <= 1:
-        # One thread, as in a worker process, so that runtimes compare; restored afterwards.
+        # One torch thread, as in a worker process, so that runtimes compare; restored after.
         torch = sys.modules.get("torch")
         prev_threads = torch.get_num_threads() if torch is not None else 0
         if torch is not None:
             torch.set_num_threads(1)
         try:
-            state = _State(built)
-            for run, seg in tasks:
-                done(_run_task(run, seg, out_dir, save(seg), state))
+            for run, segs in units:
+                for row in _run_task(run, segs, out_dir, [save(s) for s in segs], state,
+                                     threads):  # fmt: skip
+                    done(row)
         finally:
             if torch is not None:
                 torch.set_num_threads(prev_threads)
-    elif tasks:
-        _run_pool(tasks, out_dir, save, workers, done)
+    elif units:
+        _run_pool(units, out_dir, save, workers, done, threads)
     return [rows[(r.label, s.id)] for s in segments for r in runs if (r.label, s.id) in rows]
 
 
-def _pool_round(tasks, out_dir: Path, save, workers: int, done) -> list:
-    """Run ``tasks`` in one pool; returns the tasks lost when a worker process died."""
+def _units(tasks: Sequence[tuple[MethodRun, Segment]], batch: int, workers: int,
+           batchable: Callable[[MethodRun], bool],
+           ) -> list[tuple[MethodRun, list[Segment]]]:  # fmt: skip
+    """Units of work: one segment each, or for a batchable method up to ``batch`` of its
+    segments in their order (fewer when ``workers`` would otherwise wait)."""
+    single: list[tuple[MethodRun, list[Segment]]] = []
+    per_run: dict[str, tuple[MethodRun, list[Segment]]] = {}
+    for run, seg in tasks:
+        if batch > 1 and batchable(run):
+            per_run.setdefault(run.label, (run, []))[1].append(seg)
+        else:
+            single.append((run, [seg]))
+    units = list(single)
+    for run, segs in per_run.values():
+        size = max(1, min(batch, -(-len(segs) // max(workers, 1))))
+        units += [(run, segs[i : i + size]) for i in range(0, len(segs), size)]
+    return units
+
+
+def _pool_round(units, out_dir: Path, save, workers: int, done, threads: int) -> list:
+    """Run ``units`` in one pool; returns the units lost when a worker process died."""
     ctx = mp.get_context(_start_method())
-    lost = []
+    lost: list = []
     # one BLAS thread per worker: set before the workers (and the forkserver) start, because
     # OpenBLAS reads it when numpy is first imported
     saved = {v: os.environ.get(v) for v in _THREAD_VARS}
     os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
     try:
-        return _pool_round_in_env(ctx, tasks, out_dir, save, workers, done, lost)
+        return _pool_round_in_env(ctx, units, out_dir, save, workers, done, lost, threads)
     finally:
         for v, old in saved.items():
             if old is None:
@@ -423,46 +501,51 @@ def _pool_round(tasks, out_dir: Path, save, workers: int, done) -> list:
                 os.environ[v] = old
 
 
-def _pool_round_in_env(ctx, tasks, out_dir: Path, save, workers: int, done, lost) -> list:
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx,
+def _pool_round_in_env(ctx, units, out_dir: Path, save, workers: int, done, lost,
+                       threads: int) -> list:  # fmt: skip
+    with ProcessPoolExecutor(max_workers=min(workers, len(units)), mp_context=ctx,
                              initializer=_init_worker) as pool:  # fmt: skip
-        futures = {pool.submit(_run_task, run, seg, out_dir, save(seg)): (run, seg)
-                   for run, seg in tasks}  # fmt: skip
+        futures = {pool.submit(_run_task, run, segs, out_dir, [save(s) for s in segs], None,
+                               threads): (run, segs)
+                   for run, segs in units}  # fmt: skip
         for fut in as_completed(futures):
-            run, seg = futures[fut]
+            run, segs = futures[fut]
             try:
-                row = fut.result()
+                rows = fut.result()
             except BrokenProcessPool:
-                lost.append((run, seg))
+                lost.append((run, segs))
                 continue
             except Exception as e:  # outside the per-segment guard (building the method)
                 # Reported but not stored: the next run tries again.
-                row = error_row(run.label, seg, f"{type(e).__name__}: {e}")
-            done(row)
+                rows = [error_row(run.label, seg, f"{type(e).__name__}: {e}") for seg in segs]
+            for row in rows:
+                done(row)
     return lost
 
 
-def _run_pool(tasks, out_dir: Path, save, workers: int, done) -> None:
-    """Run tasks in worker processes, surviving workers that die.
+def _run_pool(units, out_dir: Path, save, workers: int, done, threads: int = 1) -> None:
+    """Run units of work in worker processes, surviving workers that die.
 
-    When a worker dies the pool breaks and every unfinished task is lost. The tasks that were
-    running (their ``.running`` marker exists) are suspects: each runs again alone in a
+    When a worker dies the pool breaks and every unfinished unit is lost. The segments that
+    were running (their ``.running`` marker exists) are suspects: each runs again alone in a
     one-worker pool, and one that kills its worker there too is recorded as an error. The
     others go back into a fresh pool.
     """
-    pending = list(tasks)
+    pending = list(units)
     while pending:
-        lost = _pool_round(pending, out_dir, save, workers, done)
+        lost = _pool_round(pending, out_dir, save, workers, done, threads)
         suspects, pending = [], []
-        for run, seg in lost:
-            marker = _marker(out_dir, run.label, seg.id)
-            (suspects if marker.exists() else pending).append((run, seg))
-            marker.unlink(missing_ok=True)
+        for run, segs in lost:
+            for seg in segs:
+                marker = _marker(out_dir, run.label, seg.id)
+                (suspects if marker.exists() else pending).append((run, [seg]))
+                marker.unlink(missing_ok=True)
         if lost and not suspects:
             raise BenchError("worker processes died before running any segment; run with "
                              "--workers 1 to see the error")  # fmt: skip
-        for run, seg in suspects:
-            if _pool_round([(run, seg)], out_dir, save, 1, done):
+        for run, segs in suspects:
+            if _pool_round([(run, segs)], out_dir, save, 1, done, threads):
+                (seg,) = segs
                 _marker(out_dir, run.label, seg.id).unlink(missing_ok=True)
                 row = error_row(run.label, seg, "the worker process died while running this "
                                  "segment (crash or out of memory)")  # fmt: skip

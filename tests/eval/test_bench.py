@@ -479,3 +479,45 @@ def test_blow_ups_are_counted_per_segment_and_in_the_results(segments, tmp_path)
     assert results["oracle"]["blowups"] == 2 * len(segments)
     assert "Simulation blow-ups" in (out / "table.md").read_text()
     assert "blowups" in (out / "segments.csv").read_text().splitlines()[0]
+
+
+class BatchOracle(Oracle):
+    """:class:`Oracle` that plays several segments at once (``reconstruct_many``, as method
+    grip does); ``batches``: the number of recordings of each call."""
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.batches: list[int] = []
+
+    def reconstruct_many(self, recs: list, threads: int = 0) -> list:
+        self.batches.append(len(recs))
+        out: list = []
+        for rec in recs:
+            try:
+                out.append(self.reconstruct(rec))
+            except Exception as e:
+                out.append(e)
+        return out
+
+
+def test_batched_methods_run_segments_together_with_the_same_rows(segments, tmp_path) -> None:
+    rows = {}
+    for batch in (1, 3):
+        oracle = BatchOracle(fail_on={"take1"})
+        runs = [_run("oracle", lambda o, m=oracle: m)]
+        rows[batch] = R.run_bench(runs, segments, tmp_path / f"b{batch}",
+                                  built={"oracle": oracle},
+                                  log=lambda s: None, batch=batch)  # fmt: skip
+        assert oracle.batches == ([] if batch == 1 else [3, 2])  # 5 segments
+    drop = ("ms_per_frame", "method_ms_per_frame", "traceback")
+    for a, b in zip(rows[1], rows[3], strict=True):
+        a, b = ({k: v for k, v in r.items() if k not in drop} for r in (a, b))
+        a["metrics"].pop("ms_per_frame", None), b["metrics"].pop("ms_per_frame", None)
+        assert json.dumps(report.jsonable(a)) == json.dumps(report.jsonable(b))
+    assert [r["status"] for r in rows[3]].count("error") == 1  # take1 keeps its error row
+    # with two workers a batch of 3 would leave one idle: units of 2
+    run = _run("oracle", _oracle_factory)
+    units = R._units([(run, s) for s in segments], 3, 2, lambda r: True)
+    assert [len(segs) for _, segs in units] == [3, 2]
+    units = R._units([(run, s) for s in segments[:4]], 3, 2, lambda r: True)
+    assert [len(segs) for _, segs in units] == [2, 2]

@@ -1,0 +1,36 @@
+"""DAgger rollouts on the batched training environments (``vec_env = "batched"``, the default)
+collect what one-by-one environments (``"dummy"``) collect, to float rounding."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from envs.factory import make_tracking_env
+from envs.tracking_env import SAMPLE_REFERENCE
+from grip.assets import SHIPPED_POLICY
+from policies.distill import DistillConfig, Distiller
+
+
+def _collect(tmp_path, vec_env: str):
+    cfg = DistillConfig(iterations=1, decisions_per_iteration=24, n_envs=3, max_samples=64,
+                        categories=(), reverse_categories=(), mirror_references=False,
+                        max_episode_frames=5, vec_env=vec_env)  # fmt: skip
+    dist = Distiller(cfg, [SHIPPED_POLICY], tmp_path / vec_env, SAMPLE_REFERENCE,
+                     make_tracking_env)  # fmt: skip
+    return dist.collect()
+
+
+def test_batched_rollouts_collect_the_dummy_ones(tmp_path) -> None:
+    xb, yb, sb = _collect(tmp_path, "batched")
+    xd, yd, sd = _collect(tmp_path, "dummy")
+    assert xb.shape == xd.shape and yb.shape == yd.shape
+    # float16 samples: equal up to a rounding step of the (normalised, clipped) inputs
+    np.testing.assert_allclose(xb.astype(np.float32), xd.astype(np.float32), atol=2e-2)
+    np.testing.assert_allclose(yb.astype(np.float32), yd.astype(np.float32), atol=2e-2)
+    assert sb["episodes"] == sd["episodes"] and sb["falls"] == sd["falls"]
+
+
+def test_vec_env_is_checked() -> None:
+    with pytest.raises(ValueError, match="vec_env"):
+        DistillConfig(vec_env="subproc")
