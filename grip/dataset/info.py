@@ -102,6 +102,7 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         "clips_failed": failed,
         "config": manifest.get("config", {}),
         "insole_zmp_outside_fraction": outside / synth if synth else None,
+        "insole_zmp_outside_by_source": zmp_outside_by_source(done),
         "size_bytes": folder_size_bytes(root),
     }
     split_path = root / "split.json"
@@ -111,6 +112,35 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         except (ValueError, TypeError, AttributeError):
             summary["splits"] = {"error": f"{split_path}: unreadable"}
     return summary
+
+
+def clip_source(clip: dict) -> str:
+    """The source of a manifest clip: its group less the last part (``"hdm05/bd"`` ->
+    ``"hdm05"``, ``"bandai_namco/dataset-2/active"`` -> ``"bandai_namco/dataset-2"``, as the
+    split strata); for a manifest without groups (built before groups existed) the clip id's top
+    folder (``"cmu/02_01"`` -> ``"cmu"``)."""
+    group = str(clip.get("group") or "")
+    if "/" in group:
+        return group.rsplit("/", 1)[0]
+    return str(clip.get("clip_id") or "unknown").split("/", 1)[0]
+
+
+def zmp_outside_by_source(clips: list[dict]) -> dict[str, dict]:
+    """Per source (:func:`clip_source`): ``clips``, ``synth_frames``, ``zmp_outside_frames`` and
+    ``fraction`` (None without synthesised frames) of the finished manifest clips, sorted by
+    source. A frame is outside when its ZMP lies more than
+    :data:`prism_tools.synth.recording.ZMP_OUTSIDE_M` (3 cm) off the loaded insole cells."""
+    out: dict[str, dict] = {}
+    for c in clips:
+        entry = out.setdefault(clip_source(c), {"clips": 0, "synth_frames": 0,
+                                                "zmp_outside_frames": 0})  # fmt: skip
+        entry["clips"] += 1
+        entry["synth_frames"] += int(c.get("synth_frames", 0))
+        entry["zmp_outside_frames"] += int(c.get("zmp_outside_frames", 0))
+    for entry in out.values():
+        n = entry["synth_frames"]
+        entry["fraction"] = entry["zmp_outside_frames"] / n if n else None
+    return dict(sorted(out.items()))
 
 
 def _split_summary(split: dict) -> dict:
@@ -193,8 +223,10 @@ def format_summary(s: dict) -> str:
     if s.get("sensors_only"):
         lines.append(f"- without ground truth (sensors only, no smpl_params): {s['sensors_only']}")
     if s.get("insole_zmp_outside_fraction") is not None:
-        lines.append(f"- synthesised frames whose ZMP lies > 3 cm outside the insole cells: "
+        lines.append(f"- synthesised frames whose ZMP lies > {_zmp_threshold_cm()} outside the "
+                     "insole cells: "
                      f"{100 * s['insole_zmp_outside_fraction']:.1f} %")  # fmt: skip
+    lines += _format_zmp_by_source(s.get("insole_zmp_outside_by_source") or {})
     lines += [
         "",
         "| category | clips | recordings | frames |" if "clips" in s
@@ -220,6 +252,28 @@ def format_summary(s: dict) -> str:
         lines += ["", f"{len(bad)} clip(s)/file(s) failed:"]
         lines += [f"- {b.get('clip_id') or b.get('file')}: {b['error']}" for b in bad[:20]]
     return "\n".join(lines)
+
+
+def _zmp_threshold_cm() -> str:
+    """The threshold the build counted ZMP-outside frames with, as text (``"3 cm"``)."""
+    from prism_tools.synth.recording import ZMP_OUTSIDE_M
+
+    return f"{100 * ZMP_OUTSIDE_M:g} cm"
+
+
+def _format_zmp_by_source(by_source: dict[str, dict]) -> list[str]:
+    """The table "ZMP outside the insole cells per source" (Markdown lines; none if empty)."""
+    if not by_source:
+        return []
+    lines = ["", f"ZMP outside the insole cells per source (> {_zmp_threshold_cm()}, "
+             "docs/insoles_zmp.md):", "",
+             "| source | clips | synthesised frames | ZMP outside | share |",
+             "|---|---:|---:|---:|---:|"]  # fmt: skip
+    for name, e in by_source.items():
+        share = "-" if e["fraction"] is None else f"{100 * e['fraction']:.1f} %"
+        lines.append(f"| {name} | {e['clips']} | {e['synth_frames']} | "
+                     f"{e['zmp_outside_frames']} | {share} |")  # fmt: skip
+    return lines
 
 
 def _format_split(s: dict) -> list[str]:

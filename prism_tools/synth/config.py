@@ -65,7 +65,12 @@ class InsoleSynthConfig:
     Attributes:
         smoothing_window_s: Savitzky-Golay window used to differentiate segment COM positions
             and the spin angular momentum (and foot-cell positions for their speed), s; rounded
-            to an odd number of frames (11 at 100 Hz).
+            to an odd number of frames (11 at 100 Hz, about 10 Hz cut-off). 0.2 s (about 5 Hz,
+            the usual low-pass for accelerations derived from motion capture) takes out the
+            jitter that moves the ZMP by decimetres and lowers the share of frames whose ZMP
+            lies off the insoles by 4-13 points per source (docs/insoles_zmp.md); it becomes
+            the default with the next rebuild of the corpus and retraining of KinematicsNet,
+            whose shipped weights read insoles synthesised with 0.1 s.
         smoothing_polyorder: Polynomial order of that Savitzky-Golay filter.
         contact_height_full_m: A cell at or below this height above the contact level (the
             floor, see ``contact_float_tolerance_m``) may carry full load, m.

@@ -6,7 +6,8 @@
    ``I_j = R_j I_local R_j^T`` and ``w_j`` the world angular velocity (``I_j w_j`` is
    computed as ``R_j I_local w_local``). Positions and the spin angular momentum are
    differentiated with a Savitzky-Golay filter (window ``InsoleSynthConfig.smoothing_window_s``,
-   0.1 s, quadratic) so that the ZMP is not dominated by noise.
+   0.1 s, quadratic) so that the ZMP is not dominated by noise (0.2 s, about 5 Hz, removes
+   more: docs/insoles_zmp.md).
 2. On the flat floor ``z = 0`` the ground reaction acts through the zero-moment point
    ``p = (-N_y / F_z, N_x / F_z)``.
 3. Each of the 32 cells (16 per foot) gets a soft support weight in ``[0, 1]`` from its height

@@ -52,8 +52,17 @@ SMPL_NOTE = (
     "root_offset = 0, betas = 0."
 )
 
-ZMP_OUTSIDE_M = 0.01
-"""A frame counts as 'ZMP outside the support' in the diagnostics above this error, m."""
+ZMP_OUTSIDE_M = 0.03
+"""A frame counts as 'ZMP outside the support' in the diagnostics above this error, m.
+
+The error is the distance from the cells' force centroid to the ZMP, so it is the ZMP's distance
+outside the hull of the loaded cell centres. Those centres sit inside the sole: the heel cells
+2.3 cm in front of the heel, the toe cells 2.6 cm behind the tip, the outer cells 2.1 cm inside
+the sole's edge (layout :data:`grip.core.skeleton.INSOLE_CELL_UV`, 1.70 m body). A physically
+possible ZMP under the sole's rim is therefore up to ~2.6 cm outside the cells' hull, where no
+cell distribution (nor a real insole's CoP) can follow it; 3 cm flags a ZMP outside the
+foot itself, which is what ``grip data info``, the README and the manifest report
+(docs/insoles_zmp.md)."""
 
 
 @dataclass(frozen=True)
@@ -162,7 +171,8 @@ def recording_from_motion(
     ``slam`` and ``objects`` None. ``extras`` holds the provenance: ``source_clip``,
     ``category``, ``synthetic``, ``noise``, ``noise_seed``, ``synthesis_config`` (JSON),
     ``body_params`` (JSON), ``source_meta`` (JSON), ``smpl_note``, ``dropped_frames``
-    (``{"imu": {part: idx}, "insole": {foot: idx}}``) and insole diagnostics.
+    (``{"imu": {part: idx}, "insole": {foot: idx}}``) and insole diagnostics
+    (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``).
 
     Args:
         motion: The motion.
@@ -220,6 +230,7 @@ def recording_from_motion(
         },
         "insole_unsupported_frames": int(np.count_nonzero(ins.unsupported_force_n > 1.0)),
         "insole_zmp_outside_frames": int(np.count_nonzero(ins.zmp_error_m > ZMP_OUTSIDE_M)),
+        "insole_zmp_outside_threshold_m": ZMP_OUTSIDE_M,
         "insole_max_zmp_error_m": float(ins.zmp_error_m.max(initial=0.0)),
         "insole_solver_fallback_frames": int(ins.fallback_frames.size),
     }
