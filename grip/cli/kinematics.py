@@ -6,7 +6,12 @@ import argparse
 import time
 from pathlib import Path
 
-from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
+from grip.cli.recordings import (
+    add_init_argument,
+    add_limit_arguments,
+    add_tta_argument,
+    limits_from_args,
+)
 
 BASELINE_NAMES: tuple[str, ...] = ("transpose", "pip")
 """The baselines whose kinematics nets ``grip kin train --baseline`` trains."""
@@ -277,6 +282,7 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         "body (default, what every method is judged on) or the FP stage's direct estimate",
     )
     add_tta_argument(p)
+    add_init_argument(p)
     p.add_argument(
         "--sweep",
         type=Path,
@@ -314,9 +320,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
     errors: list[tuple[str, str]] = []
     segs = _split_segments(args, errors)
     with tqdm(total=len(segs), unit="segment", desc="evaluating") as bar:
-        rows = evaluate_segments(est, segs, progress=bar.update, joints=args.joints)
+        rows = evaluate_segments(est, segs, progress=bar.update, joints=args.joints,
+                                 init=args.init)  # fmt: skip
+    sources = _segment_sources(args.data, segs)
+    for r in rows:
+        r["source"] = sources[r["segment"]]
     agg = aggregate(rows)
     table = markdown_table(agg)
+    by_source = aggregate(rows, "source")
+    table += "\n\n" + markdown_table(by_source, "source")
     print(table)
     overall = agg["overall"]
     figures = {k: overall[k] for k in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps",
@@ -325,8 +337,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     figures["model"] = str(model)
     figures["joints"] = args.joints
     figures["tta"] = args.tta
+    figures["init"] = args.init
     if args.json:
-        atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"]},
+        atomic_write_text(args.json, json.dumps(figures | {"categories": agg["categories"],
+                                                           "sources": by_source["categories"]},
                                                 indent=1))  # fmt: skip
         print(f"wrote {args.json}")
     if args.out:
@@ -335,6 +349,24 @@ def cmd_eval(args: argparse.Namespace) -> int:
         plot_categories(agg, args.out / "categories.png")
         print(f"wrote {args.out / 'table.md'} and {args.out / 'categories.png'}")
     return _exit_status(errors)
+
+
+def _segment_sources(data: Path, segs: list) -> dict[str, str]:
+    """Segment id -> its clip's source: the group less its last part in a dataset split by
+    person (``cmu``, ``bandai_namco/dataset-2``), else the top folder of the clip's name."""
+    from grip.dataset.build import group_source
+    from grip.kinematics.dataset import clip_of, dataset_groups
+
+    try:
+        groups = dataset_groups(data)
+    except (OSError, ValueError):
+        groups = {}
+    out = {}
+    for s in segs:
+        clip = clip_of(s.path.stem)
+        group = groups.get(clip)
+        out[s.id] = group_source(group) if group else clip.split("__")[0]
+    return out
 
 
 def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> list:

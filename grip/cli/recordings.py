@@ -178,6 +178,19 @@ def add_tta_argument(parser) -> None:
     parser.add_argument("--tta", default="none", choices=tuple(TTA_MODES), help=TTA_HELP)
 
 
+def add_init_argument(parser) -> None:
+    """The ``--init`` option of the commands that start KinematicsNet on recordings with
+    ground truth."""
+    from grip.kinematics.features import INITS
+
+    parser.add_argument(
+        "--init", default="truth", choices=INITS,
+        help="how each segment starts: from the ground truth of its first frame (default, the "
+        "GRIP protocol) or from the standing rest pose at the heading of the foot IMUs, as a "
+        "user without motion capture must ('standing': no ground truth read)",
+    )  # fmt: skip
+
+
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
                                  categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence

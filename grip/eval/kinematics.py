@@ -19,10 +19,11 @@ MIN_SEGMENT_FRAMES = 10
 
 def evaluate_segments(
     est, segments: Sequence[Segment], batch: int = 32,
-    progress: Callable[[int], object] | None = None, joints: str = "pose",
+    progress: Callable[[int], object] | None = None, joints: str = "pose", init: str = "truth",
 ) -> list[dict]:  # fmt: skip
     """KinematicsNet (a :class:`~grip.kinematics.inference.KinematicsEstimator`) on segments,
-    ``batch`` per forward pass, each from its first frame's ground truth (the GRIP protocol).
+    ``batch`` per forward pass, each from its first frame's ground truth (the GRIP protocol) or,
+    with ``init="standing"``, from the standing pose at the sensors' heading.
 
     Returns:
         One row per segment: its segment keys and the metrics of ``joints`` (``frames`` the
@@ -31,7 +32,7 @@ def evaluate_segments(
 
     def score(recs: list) -> list[dict]:
         return [segment_metrics(out, rec, joints)
-                for rec, out in zip(recs, est.predict(recs), strict=True)]  # fmt: skip
+                for rec, out in zip(recs, est.predict(recs, init), strict=True)]  # fmt: skip
 
     return play_segments(segments, score, batch, progress)
 
@@ -43,18 +44,19 @@ def _mean(rows: list[dict]) -> dict:
     return out
 
 
-def aggregate(rows: list[dict]) -> dict:
-    """Frame-weighted means overall and per category.
+def aggregate(rows: list[dict], key: str = "category") -> dict:
+    """Frame-weighted means overall and per category (or per another row key, e.g.
+    ``"source"``).
 
     Returns:
         ``{"overall": {...}, "categories": {category: {...}}}``.
     """
-    return category_summary(rows, _mean)
+    return category_summary(rows, _mean, key)
 
 
-def markdown_table(agg: dict) -> str:
-    """The per-category table (and the overall row) in Markdown."""
-    head = ["category", "segments", "frames", "PEL-MPJPE (mm)", "MPJRE (deg)", "leaf vel. (m/s)",
+def markdown_table(agg: dict, key: str = "category") -> str:
+    """The per-category (or per-``key``) table and the overall row in Markdown."""
+    head = [key, "segments", "frames", "PEL-MPJPE (mm)", "MPJRE (deg)", "leaf vel. (m/s)",
             "root transl. (m)"]  # fmt: skip
     items = [*agg["categories"].items(), ("**all**", agg["overall"])]
     body = [[name, str(m["segments"]), str(m["frames"]), f"{m['PEL_MPJPE_mm']:.1f}",

@@ -84,12 +84,13 @@ def weighted_means(rows: Sequence[Mapping], keys: Sequence[str], weight: str = "
     return out
 
 
-def category_summary(rows: Sequence[Mapping], summarize: Callable[[list], dict]) -> dict:
+def category_summary(rows: Sequence[Mapping], summarize: Callable[[list], dict],
+                     key: str = "category") -> dict:  # fmt: skip
     """``{"overall": summarize(rows), "categories": {category: summarize(its rows)}}``, the
-    categories sorted."""
+    categories sorted (rows grouped by another of their keys with ``key``, e.g. ``"source"``)."""
     cats: dict[str, list] = {}
     for r in rows:
-        cats.setdefault(r["category"], []).append(r)
+        cats.setdefault(r[key], []).append(r)
     return {"overall": summarize(list(rows)),
             "categories": {c: summarize(v) for c, v in sorted(cats.items())}}  # fmt: skip
 

@@ -167,7 +167,14 @@ def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsy
     for key in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "frames"):
         assert key in fig
     assert fig["frames"] > 0 and (tmp_path / "ev" / "categories.png").exists()
-    assert fig["tta"] == "none"
+    assert fig["tta"] == "none" and fig["init"] == "truth"
+    assert set(fig["sources"]) == {"deepmimic"}  # per-source table (the fixture's one source)
+    assert fig["sources"]["deepmimic"]["frames"] == fig["frames"]
+    assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
+                 "--init", "standing", "--json", str(js)]) == 0  # fmt: skip
+    standing = json.loads(js.read_text())
+    assert standing["init"] == "standing" and standing["frames"] == fig["frames"]
+    assert standing["PEL_MPJPE_mm"] != pytest.approx(fig["PEL_MPJPE_mm"], rel=1e-6)  # tiny net
     assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
                  "--tta", "mirror", "--json", str(js)]) == 0  # fmt: skip
     tta = json.loads(js.read_text())
