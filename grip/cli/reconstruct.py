@@ -29,7 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Recordings already reconstructed in OUT are skipped (resume); a resume with other\n"
             "settings (--max-frames, --no-recovery, --history, --fill-gaps, the models' contents)\n"
             "is refused, --overwrite redoes them.\n"
-            "The recording's first frame is the calibration pose the humanoid starts from.\n"
+            "The recording's first frame is the calibration pose the humanoid starts from\n"
+            "(its ground truth, or the standing pose at the foot IMUs' heading without one or\n"
+            "with --init standing).\n"
             "Sensor dropouts (NaN runs) up to --fill-gaps frames are interpolated; a recording\n"
             "with longer ones, or without a sensor the models read (an IMU site, an insole),\n"
             "is reported and skipped, the others go on (exit status 1)."
@@ -63,8 +65,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
                         "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
-    from grip.cli.recordings import add_limit_arguments
+    from grip.cli.recordings import add_init_argument, add_limit_arguments
 
+    add_init_argument(p)
     add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
 
@@ -157,7 +160,7 @@ def _work(job: tuple) -> list[dict]:
     """One worker: reconstruct a share of the recordings (``batch`` of them side by side) and
     write their files. A recording that cannot be read or does not carry the sensors the models
     need gives a row with an ``"error"`` (the others go on)."""
-    files, out, policy, kin, recovery, max_frames, formats, fill_gaps, batch, threads = job
+    files, out, policy, kin, recovery, max_frames, formats, fill_gaps, batch, threads, init = job
     import torch
 
     torch.set_num_threads(1)
@@ -180,7 +183,8 @@ def _work(job: tuple) -> list[dict]:
         loaded.append((f, stem, rec))
     recs = [r for _, _, r in loaded if not isinstance(r, Exception)]
     # each recording's KinematicsNet pass alone: the numbers of --batch 1
-    got = iter(g.reconstruct(recs, batch=1, play_batch=batch, threads=threads, errors=True))
+    got = iter(g.reconstruct(recs, batch=1, play_batch=batch, threads=threads, errors=True,
+                             init=init))  # fmt: skip
     rows = []
     for f, stem, rec in loaded:
         recon = rec if isinstance(rec, Exception) else next(got)
@@ -263,6 +267,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     settings = {"max_frames": args.max_frames, "recovery": recovery.enabled,
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
                 "policy_sha256": file_digest(policy), "kin_sha256": file_digest(kin)}  # fmt: skip
+    if args.init != "truth":  # (absent from the settings of runs before --init: their start)
+        settings["init"] = args.init
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "summary.json"
     old: dict = {}
@@ -319,7 +325,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     size = max(1, min(args.batch, -(-len(todo) // workers)))
     threads = max(1, usable_cores() // workers)
     jobs = [([(given[f], stems[f]) for f in todo[i : i + size]], str(args.out), str(policy),
-             str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch, threads)
+             str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch, threads,
+             args.init)
             for i in range(0, len(todo), size)]  # fmt: skip
     with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
         if not parallel:

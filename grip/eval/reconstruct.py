@@ -51,7 +51,7 @@ class GripReconstructor:
 
     def reconstruct(
         self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16,
-        play_batch: int = 1, threads: int = 0, errors: bool = False,
+        play_batch: int = 1, threads: int = 0, errors: bool = False, init: str = "truth",
     ) -> list:  # fmt: skip
         """One :class:`~grip.core.reconstruction.Reconstruction` per recording, in order (only
         their sensors and calibration frames are read).
@@ -65,17 +65,20 @@ class GripReconstructor:
             threads: Threads stepping a batch's humanoids (0: the usable cores).
             errors: Return the exception a recording raised (reading its sensors included) in
                 its place, the others going on; False: raise it.
+            init: Start from the first frame's ground truth (``"truth"``, where the recording
+                has it) or the standing pose at the sensors' heading (``"standing"``;
+                :func:`grip.kinematics.features.recording_calibration`).
         """
         cfg = self.estimator.cfg.features
         if not errors:
-            streams = [sensor_stream(r, cfg) for r in recs]
+            streams = [sensor_stream(r, cfg, init) for r in recs]
             return self.pipeline.reconstruct(streams, batch, progress, play_batch, threads)
         out: list = [None] * len(recs)
         ok: list[int] = []
         streams = []
         for i, r in enumerate(recs):
             try:
-                streams.append(sensor_stream(r, cfg))
+                streams.append(sensor_stream(r, cfg, init))
                 ok.append(i)
             except Exception as e:
                 out[i] = e

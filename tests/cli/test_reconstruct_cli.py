@@ -108,7 +108,7 @@ def test_resume_with_other_settings_is_refused(takes, tmp_path, capsys):
     assert main(base) == 0
     before = (out / "take001.npz").stat().st_mtime_ns
     for extra in (["--max-frames", "12"], ["--history", "20"], ["--no-recovery"],
-                  ["--fill-gaps", "3"]):  # fmt: skip
+                  ["--fill-gaps", "3"], ["--init", "standing"]):  # fmt: skip
         assert main([*base, *extra]) == 2
         err = capsys.readouterr().err
         assert "different settings" in err and "--overwrite" in err
@@ -146,3 +146,24 @@ def test_a_recording_without_ground_truth_is_reconstructed(tmp_path, capsys):
     assert main(["export", str(out / "sensors_only.npz"), "--gt", str(path), "--formats", "png",
                  "--out", str(tmp_path / "exp")]) != 0  # fmt: skip
     assert f"{path}: " in capsys.readouterr().err
+
+
+def test_init_standing_starts_as_without_ground_truth(tmp_path):
+    """--init standing on a recording with ground truth: the reconstruction of the same
+    recording with its motion capture removed."""
+    from grip.core.reconstruction import Reconstruction
+    from prism_tools.io import save_recording
+
+    rec = load_recording(SAMPLE)
+    path = tmp_path / "no_mocap.npz"
+    save_recording(dataclasses.replace(rec, smpl_params=None), path)
+    args = ["--max-frames", "40", "--batch", "1"]
+    assert main(["reconstruct", str(SAMPLE), "--out", str(tmp_path / "a"), "--init", "standing",
+                 *args]) == 0  # fmt: skip
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "b"), *args]) == 0
+    assert main(["reconstruct", str(SAMPLE), "--out", str(tmp_path / "c"), *args]) == 0
+    a = Reconstruction.load(next((tmp_path / "a").glob("*.npz")))
+    b = Reconstruction.load(tmp_path / "b" / "no_mocap.npz")
+    c = Reconstruction.load(next((tmp_path / "c").glob("*.npz")))
+    np.testing.assert_array_equal(a.joint_pos, b.joint_pos)
+    assert np.abs(a.joint_pos[0] - c.joint_pos[0]).max() > 1e-3  # truth starts elsewhere
