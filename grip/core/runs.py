@@ -149,7 +149,9 @@ def require_same_settings(old: Mapping[str, Any], new: Mapping[str, Any], where:
                                + (f"; {hint}" if hint else ""))  # fmt: skip
 
 
-def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str) -> None:
+def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str, *,
+                    may_change: tuple[str, ...] = (),
+                    defaults: Mapping[str, Any] | None = None) -> None:  # fmt: skip
     """Record a run's settings before its first output, or check them against the record.
 
     The first run writes ``path`` atomically; every later run (a resume, perhaps of a killed run
@@ -159,6 +161,8 @@ def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str) ->
         path: The settings file (JSON).
         settings: JSON-serialisable settings of this run.
         hint: See :func:`require_same_settings`.
+        may_change, defaults: See :func:`require_same_settings`; the record is rewritten when
+            a setting that may change did.
 
     Raises:
         SettingsMismatch: ``path`` holds other settings.
@@ -173,8 +177,10 @@ def record_settings(path: str | Path, settings: Mapping[str, Any], hint: str) ->
         except (OSError, ValueError) as e:
             raise ValueError(f"{path}: corrupt settings file ({e}); remove it to start "
                              "over, or use another --out") from e  # fmt: skip
-        require_same_settings(old, settings, path, hint)
-        return
+        require_same_settings(old, settings, path, hint, may_change=may_change,
+                              defaults=defaults)  # fmt: skip
+        if old == _normalised(settings):
+            return
     atomic_write_text(path, json.dumps(_normalised(settings), indent=1, sort_keys=True))
 
 

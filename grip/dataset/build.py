@@ -44,7 +44,12 @@ from typing import NamedTuple
 import numpy as np
 
 from grip.core.atomic import atomic_write_text
-from grip.core.runs import exit_with_parent, remove_stale_temps, require_same_settings
+from grip.core.runs import (
+    exit_with_parent,
+    record_settings,
+    remove_stale_temps,
+    require_same_settings,
+)
 from prism_tools.chunking import safe_name
 
 MANIFEST = "manifest.json"
@@ -368,20 +373,8 @@ def _settings_check(out: Path, cfg: BuildConfig) -> None:
             ) from e
         require_same_settings(old.get("config") or {}, new, manifest_path, _RESUME_HINT,
                               may_change=SPLIT_SETTINGS, defaults=defaults)  # fmt: skip
-    path = out / SETTINGS
-    if path.is_file():
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-            if not isinstance(old, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{path}: corrupt settings file ({e}); remove it to start "
-                             "over, or use another --out") from e  # fmt: skip
-        require_same_settings(old, new, path, _RESUME_HINT, may_change=SPLIT_SETTINGS,
-                              defaults=defaults)  # fmt: skip
-        if old == new:
-            return
-    atomic_write_text(path, json.dumps(new, indent=1, sort_keys=True))
+    record_settings(out / SETTINGS, new, _RESUME_HINT, may_change=SPLIT_SETTINGS,
+                    defaults=defaults)  # fmt: skip
 
 
 def build_dataset(
