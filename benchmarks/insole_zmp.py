@@ -39,7 +39,8 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from grip.core.body import GRAVITY
-from grip.dataset.build import BuildConfig, group_source, subject_for
+from grip.dataset.build import BuildConfig, subject_for
+from prism_tools.chunking import group_source
 from grip.motion.catalog import find_clips, load_clip
 from grip.motion.retarget import retarget
 from prism_tools.synth.config import InsoleSynthConfig

@@ -41,6 +41,20 @@ def safe_name(clip_id: str) -> str:
     return clip_id.replace("/", "__")
 
 
+def group_source(group: str) -> str:
+    """The source a group belongs to, the stratum of a split by person: the group id less its
+    last part (``"hdm05/bd"`` -> ``"hdm05"``, ``"bandai_namco/dataset-2/active"`` ->
+    ``"bandai_namco/dataset-2"``, ``"deepmimic/walk"`` -> ``"deepmimic"``)."""
+    return group.rsplit("/", 1)[0] if "/" in group else ""
+
+
+def clip_source(clip: str, group: str | None = None) -> str:
+    """The source of a clip (its :func:`safe_name` form): :func:`group_source` of its
+    ``group`` when it has one (a dataset split by person), else the clip's top folder
+    (``"cmu__walk_01"`` -> ``"cmu"``)."""
+    return group_source(group) if group else clip.split("__")[0]
+
+
 def chunk_id(take_name: str, index: int) -> str:
     """``chunk_id("subj001_take002", 3) -> "subj001_take002_seq003"``."""
     return f"{take_name}_seq{index:03d}"

@@ -178,15 +178,21 @@ def cmd_train_baseline(args: argparse.Namespace) -> int:
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.errors import CliError
-    from grip.kinematics.dataset import dataset_groups, holdout_split, load_split_sequences
+    from grip.kinematics.dataset import (
+        dataset_groups,
+        holdout_split,
+        load_split_sequences,
+        sequence_sources,
+    )
     from grip.kinematics.train import Trainer
 
     t0 = time.perf_counter()
     tc = cfg.train
     try:
         train = load_split_sequences(data, "train", cfg.features)
+        groups = dataset_groups(data)
         if tc.val_source == "holdout":
-            train, val = holdout_split(train, tc.val_fraction, tc.seed, dataset_groups(data))
+            train, val = holdout_split(train, tc.val_fraction, tc.seed, groups)
         else:
             val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
@@ -196,7 +202,14 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     print(f"loaded {len(train)} train / {len(val)} validation ({what}) sequences "
           f"({n_frames} train frames) in {time.perf_counter() - t0:.1f} s")  # fmt: skip
     try:
-        trainer = Trainer(cfg, train, val, out)
+        sources = sequence_sources(train, groups)
+        trainer = Trainer(cfg, train, val, out, sources=sources)
+        share: dict[str, float] = {}
+        for seq, w in zip(train, trainer.weights, strict=True):
+            share[sources[seq.name]] = share.get(sources[seq.name], 0.0) + float(w)
+        if len(share) > 1:
+            print("training windows by source: " + ", ".join(
+                f"{k} {100 * v:.1f} %" for k, v in sorted(share.items(), key=lambda kv: -kv[1])))
         info = {"data": str(data.resolve()), "train_frames": n_frames}
         if init is not None:
             trainer.init_from(init)
@@ -352,21 +365,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _segment_sources(data: Path, segs: list) -> dict[str, str]:
-    """Segment id -> its clip's source: the group less its last part in a dataset split by
-    person (``cmu``, ``bandai_namco/dataset-2``), else the top folder of the clip's name."""
-    from grip.dataset.build import group_source
+    """Segment id -> its clip's source (:func:`prism_tools.chunking.clip_source`)."""
     from grip.kinematics.dataset import clip_of, dataset_groups
+    from prism_tools.chunking import clip_source
 
     try:
         groups = dataset_groups(data)
     except (OSError, ValueError):
         groups = {}
-    out = {}
-    for s in segs:
-        clip = clip_of(s.path.stem)
-        group = groups.get(clip)
-        out[s.id] = group_source(group) if group else clip.split("__")[0]
-    return out
+    return {s.id: clip_source(clip_of(s.path.stem), groups.get(clip_of(s.path.stem)))
+            for s in segs}  # fmt: skip
 
 
 def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> list:

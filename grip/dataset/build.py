@@ -50,7 +50,7 @@ from grip.core.runs import (
     remove_stale_temps,
     require_same_settings,
 )
-from prism_tools.chunking import safe_name
+from prism_tools.chunking import group_source, safe_name
 
 MANIFEST = "manifest.json"
 SPLIT = "split.json"
@@ -284,13 +284,6 @@ def _load_done(out: Path) -> dict[str, ClipResult]:
         except (OSError, ValueError, KeyError, TypeError):
             continue  # a damaged marker means: build that clip again
     return done
-
-
-def group_source(group: str) -> str:
-    """The source a group belongs to, the stratum of a split by person: the group id less its
-    last part (``"hdm05/bd"`` -> ``"hdm05"``, ``"bandai_namco/dataset-2/active"`` ->
-    ``"bandai_namco/dataset-2"``, ``"deepmimic/walk"`` -> ``"deepmimic"``)."""
-    return group.rsplit("/", 1)[0] if "/" in group else ""
 
 
 def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int,

@@ -51,6 +51,10 @@ class TrainConfig:
         standing_init: Share of the training windows whose LSTMs start from the standing rest
             pose at the heading of the foot IMUs (no ground truth, as ``--init standing`` and
             recordings without ground truth start) instead of the first frame's ground truth.
+        source_balance: Even out the sources of the training windows
+            (:func:`grip.kinematics.dataset.source_weights`): 0 draws frames uniformly (in the
+            whole shared corpus Bandai Namco dataset-2's locomotion is 76 % of them), 0.5 gives
+            each source a share in proportion to the square root of its frames, 1 the same share.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
             AVX512-BF16 the LSTMs run several times faster
@@ -78,10 +82,13 @@ class TrainConfig:
     seed: int = 0
     bf16: bool = False
     standing_init: float = 0.25
+    source_balance: float = 0.0
 
     def __post_init__(self) -> None:
         check(
             self,
+            (0.0 <= self.source_balance <= 1.0,
+             f"train.source_balance must be in [0, 1], got {self.source_balance}"),
             (0.0 <= self.standing_init <= 1.0,
              f"train.standing_init must be in [0, 1], got {self.standing_init}"),
             (self.val_source in VAL_SOURCES, f"train.val_source must be one of "

@@ -175,18 +175,50 @@ class Normalizer:
         return ((x - self.mean) / self.std).astype(np.float32)
 
 
-def sample_windows(seqs: list[SequenceArrays], n: int, length: int,
-                   rng: np.random.Generator) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def source_weights(seqs: Sequence[SequenceArrays], sources: Mapping[str, str],
+                   balance: float) -> np.ndarray:  # fmt: skip
+    """Sampling weight of each sequence: its length times its source's total frames to the
+    power ``-balance`` (``sources``: sequence name -> source; sequences not in it are one source
+    of their own name). 0 draws frames uniformly (a large source dominates), 0.5 gives each source
+    a share in proportion to the square root of its frames, 1 the same share to every source.
+
+    Returns:
+        ``(len(seqs),)`` weights summing to 1.
+    """
+    if not 0.0 <= balance <= 1.0:
+        raise ValueError(f"source balance must be in [0, 1], got {balance}")
+    lengths = np.array([len(s.x) for s in seqs], dtype=np.float64)
+    of = [sources.get(s.name, s.name) for s in seqs]
+    total: dict[str, float] = {}
+    for src, n in zip(of, lengths, strict=True):
+        total[src] = total.get(src, 0.0) + n
+    w = lengths * np.array([total[src] for src in of]) ** -balance
+    return w / w.sum()
+
+
+def sequence_sources(seqs: Sequence[SequenceArrays], groups: Mapping[str, str]) -> dict[str, str]:
+    """Sequence name -> source (:func:`prism_tools.chunking.clip_source` of its clip, with
+    ``groups`` from :func:`dataset_groups`)."""
+    from prism_tools.chunking import clip_source
+
+    return {s.name: clip_source(clip_of(s.name), groups.get(clip_of(s.name))) for s in seqs}
+
+
+def sample_windows(seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
+                   weights: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
-    their last frame; a window never crosses sequences), weighted by sequence length.
+    their last frame; a window never crosses sequences), drawn with probabilities ``weights``
+    (``(len(seqs),)`` summing to 1; default: in proportion to sequence length).
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
         sequences (``TARGET_KEYS`` plus any the caller added to ``SequenceArrays.y``), plus
         ``"offsets": (n, 24, 3)``.
     """
-    weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
-    pick = rng.choice(len(seqs), size=n, p=weights / weights.sum())
+    if weights is None:
+        weights = np.array([len(s.x) for s in seqs], dtype=np.float64)
+        weights = weights / weights.sum()
+    pick = rng.choice(len(seqs), size=n, p=weights)
     keys = tuple(seqs[0].y)
     xs, offs, ys = [], [], {k: [] for k in keys}
     for i in pick:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict
 from pathlib import Path
 
@@ -29,7 +29,13 @@ from grip.core.rotations import axis_angle_to_matrix
 from grip.core.rundir import RunDir
 from grip.core.runs import git_hash, history_wall_s, require_same_settings
 from grip.kinematics.config import REMOVED_SETTINGS, KinematicsRunConfig, run_config_from_dict
-from grip.kinematics.dataset import TARGET_KEYS, Normalizer, SequenceArrays, sample_windows
+from grip.kinematics.dataset import (
+    TARGET_KEYS,
+    Normalizer,
+    SequenceArrays,
+    sample_windows,
+    source_weights,
+)
 from grip.kinematics.model import KinematicsNet
 from grip.nn.symmetry import mirror_batch, mirror_site_order, rotate_batch, yaw_matrices
 from grip.nn.weights import (
@@ -131,7 +137,10 @@ class Trainer:
     """Owns the model, optimiser, data and the run folder."""
 
     def __init__(self, cfg: KinematicsRunConfig, train_seqs: list[SequenceArrays],
-                 val_seqs: list[SequenceArrays], run_dir: str | os.PathLike) -> None:  # fmt: skip
+                 val_seqs: list[SequenceArrays], run_dir: str | os.PathLike,
+                 sources: Mapping[str, str] | None = None) -> None:  # fmt: skip
+        """``sources``: training sequence name -> source, for ``train.source_balance``
+        (:func:`grip.kinematics.dataset.sequence_sources`; default: every sequence its own)."""
         if not train_seqs:
             raise ValueError("no training sequences")
         self.cfg = cfg
@@ -149,6 +158,7 @@ class Trainer:
         else:
             self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.norm = Normalizer.fit(train_seqs)
+        self.weights = source_weights(train_seqs, sources or {}, cfg.train.source_balance)
         self.rng = np.random.default_rng(cfg.train.seed)
         self.epoch = 0
         self.best_val = float("inf")
@@ -293,7 +303,8 @@ class Trainer:
         tick = clock.append if clock is not None else lambda _t: None
         for group in self.opt.param_groups:
             group["lr"] = lr
-        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng)
+        x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
+                              self.weights)  # fmt: skip
         tick(time.perf_counter())
         xt, yt = self._tensors(x, y, augment=True)
         tick(time.perf_counter())

@@ -7,7 +7,8 @@ import json
 import pytest
 
 from grip.assets import REPO_ROOT
-from grip.dataset.build import SPLIT_MODES, BuildConfig, ClipResult, dataset_split, group_source
+from grip.dataset.build import SPLIT_MODES, BuildConfig, ClipResult, dataset_split
+from prism_tools.chunking import group_source
 from prism_tools.chunking import make_split
 
 DATA = REPO_ROOT.parent / "shared" / "data" / "motions"

@@ -86,3 +86,30 @@ def test_holdout_split_keeps_each_group_on_one_side(tmp_path):
         {"format": "grip-prism-split", "version": 1, "train": [], "test": [],
          "split_by": "clip"}))  # fmt: skip
     assert dataset_groups(tmp_path) == {}
+
+
+def test_source_weights_share_sources_by_balance_and_draws_follow_them():
+    from types import SimpleNamespace
+
+    from grip.kinematics.dataset import sequence_sources, source_weights
+
+    # Source "big" has 900 frames in three sequences, "small" 100 in one.
+    seqs = [SimpleNamespace(name=f"big__c{i}_v0_seq000", x=np.zeros((300, 1))) for i in range(3)]
+    seqs.append(SimpleNamespace(name="small__c_v0_seq000", x=np.zeros((100, 1))))
+    sources = sequence_sources(seqs, {})
+    assert set(sources.values()) == {"big", "small"}
+    w0 = source_weights(seqs, sources, 0.0)
+    np.testing.assert_allclose(w0, [0.3, 0.3, 0.3, 0.1])  # in proportion to length
+    w1 = source_weights(seqs, sources, 1.0)
+    np.testing.assert_allclose(w1, [1 / 6, 1 / 6, 1 / 6, 0.5])  # every source the same share
+    w5 = source_weights(seqs, sources, 0.5)
+    np.testing.assert_allclose(w5[3], 10 / (30 + 10))  # sqrt(100) against sqrt(900)
+    # Groups name the source of a split by person: "hdm05/bd" -> "hdm05".
+    named = sequence_sources(seqs[:1], {"big__c0": "hdm05/bd"})
+    assert named == {"big__c0_v0_seq000": "hdm05"}
+    with pytest.raises(ValueError, match="balance"):
+        source_weights(seqs, sources, 1.5)
+    # The sampler draws with those weights.
+    real = [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (80, 80)]
+    x, _ = sample_windows(real, 200, 20, np.random.default_rng(0), np.array([0.0, 1.0]))
+    assert all(np.any(np.all(w[0] == real[1].x, axis=1)) for w in x)
