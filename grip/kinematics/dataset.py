@@ -33,8 +33,9 @@ class SequenceArrays:
     fps: float = 100.0  # frame rate of the recording, Hz
 
 
-def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
-    """Features and flattened stage targets of one recording."""
+def sequence_arrays(rec, cfg: FeatureConfig, name: str | None = None) -> SequenceArrays:
+    """Features and flattened stage targets of one recording (named ``name``, default the
+    recording's own name)."""
     t = targets(rec)
     n = rec.n_frames
     y = {
@@ -44,7 +45,7 @@ def sequence_arrays(rec, cfg: FeatureConfig) -> SequenceArrays:
         "lv": t.velocity.reshape(n, -1),
     }
     return SequenceArrays(
-        name=rec.name,
+        name=rec.name if name is None else name,
         category=rec.category or "unknown",
         x=input_features(rec, cfg),
         y={k: v.astype(np.float32) for k, v in y.items()},
@@ -76,7 +77,9 @@ def split_files(data_dir: str | os.PathLike, split: str) -> list[Path]:
 def load_split_sequences(
     data_dir: str | os.PathLike, split: str, cfg: FeatureConfig, limit: int | None = None
 ) -> list[SequenceArrays]:
-    """All sequences of ``split`` ("train" or "test") of a ``grip data build`` folder.
+    """All sequences of ``split`` ("train" or "test") of a ``grip data build`` folder, each
+    named by its sequence id (the file stem, which :func:`clip_of` and the split's groups know;
+    a recording's own name may differ, e.g. ``synthetic_<clip id>``).
 
     Raises:
         FileNotFoundError / ValueError naming the folder, the split file or the bad recording.
@@ -89,7 +92,7 @@ def load_split_sequences(
     out = []
     for path in files:
         try:
-            out.append(sequence_arrays(load_recording(path), cfg))
+            out.append(sequence_arrays(load_recording(path), cfg, name=path.stem))
         except (KeyError, ValueError) as e:
             raise ValueError(f"{path}: {e}") from e
     return out

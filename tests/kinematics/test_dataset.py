@@ -113,3 +113,23 @@ def test_source_weights_share_sources_by_balance_and_draws_follow_them():
     real = [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (80, 80)]
     x, _ = sample_windows(real, 200, 20, np.random.default_rng(0), np.array([0.0, 1.0]))
     assert all(np.any(np.all(w[0] == real[1].x, axis=1)) for w in x)
+
+
+def test_split_sequences_are_named_by_their_file_so_groups_find_them(tmp_path):
+    """The split's groups key clips by file name; a recording's own name may differ."""
+    import dataclasses
+    import json
+
+    from grip.kinematics.dataset import clip_of, dataset_groups, load_split_sequences
+    from prism_tools.io import save_recording
+
+    (tmp_path / "sequences").mkdir()
+    stem = "src__p1_clip0_v0_seq000"
+    rec = make_recording(40, seed=1)
+    rec = dataclasses.replace(rec, extras={**rec.extras, "chunk_id": "synthetic_src/p1_clip0"})
+    save_recording(rec, tmp_path / "sequences" / f"{stem}.npz")
+    (tmp_path / "split.json").write_text(json.dumps(
+        {"format": "grip-prism-split", "version": 1, "train": [stem], "test": [],
+         "split_by": "person", "members": {"src/p1": ["src/p1_clip0"]}}))  # fmt: skip
+    (seq,) = load_split_sequences(tmp_path, "train", FeatureConfig())
+    assert seq.name == stem and dataset_groups(tmp_path)[clip_of(seq.name)] == "src/p1"
