@@ -272,10 +272,12 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Run KinematicsNet on the 500-frame segments of a dataset's test split (each\n"
-            "initialised from its first frame's ground truth) and report root-relative MPJPE,\n"
-            "MPJRE, leaf-velocity error and the error of the integrated root trajectory, per\n"
-            "motion category, as a Markdown table, a plot and (with --json) the overall figures\n"
-            "under PEL_MPJPE_mm, MPJRE_deg, leaf_vel_err_mps, frames."
+            "started from its first frame's ground truth, or standing with --init standing)\n"
+            "and report root-relative MPJPE (all frames, and after each segment's first\n"
+            "second), MPJRE, leaf-velocity error and the error of the integrated root\n"
+            "trajectory, per motion category and per source, as Markdown tables, a plot and\n"
+            "(with --json) the overall figures under PEL_MPJPE_mm, PEL_MPJPE_settled_mm,\n"
+            "MPJRE_deg, leaf_vel_err_mps, frames."
         ),
         epilog="example: grip kin eval --model runs/kin/best.pt --data data/prism_synth "
         "--json kin.json --out runs/kin/eval",
@@ -344,7 +346,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     table += "\n\n" + markdown_table(by_source, "source")
     print(table)
     overall = agg["overall"]
-    figures = {k: overall[k] for k in ("PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps",
+    figures = {k: overall[k] for k in ("PEL_MPJPE_mm", "PEL_MPJPE_settled_mm", "MPJRE_deg",
+                                       "leaf_vel_err_mps",
                                        "trans_err_m", "MPJPE_mm", "PA_MPJPE_mm", "frames",
                                        "segments")}  # fmt: skip
     figures["model"] = str(model)

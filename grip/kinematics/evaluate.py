@@ -15,6 +15,10 @@ METRIC_KEYS: tuple[str, ...] = (
     "PEL_MPJPE_mm", "MPJRE_deg", "leaf_vel_err_mps", "trans_err_m", "MPJPE_mm", "PA_MPJPE_mm",
 )  # fmt: skip
 
+SETTLE_S = 1.0
+"""``PEL_MPJPE_settled_mm`` leaves out each segment's first second: the frames where a start
+from the standing pose (``--init standing``) has not yet caught up with the motion."""
+
 
 JOINTS: tuple[str, ...] = ("pose", "fp")
 """Which joints the position metrics read: the estimated pose (rotations posed on the body,
@@ -28,7 +32,9 @@ def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
     error (deg); ``leaf_vel_err_mps``: mean error of the 6 velocity outputs (m/s);
     ``trans_err_m``: mean distance between the integrated and the true root trajectory (m);
     ``MPJPE_mm``: global joint error with the integrated root trajectory (mm);
-    ``PA_MPJPE_mm``: joint error after Procrustes alignment per frame (mm).
+    ``PA_MPJPE_mm``: joint error after Procrustes alignment per frame (mm);
+    ``PEL_MPJPE_settled_mm``: ``PEL_MPJPE_mm`` after the first :data:`SETTLE_S` (NaN for a
+    segment no longer than that), over ``settled_frames`` frames.
     """
     if joints not in JOINTS:
         raise ValueError(f"joints must be one of {list(JOINTS)}, got {joints!r}")
@@ -36,6 +42,9 @@ def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
     pos = est_out.joint_pos if joints == "pose" else est_out.fp_joint_pos
     est_glob = pos + est_out.root_pos[:, None]
     gt_glob = gt.joint_pos + gt.root_pos[:, None]
+    skip = int(round(SETTLE_S * float(rec.fps)))
+    settled = (float(M.pel_mpjpe(pos[skip:], gt.joint_pos[skip:])) if rec.n_frames > skip
+               else float("nan"))  # fmt: skip
     return {
         "PEL_MPJPE_mm": float(M.pel_mpjpe(pos, gt.joint_pos)),
         "MPJRE_deg": float(M.mpjre(est_out.global_rot, gt.global_rot)),
@@ -44,6 +53,8 @@ def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
         "MPJPE_mm": float(M.mpjpe(est_glob, gt_glob)),
         "PA_MPJPE_mm": float(M.pa_mpjpe(pos, gt.joint_pos)),
         "frames": int(rec.n_frames),
+        "PEL_MPJPE_settled_mm": settled,
+        "settled_frames": max(int(rec.n_frames) - skip, 0),
     }
 
 

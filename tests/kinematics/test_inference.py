@@ -143,3 +143,29 @@ def test_standing_init_starts_as_a_recording_without_ground_truth(ckpt):
     np.testing.assert_allclose(first["fp"].reshape(24, 3), standing.fp_joint_pos[0], atol=1e-5)
     with pytest.raises(ValueError, match="init must be one of"):
         est.predict([rec], init="oracle")
+
+
+def test_settled_error_leaves_out_the_first_second():
+    """An estimate off by 10 cm in the first second only: all frames err, the settled figure
+    does not; a segment no longer than a second has no settled figure."""
+    from types import SimpleNamespace
+
+    from grip.kinematics.evaluate import segment_metrics
+    from grip.kinematics.features import targets
+    from prism_tools.synthetic import make_recording
+
+    rec = make_recording(250, seed=3)
+    gt = targets(rec)
+    pos = gt.joint_pos.copy()
+    fps = int(round(rec.fps))
+    pos[:fps] += np.array([0.1, 0.0, 0.0])
+    pos[:fps, 0] = 0.0  # root-relative: the pelvis stays at the origin
+    est = SimpleNamespace(joint_pos=pos, global_rot=gt.global_rot, velocity=gt.velocity,
+                          root_pos=gt.root_pos)  # fmt: skip
+    m = segment_metrics(est, rec)
+    assert m["PEL_MPJPE_mm"] > 10.0 and m["PEL_MPJPE_settled_mm"] < 1e-6
+    assert m["settled_frames"] == 250 - fps
+    short = rec.slice_frames(0, fps)
+    cut = SimpleNamespace(**{k: getattr(est, k)[:fps] for k in vars(est)})
+    m = segment_metrics(cut, short)
+    assert np.isnan(m["PEL_MPJPE_settled_mm"]) and m["settled_frames"] == 0
