@@ -268,6 +268,23 @@ class SceneObject:
     extents: np.ndarray
 
 
+def box_object(centroid: np.ndarray, extents: np.ndarray) -> SceneObject:
+    """An axis-aligned box mesh (8 vertices, 12 outward triangles) centred at ``centroid (3,)``
+    with side lengths ``extents (3,)``, m."""
+    centroid = np.asarray(centroid, dtype=np.float64)
+    extents = np.asarray(extents, dtype=np.float64)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    faces = np.array(
+        [
+            [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+            [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],
+        ],
+        dtype=np.int64,
+    )  # fmt: skip
+    return SceneObject(vertices=centroid + corners * extents, faces=faces, centroid=centroid,
+                       extents=extents)  # fmt: skip
+
+
 @dataclass(frozen=True)
 class _ArraySpec:
     """Expected layout of one array field: ``"F"`` in ``shape`` is the frame count."""

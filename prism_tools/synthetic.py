@@ -35,10 +35,10 @@ from prism_tools.streams import (
     ImuStream,
     InsoleCombined,
     InsoleStream,
-    SceneObject,
     Slam,
     SmplParams,
     SubjectInfo,
+    box_object,
     contacts_from_cells,
 )
 
@@ -86,20 +86,6 @@ def _smooth(rng: np.random.Generator, t: np.ndarray, dims: int, max_hz: float = 
     phase = rng.uniform(0.0, 2 * np.pi, size=(n_harm, dims))
     amp = rng.uniform(0.3, 1.0, size=(n_harm, dims)) / n_harm
     return (amp * np.sin(2 * np.pi * freq * t[:, None, None] + phase)).sum(axis=1)
-
-
-def _box(centroid: np.ndarray, extents: np.ndarray) -> SceneObject:
-    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-    faces = np.array(
-        [
-            [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-            [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],
-        ],
-        dtype=np.int64,
-    )  # fmt: skip
-    return SceneObject(
-        vertices=centroid + corners * extents, faces=faces, centroid=centroid, extents=extents
-    )
 
 
 def make_recording(
@@ -261,7 +247,7 @@ def make_recording(
     objects = None
     if with_objects:
         centroid = np.array([0.6, 1.5, 0.15]) + rng.normal(0.0, 0.05, 3) * np.array([1, 1, 0])
-        objects = {"BoxSmall": _box(centroid, np.array([0.4, 0.3, 0.3]))}
+        objects = {"BoxSmall": box_object(centroid, np.array([0.4, 0.3, 0.3]))}
 
     gender = str(rng.choice(["female", "male"]))
     subject = SubjectInfo(

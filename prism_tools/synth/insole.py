@@ -28,6 +28,7 @@ Shapes: ``T`` frames, ``P`` cells (32 = 2 feet x 16), feet ordered (L, R).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,8 +135,9 @@ def _ramp_down(x: np.ndarray, full: float, zero: float) -> np.ndarray:
 
 
 def cell_support_weights(
-    cell_pos_world: np.ndarray, fps: float, cfg: InsoleSynthConfig | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+    cell_pos_world: np.ndarray, fps: float, cfg: InsoleSynthConfig | None = None,
+    ground_z: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Soft weight of each cell's ability to carry load: near the contact level and not sliding.
 
     The contact level is the floor (``z = 0``), raised to the lowest slow cell of the frame when
@@ -149,13 +151,16 @@ def cell_support_weights(
         fps: Frame rate, Hz.
         cfg: Thresholds ``contact_height_*``, ``contact_speed_*``,
             ``contact_float_tolerance_m`` and the smoothing window (for the horizontal speed).
+        ground_z: ``(T, C)`` height of the ground under each cell (props,
+            :mod:`prism_tools.synth.props`); heights are then measured from it. ``None``: the
+            flat floor.
 
     Returns:
         ``(T, C)`` weights in ``[0, 1]`` (a smooth height ramp above the contact level times a
-        smooth speed ramp) and ``(T,)`` the contact level, m.
+        smooth speed ramp) and ``(T,)`` the contact level above the ground, m.
     """
     cfg = cfg or InsoleSynthConfig()
-    h = cell_pos_world[..., 2]
+    h = cell_pos_world[..., 2] if ground_z is None else cell_pos_world[..., 2] - ground_z
     vel = smooth_derivative(
         cell_pos_world[..., :2], fps, cfg.smoothing_window_s, cfg.smoothing_polyorder, deriv=1
     )
@@ -307,6 +312,7 @@ def synthesize_insoles(
     body: BodyModel,
     fps: float,
     cfg: InsoleSynthConfig | None = None,
+    ground: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> InsoleSynth:
     """Clean cell forces of both insoles from the whole-body motion.
 
@@ -316,6 +322,10 @@ def synthesize_insoles(
         body: Body model.
         fps: Frame rate, Hz.
         cfg: Insole synthesis configuration.
+        ground: Height of the ground under points ``(..., 2)`` (the props a motion stands on,
+            :func:`prism_tools.synth.props.support_height`); ``None``: the flat floor. Cells
+            carry load near the ground under them, and the ZMP is taken on the plane of the
+            supported cells' mean ground height (``p_h = p_0 + h F_xy / F_z``).
 
     Returns:
         Cell forces, geometry and diagnostics; :func:`insole_readings_from_cells` turns them into
@@ -325,14 +335,21 @@ def synthesize_insoles(
     wrench = external_wrench(global_rot, joint_pos, body, fps, cfg)
     cells = insole_cell_positions(global_rot, joint_pos, body)
     t = cells.shape[0]
-    support, level = cell_support_weights(cells.reshape(t, -1, 3), fps, cfg)
+    flat_xy = cells[..., :2].reshape(t, -1, 2)
+    ground_z = None if ground is None else ground(flat_xy)
+    support, level = cell_support_weights(cells.reshape(t, -1, 3), fps, cfg, ground_z)
+    zmp = wrench.zmp_world
+    if ground_z is not None:
+        w = support.sum(1)
+        plane = np.where(w > 0, (support * ground_z).sum(1) / np.where(w > 0, w, 1.0), 0.0)
+        f = wrench.force_world
+        zmp = zmp + plane[:, None] * f[:, :2] / np.where(f[:, 2] > 0, f[:, 2], 1.0)[:, None]
     support = support.reshape(t, 2, sk.N_INSOLE_CELLS)
     capacity = support * body.insole_area_cm2 * np.asarray(cfg.cell_prior)
     fz = np.maximum(wrench.force_world[:, 2], 0.0)
-    flat_xy = cells[..., :2].reshape(t, -1, 2)
     forces, fallback = distribute_force(
         fz,
-        wrench.zmp_world,
+        zmp,
         flat_xy,
         capacity.reshape(t, -1),
         cfg.zmp_penalty_per_m2,
@@ -341,7 +358,7 @@ def synthesize_insoles(
     carried = forces.sum(axis=1)
     safe = np.where(carried > 0, carried, 1.0)
     centroid = np.einsum("tp,tpk->tk", forces, flat_xy) / safe[:, None]
-    zmp_err = np.where(carried > 0, np.linalg.norm(centroid - wrench.zmp_world, axis=1), 0.0)
+    zmp_err = np.where(carried > 0, np.linalg.norm(centroid - zmp, axis=1), 0.0)
     return InsoleSynth(
         wrench=wrench,
         support=support,

@@ -11,6 +11,7 @@ position, so ``trans + root_offset`` is our root position.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -38,6 +39,7 @@ from prism_tools.synth.insole import (
     measure_insoles,
     synthesize_insoles,
 )
+from prism_tools.synth.props import Prop, infer_props, props_as_objects, support_height
 from prism_tools.validation import validate
 
 if TYPE_CHECKING:  # prism_tools must not import grip.motion at run time (STYLE.md layering)
@@ -76,6 +78,8 @@ class SensorSynthesis:
         insole: Clean insole synthesis with its diagnostics.
         insole_readings: Insole readings (noisy unless the noise was off).
         noise: The noise configuration applied.
+        props: The boxes the motion stands or sits on (:func:`prism_tools.synth.props.
+            infer_props`), which the insoles stand on; empty on flat ground.
     """
 
     body: BodyModel
@@ -84,6 +88,7 @@ class SensorSynthesis:
     insole: InsoleSynth
     insole_readings: InsoleReadings
     noise: NoiseConfig
+    props: tuple[Prop, ...] = ()
 
 
 def synthesize_sensors(
@@ -106,7 +111,9 @@ def synthesize_sensors(
     noise_cfg = cfg.noise if noise else NoiseConfig.off()
     imu_rng, insole_rng = np.random.default_rng(seed).spawn(2)
     imu = synthesize_imu(global_rot, joint_pos, body, motion.fps, cfg.imu)
-    ins = synthesize_insoles(global_rot, joint_pos, body, motion.fps, cfg.insole)
+    props = tuple(infer_props(global_rot, joint_pos, body, motion.fps))
+    ground = functools.partial(support_height, list(props)) if props else None
+    ins = synthesize_insoles(global_rot, joint_pos, body, motion.fps, cfg.insole, ground)
     return SensorSynthesis(
         body=body,
         imu=imu,
@@ -114,6 +121,7 @@ def synthesize_sensors(
         insole=ins,
         insole_readings=measure_insoles(ins, body, cfg.insole, noise_cfg, insole_rng),
         noise=noise_cfg,
+        props=props,
     )
 
 
@@ -168,11 +176,14 @@ def recording_from_motion(
     ``acc_local_raw``/``gyr_local_raw``); ``imu_gt`` (position, central-difference velocity,
     plain second-difference acceleration, orientation); both insoles and the combined insole
     (forces and cell values in body weights, cells summing to the foot force; CoP in metres);
-    ``slam`` and ``objects`` None. ``extras`` holds the provenance: ``source_clip``,
-    ``category``, ``synthetic``, ``noise``, ``noise_seed``, ``synthesis_config`` (JSON),
-    ``body_params`` (JSON), ``source_meta`` (JSON), ``smpl_note``, ``dropped_frames``
+    ``objects`` the boxes the motion stands or sits on (``prop_00``, ...; None on flat ground,
+    :mod:`prism_tools.synth.props`), ``slam`` None. ``extras`` holds the provenance:
+    ``source_clip``, ``category``, ``synthetic``, ``noise``, ``noise_seed``,
+    ``synthesis_config`` (JSON), ``body_params`` (JSON), ``source_meta`` (JSON), ``smpl_note``,
+    ``dropped_frames``
     (``{"imu": {part: idx}, "insole": {foot: idx}}``) and insole diagnostics
-    (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``).
+    (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``), and
+    ``props`` (JSON: kind, top height, top extent and frames of each prop).
 
     Args:
         motion: The motion.
@@ -233,8 +244,12 @@ def recording_from_motion(
         "insole_zmp_outside_threshold_m": ZMP_OUTSIDE_M,
         "insole_max_zmp_error_m": float(ins.zmp_error_m.max(initial=0.0)),
         "insole_solver_fallback_frames": int(ins.fallback_frames.size),
+        "props": json.dumps([{"kind": p.kind, "height_m": round(p.height_m, 4),
+                              "lo": p.lo.round(4).tolist(), "hi": p.hi.round(4).tolist(),
+                              "frames": p.frames} for p in syn.props]),
     }
     rec = Recording.from_streams(subject, data_info, imu, insole, combined, extras,
-                                 smpl_params=smpl, imu_gt=imu_gt)  # fmt: skip
+                                 smpl_params=smpl, imu_gt=imu_gt,
+                                 objects=props_as_objects(list(syn.props)))  # fmt: skip
     validate(rec)
     return rec

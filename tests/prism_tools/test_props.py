@@ -1,0 +1,124 @@
+"""Props inferred from motion (prism_tools.synth.props): boxes a clip stands or sits on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grip.core import fk
+from grip.core.body import build_body
+from grip.core.rotations import rot_x, rot_z
+from prism_tools.synth.props import infer_props, props_as_objects, support_height
+
+FPS = 100.0
+BODY = build_body()
+
+
+def _standing(n: int, at=(0.0, 0.0), raise_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(global_rot, joint_pos)`` of the rest pose, arms lowered, soles ``raise_m`` up."""
+    rot, pos = fk.rest_pose(n)
+    rot[:, 16], rot[:, 17] = rot_z(np.array(-1.3)), rot_z(np.array(1.3))
+    pos[:, :2] = at
+    pos[:, 2] = BODY.pelvis_height + raise_m
+    return fk.forward_kinematics(rot, pos, BODY.offsets)
+
+
+def _sitting(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Seated upright, thighs level, shanks vertical, soles on the floor (facing +y)."""
+    rot, pos = fk.rest_pose(n)
+    for hip, knee in ((1, 4), (2, 5)):
+        rot[:, hip], rot[:, knee] = rot_x(np.array(-np.pi / 2)), rot_x(np.array(np.pi / 2))
+    pos[:, 2] = 1.0
+    g, p = fk.forward_kinematics(rot, pos, BODY.offsets)
+    pos[:, 2] -= p[0, 7, 2] - BODY.rest_joint_pos[7, 1]  # ankles at their standing height
+    return fk.forward_kinematics(rot, pos, BODY.offsets)
+
+
+def _concat(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    return tuple(np.concatenate(x) for x in zip(*parts, strict=True))  # type: ignore[return-value]
+
+
+def test_standing_on_a_box_gives_its_top():
+    g, p = _concat(_standing(100), _standing(150, at=(1.0, 0.5), raise_m=0.4))
+    (prop,) = infer_props(g, p, BODY, FPS)
+    assert prop.kind == "step" and abs(prop.height_m - 0.4) < 0.02
+    soles = fk.sole_points(g[100:], p[100:], BODY)[..., :2].reshape(-1, 2)
+    assert prop.contains(soles, margin=0.005).all()  # the box is under both feet
+    assert not prop.contains(p[:100, 0, :2]).any()  # not where the body stood on the floor
+    np.testing.assert_allclose(support_height([prop], np.array([[1.0, 0.5], [0.0, 0.0]])),
+                               [prop.height_m, 0.0])  # fmt: skip
+    (box,) = props_as_objects([prop]).values()
+    assert box.vertices[:, 2].min() == 0.0 and abs(box.vertices[:, 2].max() - prop.height_m) < 1e-12
+    np.testing.assert_allclose(box.extents[:2], prop.hi - prop.lo)
+
+
+def test_flat_ground_and_short_touches_give_none():
+    g, p = _standing(200)
+    assert infer_props(g, p, BODY, FPS) == []
+    assert props_as_objects([]) is None
+    # a float of a few centimetres is the floor, a 0.1 s perch is not a step
+    g, p = _concat(_standing(100), _standing(100, at=(0.5, 0), raise_m=0.05),
+                   _standing(10, at=(1.0, 0), raise_m=0.3), _standing(100, at=(1.5, 0)))
+    assert infer_props(g, p, BODY, FPS) == []
+
+
+def test_a_real_walk_gives_none(cmu_walk):
+    b = cmu_walk.body_model()
+    g, p = cmu_walk.fk(b)
+    assert infer_props(g, p, b, cmu_walk.fps) == []
+
+
+def test_two_steps_stay_two_boxes_off_the_floor_stance():
+    g, p = _concat(_standing(60), _standing(60, at=(0, 0.3), raise_m=0.2),
+                   _standing(60, at=(0, 0.6), raise_m=0.4), _standing(60, at=(0, 1.2)))
+    props = infer_props(g, p, BODY, FPS)
+    assert [round(x.height_m, 2) for x in props] == [0.2, 0.4]
+    low, high = props
+    assert not high.contains(fk.sole_points(g[60:120], p[60:120], BODY)[..., :2]).any()
+    for q in props:  # neither covers the floor stances
+        assert not q.contains(fk.sole_points(g[:60], p[:60], BODY)[..., :2]).any()
+        assert not q.contains(fk.sole_points(g[180:], p[180:], BODY)[..., :2]).any()
+
+
+def test_sitting_gives_a_seat_under_the_pelvis_and_thighs():
+    g, p = _concat(_standing(100), _sitting(150), _standing(100))
+    props = infer_props(g, p, BODY, FPS)
+    assert [x.kind for x in props] == ["seat"]
+    seat = props[0]
+    hips = p[150, [1, 2]]
+    assert seat.contains(p[150, 0, :2]) and seat.contains(hips[:, :2]).all()
+    thigh_bottom = hips[:, 2].mean() - 0.034 * BODY.params.height_m
+    assert abs(seat.height_m - thigh_bottom) < 0.04
+    # the feet stay off the seat
+    assert not seat.contains(fk.sole_points(g[150], p[150], BODY)[..., :2]).any()
+
+
+@pytest.mark.parametrize("n", [1, 5])
+def test_tiny_clips(n):
+    g, p = _standing(n)
+    assert infer_props(g, p, BODY, FPS) == []
+
+
+def test_the_insoles_stand_on_the_props_and_the_recording_carries_them():
+    """On a 0.4 m box the insoles carry the body weight (a flat floor would leave the feet in
+    the air); the recording's objects hold the box and its extras the props' summary."""
+    import json
+
+    from grip.core.rotations import matrix_to_quat
+    from grip.motion.motion import Motion
+    from prism_tools.synth import recording_from_motion
+
+    rot, pos = fk.rest_pose(300)
+    rot[:, 16], rot[:, 17] = rot_z(np.array(-1.3)), rot_z(np.array(1.3))
+    pos[:, 2] = BODY.pelvis_height
+    pos[150:, 1] += 1.0
+    pos[150:, 2] += 0.4
+    motion = Motion(fps=FPS, root_pos=pos, local_quat=matrix_to_quat(rot), name="box")
+    rec = recording_from_motion(motion, noise=False)
+    (box,) = rec.objects.values()
+    assert abs(box.vertices[:, 2].max() - 0.4) < 0.02
+    (summary,) = json.loads(rec.extras["props"])
+    assert summary["kind"] == "step" and abs(summary["height_m"] - 0.4) < 0.02
+    force = sum(rec.insole[f].force[:, 0] for f in rec.insole)  # body weights
+    np.testing.assert_allclose(force[20:130], 1.0, atol=0.03)  # on the floor
+    np.testing.assert_allclose(force[170:280], 1.0, atol=0.03)  # on the box
