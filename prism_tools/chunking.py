@@ -49,10 +49,11 @@ def group_source(group: str) -> str:
 
 
 def clip_source(clip: str, group: str | None = None) -> str:
-    """The source of a clip (its :func:`safe_name` form): :func:`group_source` of its
-    ``group`` when it has one (a dataset split by person), else the clip's top folder
-    (``"cmu__walk_01"`` -> ``"cmu"``)."""
-    return group_source(group) if group else clip.split("__")[0]
+    """The source of a clip (its id or its :func:`safe_name` form): :func:`group_source` of its
+    ``group`` when it has a group with a source (a dataset split by person), else the clip's top
+    folder (``"cmu/walk_01"`` or ``"cmu__walk_01"`` -> ``"cmu"``)."""
+    source = group_source(group) if group else ""
+    return source or clip.replace("__", "/").split("/")[0]
 
 
 def chunk_id(take_name: str, index: int) -> str:

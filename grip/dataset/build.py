@@ -143,6 +143,7 @@ class ClipResult:
     note: str = ""  # e.g. why a finished clip gave no sequence
     label: str = ""  # the source's own label of the motion
     group: str = ""  # its group in a split by person ("": the clip itself)
+    props: list[dict] = field(default_factory=list)  # boxes it stands or sits on (variant 0)
 
 
 def clip_seed(clip_id: str, base: int) -> int:
@@ -201,6 +202,8 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
             motion = motions[k]
             rec = recording_from_motion(motion, SynthConfig(), seed=seed + k, noise=noisy)
             rec.extras["label"] = clip.label
+            if k == 0:  # (every variant of the same motion stands on the same props)
+                res.props = json.loads(rec.extras.get("props") or "[]")
             res.synth_frames += rec.n_frames
             res.zmp_outside_frames += int(rec.extras.get("insole_zmp_outside_frames", 0))
             if cfg.float32:

@@ -103,6 +103,7 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
         "config": manifest.get("config", {}),
         "insole_zmp_outside_fraction": outside / synth if synth else None,
         "insole_zmp_outside_by_source": zmp_outside_by_source(done),
+        "props": props_summary(done),
         "size_bytes": folder_size_bytes(root),
     }
     split_path = root / "split.json"
@@ -115,14 +116,36 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
 
 
 def clip_source(clip: dict) -> str:
-    """The source of a manifest clip: its group less the last part (``"hdm05/bd"`` ->
-    ``"hdm05"``, ``"bandai_namco/dataset-2/active"`` -> ``"bandai_namco/dataset-2"``, as the
-    split strata); for a manifest without groups (built before groups existed) the clip id's top
-    folder (``"cmu/02_01"`` -> ``"cmu"``)."""
-    group = str(clip.get("group") or "")
-    if "/" in group:
-        return group.rsplit("/", 1)[0]
-    return str(clip.get("clip_id") or "unknown").split("/", 1)[0]
+    """The source of a manifest clip (:func:`prism_tools.chunking.clip_source` of its id and
+    group): ``"hdm05/bd"`` -> ``"hdm05"``, as the split strata; without a group (a manifest
+    built before groups existed) the clip id's top folder (``"cmu/02_01"`` -> ``"cmu"``)."""
+    from prism_tools.chunking import clip_source as source_of
+
+    return source_of(str(clip.get("clip_id") or "unknown"), str(clip.get("group") or ""))
+
+
+def props_summary(clips: list[dict]) -> dict:
+    """The props of the finished manifest clips (:func:`prism_tools.synth.props.infer_props`,
+    recorded by the build): ``clips`` with props, ``props``, per source ``{"clips", "steps",
+    "seats"}`` and up to 12 ``examples`` ``(clip id, "step 0.21 m, seat 0.66 m")``."""
+    by_source: dict[str, dict] = {}
+    examples = []
+    with_props = n_props = 0
+    for c in clips:
+        props = c.get("props") or []
+        if not props:
+            continue
+        with_props += 1
+        n_props += len(props)
+        e = by_source.setdefault(clip_source(c), {"clips": 0, "steps": 0, "seats": 0})
+        e["clips"] += 1
+        for p in props:
+            e["seats" if p.get("kind") == "seat" else "steps"] += 1
+        if len(examples) < 12:
+            examples.append((c.get("clip_id"), ", ".join(
+                f"{p.get('kind')} {float(p.get('height_m', 0.0)):.2f} m" for p in props)))
+    return {"clips": with_props, "props": n_props, "by_source": dict(sorted(by_source.items())),
+            "examples": examples}  # fmt: skip
 
 
 def zmp_outside_by_source(clips: list[dict]) -> dict[str, dict]:
@@ -227,6 +250,7 @@ def format_summary(s: dict) -> str:
                      "insole cells: "
                      f"{100 * s['insole_zmp_outside_fraction']:.1f} %")  # fmt: skip
     lines += _format_zmp_by_source(s.get("insole_zmp_outside_by_source") or {})
+    lines += _format_props(s.get("props") or {})
     lines += [
         "",
         "| category | clips | recordings | frames |" if "clips" in s
@@ -273,6 +297,19 @@ def _format_zmp_by_source(by_source: dict[str, dict]) -> list[str]:
         share = "-" if e["fraction"] is None else f"{100 * e['fraction']:.1f} %"
         lines.append(f"| {name} | {e['clips']} | {e['synth_frames']} | "
                      f"{e['zmp_outside_frames']} | {share} |")  # fmt: skip
+    return lines
+
+
+def _format_props(props: dict) -> list[str]:
+    """The props table (Markdown lines; none when no clip has props)."""
+    if not props.get("clips"):
+        return []
+    lines = ["", f"Props inferred from the motion (boxes clips stand or sit on, "
+             f"prism_tools/synth/props.py): {props['props']} in {props['clips']} clips", "",
+             "| source | clips | steps | seats |", "|---|---:|---:|---:|"]  # fmt: skip
+    for name, e in props["by_source"].items():
+        lines.append(f"| {name} | {e['clips']} | {e['steps']} | {e['seats']} |")
+    lines += [""] + [f"- {clip}: {text}" for clip, text in props["examples"]]
     return lines
 
 

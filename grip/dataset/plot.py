@@ -138,7 +138,10 @@ def plot_recording(rec, out_png: str | os.PathLike, title: str | None = None) ->
             seg = joints[fr, [p, j]]
             ax.plot(seg[:, 0], seg[:, 1], seg[:, 2], color=col, lw=1.2)
     ax.plot(joints[:, 0, 0], joints[:, 0, 1], np.zeros(f), color="gray", lw=0.8)
-    lo, hi = joints.reshape(-1, 3).min(0), joints.reshape(-1, 3).max(0)
+    objects = _draw_objects(ax, rec.objects)
+    pts = joints.reshape(-1, 3) if objects is None else np.concatenate([joints.reshape(-1, 3),
+                                                                        objects])  # fmt: skip
+    lo, hi = pts.min(0), pts.max(0)
     mid = (lo + hi) / 2
     half = np.maximum((hi - lo)[:2] / 2 + 0.2, 0.6)
     top = max(float(hi[2]) + 0.1, 1.0)
@@ -148,8 +151,25 @@ def plot_recording(rec, out_png: str | os.PathLike, title: str | None = None) ->
     ax.set_box_aspect((2 * half[0], 2 * half[1], top - min(0.0, float(lo[2]))))
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title("Skeleton (ground truth) at 6 instants")
+    props = " and its props (grey)" if objects is not None else ""
+    ax.set_title(f"Skeleton (ground truth) at 6 instants{props}")
     return _save(fig, out_png)
+
+
+def _draw_objects(ax, objects) -> np.ndarray | None:
+    """Draw a recording's scene objects (props: boxes; any mesh) as grey triangles on a 3-D
+    axis; returns their vertices ``(N, 3)`` (``None`` without objects)."""
+    if not objects:
+        return None
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    verts = []
+    for obj in objects.values():
+        v, faces = np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces)
+        ax.add_collection3d(Poly3DCollection(v[faces], facecolor="0.6", edgecolor="0.35",
+                                             alpha=0.35, lw=0.4))  # fmt: skip
+        verts.append(v)
+    return np.concatenate(verts)
 
 
 def _save(fig, out_png: Path) -> Path:

@@ -87,3 +87,32 @@ def test_manifest_without_groups_or_counts(tmp_path: Path) -> None:
     empty = dataset_summary(_write(tmp_path / "empty", []))
     assert zmp_outside_by_source([]) == {}
     assert "per source" not in format_summary(empty)
+
+
+def test_info_lists_the_props_per_source(tmp_path) -> None:
+    stairs = _clip("cmu/14_21", "cmu/14", 1000, 100)
+    stairs["props"] = [{"kind": "step", "height_m": 0.216}, {"kind": "step", "height_m": 0.391}]
+    stool = _clip("cmu/14_31", "cmu/14", 1000, 100)
+    stool["props"] = [{"kind": "seat", "height_m": 0.356}]
+    root = _write(tmp_path / "d", [stairs, stool, _clip("cmu/07_05", "cmu/07", 500, 50)])
+    s = dataset_summary(root)
+    assert s["props"]["clips"] == 2 and s["props"]["props"] == 3
+    assert s["props"]["by_source"] == {"cmu": {"clips": 2, "steps": 2, "seats": 1}}
+    text = format_summary(s)
+    assert "| cmu | 2 | 2 | 1 |" in text
+    assert "- cmu/14_21: step 0.22 m, step 0.39 m" in text and "cmu/07_05" not in text
+    flat = format_summary(dataset_summary(_write(tmp_path / "f", [_clip("a/b", None, 10, 1)])))
+    assert "Props" not in flat
+
+
+def test_the_plot_draws_the_props(tmp_path) -> None:
+    import dataclasses
+
+    from grip.dataset.plot import plot_recording
+    from prism_tools.streams import box_object
+    from prism_tools.synthetic import make_recording
+
+    box = box_object([0.5, 0.0, 0.2], [0.4, 0.3, 0.4])
+    rec = dataclasses.replace(make_recording(60, seed=0), objects={"prop_00": box})
+    out = plot_recording(rec, tmp_path / "r.png")
+    assert out.is_file() and out.stat().st_size > 10_000

@@ -8,8 +8,7 @@ import pytest
 
 from grip.assets import REPO_ROOT
 from grip.dataset.build import SPLIT_MODES, BuildConfig, ClipResult, dataset_split
-from prism_tools.chunking import group_source
-from prism_tools.chunking import make_split
+from prism_tools.chunking import group_source, make_split
 
 DATA = REPO_ROOT.parent / "shared" / "data" / "motions"
 
