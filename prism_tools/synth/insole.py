@@ -11,9 +11,13 @@
 2. On the flat floor ``z = 0`` the ground reaction acts through the zero-moment point
    ``p = (-N_y / F_z, N_x / F_z)``.
 3. Each of the 32 cells (16 per foot) gets a soft support weight in ``[0, 1]`` from its height
-   above the floor and its horizontal speed (smooth ramps), so load fades in and out.
-4. ``F_z`` (clamped at 0) is spread over the cells: non-negative cell forces ``f`` with
-   ``sum f = F_z`` minimising ``1/2 sum f_k^2 / s_k + beta/2 |centroid(f) - p|^2``, where
+   above the ground (the floor, or a prop under it) and its horizontal speed (smooth ramps), so
+   load fades in and out. So do the lowest points of the other body shapes
+   (:func:`body_contact_points`): a seat, knees, hands or the back resting on the ground carry
+   their part, which the insoles do not feel.
+4. ``F_z`` (clamped at 0) is spread over the cells and resting body points: non-negative
+   forces ``f`` with ``sum f = F_z`` minimising
+   ``1/2 sum f_k^2 / s_k + beta/2 |centroid(f) - p|^2``, where
    ``s_k = support_k * area_k * prior_k`` (see
    :func:`~prism_tools.synth.force_distribution.distribute_force`). The solution is a
    linear pressure field clipped at zero, ``f_k = s_k max(0, a + b . x_k)``, found exactly by a
@@ -57,6 +61,10 @@ __all__ = [
     "synthesize_insoles",
 ]
 
+_OTHER_CAPACITY = 0.25
+"""Capacity of a body point resting on the ground (:func:`body_contact_points`) as a share of one
+foot's insole area: a seat's five points together carry like a foot and a quarter, so sitting
+with the feet down shares the weight between them as the ZMP requires."""
 _SLIDING_PENALTY_M = 1.0  # height added to a fully sliding cell when finding the contact level
 _FEET_SEGMENTS = (sk.FOOT_BODY["L_Foot"], sk.FOOT_BODY["R_Foot"])
 
@@ -105,6 +113,42 @@ def insole_cell_positions(
         global_rot, joint_pos, body.insole_body.reshape(-1), body.insole_pos.reshape(-1, 3)
     )
     return pts.reshape(pts.shape[0], 2, sk.N_INSOLE_CELLS, 3)
+
+
+_SHANKS = (4, 5)  # knee -> ankle bodies: only their knee end may rest on the ground (kneeling)
+_FOOT_BODIES = frozenset((7, 8, 10, 11))  # feet and toes: the insole cells stand for them
+
+
+def body_contact_points(
+    global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lowest surface points of the body's shapes other than the feet: where the body can
+    rest on the ground or a prop besides its soles (sitting, kneeling, hands on the floor,
+    lying). Each capsule gives its two ends and its middle, a sphere its centre, lowered by the
+    radius; a shank only its knee end (its ankle end is the foot's business).
+
+    Returns:
+        ``(T, K, 3)`` points, world frame, m; ``(K,)`` carrying body of each; ``(K,)`` position
+        along its capsule (0 proximal end, 0.5 middle, 1 distal end; 0.5 for a sphere).
+    """
+    bodies, local, where, radius = [], [], [], []
+    for g in body.geoms:
+        if g.body in _FOOT_BODIES or g.kind == "box":
+            continue
+        if g.kind == "sphere":
+            samples = [(g.pos, 0.5)]
+        else:
+            ends = g.fromto()
+            a, b = ends[:3], ends[3:]
+            samples = [(a, 0.0)]
+            if g.body not in _SHANKS:
+                samples += [(0.5 * (a + b), 0.5), (b, 1.0)]
+        for pt, frac in samples:
+            bodies.append(g.body), local.append(pt), where.append(frac), radius.append(g.size[0])
+    bodies_a = np.asarray(bodies, dtype=np.int64)
+    pts = body_points(global_rot, joint_pos, bodies_a, np.asarray(local, dtype=np.float64))
+    pts[..., 2] -= np.asarray(radius)
+    return pts, bodies_a, np.asarray(where)
 
 
 def insole_origin_world(
@@ -293,6 +337,9 @@ class InsoleSynth:
         zmp_error_m: ``(T,)`` distance from the cells' force centroid to the ZMP, m (0 while the
             ZMP lies in the support polygon; 0 without load).
         fallback_frames: ``(K,)`` frames solved by the nnls fallback.
+        other_support_force_n: ``(T,)`` vertical force carried by body parts other than the
+            feet that rest on the ground or a prop (:func:`body_contact_points`: seat, knees,
+            hands, back), N; the insoles do not feel it.
     """
 
     wrench: Wrench
@@ -304,6 +351,7 @@ class InsoleSynth:
     unsupported_force_n: np.ndarray
     zmp_error_m: np.ndarray
     fallback_frames: np.ndarray
+    other_support_force_n: np.ndarray
 
 
 def synthesize_insoles(
@@ -334,24 +382,27 @@ def synthesize_insoles(
     cfg = cfg or InsoleSynthConfig()
     wrench = external_wrench(global_rot, joint_pos, body, fps, cfg)
     cells = insole_cell_positions(global_rot, joint_pos, body)
-    t = cells.shape[0]
-    flat_xy = cells[..., :2].reshape(t, -1, 2)
+    t, n_cells = cells.shape[0], 2 * sk.N_INSOLE_CELLS
+    others = body_contact_points(global_rot, joint_pos, body)[0]  # (T, K, 3)
+    points = np.concatenate([cells.reshape(t, -1, 3), others], axis=1)
+    flat_xy = points[..., :2]
     ground_z = None if ground is None else ground(flat_xy)
-    support, level = cell_support_weights(cells.reshape(t, -1, 3), fps, cfg, ground_z)
+    support, level = cell_support_weights(points, fps, cfg, ground_z)
     zmp = wrench.zmp_world
     if ground_z is not None:
         w = support.sum(1)
         plane = np.where(w > 0, (support * ground_z).sum(1) / np.where(w > 0, w, 1.0), 0.0)
         f = wrench.force_world
         zmp = zmp + plane[:, None] * f[:, :2] / np.where(f[:, 2] > 0, f[:, 2], 1.0)[:, None]
-    support = support.reshape(t, 2, sk.N_INSOLE_CELLS)
-    capacity = support * body.insole_area_cm2 * np.asarray(cfg.cell_prior)
+    cell_capacity = support[:, :n_cells] * (body.insole_area_cm2
+                                            * np.asarray(cfg.cell_prior)).reshape(-1)  # fmt: skip
+    other_capacity = support[:, n_cells:] * (_OTHER_CAPACITY * body.insole_area_cm2.sum() / 2)
     fz = np.maximum(wrench.force_world[:, 2], 0.0)
     forces, fallback = distribute_force(
         fz,
         zmp,
         flat_xy,
-        capacity.reshape(t, -1),
+        np.concatenate([cell_capacity, other_capacity], axis=1),
         cfg.zmp_penalty_per_m2,
         cfg.max_newton_iters,
     )
@@ -361,14 +412,15 @@ def synthesize_insoles(
     zmp_err = np.where(carried > 0, np.linalg.norm(centroid - zmp, axis=1), 0.0)
     return InsoleSynth(
         wrench=wrench,
-        support=support,
+        support=support[:, :n_cells].reshape(t, 2, sk.N_INSOLE_CELLS),
         contact_level_m=level,
-        cell_force_n=forces.reshape(t, 2, sk.N_INSOLE_CELLS),
+        cell_force_n=forces[:, :n_cells].reshape(t, 2, sk.N_INSOLE_CELLS),
         cell_pos_world=cells,
         origin_world=insole_origin_world(global_rot, joint_pos, body),
         unsupported_force_n=np.where(carried > 0, 0.0, fz),
         zmp_error_m=zmp_err,
         fallback_frames=np.flatnonzero(fallback).astype(np.int64),
+        other_support_force_n=forces[:, n_cells:].sum(axis=1),
     )
 
 

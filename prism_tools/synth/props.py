@@ -41,7 +41,11 @@ import numpy as np
 from grip.core.body import BodyModel
 from grip.core.fk import center_of_mass, sole_points
 from prism_tools.streams import SceneObject, box_object
-from prism_tools.synth.insole import insole_cell_positions, smooth_derivative
+from prism_tools.synth.insole import (
+    body_contact_points,
+    insole_cell_positions,
+    smooth_derivative,
+)
 
 __all__ = ["Prop", "infer_props", "props_as_objects", "support_height"]
 
@@ -139,20 +143,11 @@ def _planted(cells: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _seat_points(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel) -> np.ndarray:
-    """``(T, 5, 3)`` lowest points of the shapes a seat carries: the pelvis capsule's ends and
-    middle, and the middle of each thigh capsule's proximal half (z lowered by the radius)."""
-    pts = []
-    for g in body.geoms:
-        if g.kind != "capsule" or g.body not in (0, 1, 2):
-            continue
-        ends = g.fromto()
-        a, b = ends[:3], ends[3:]
-        local = [a, 0.5 * (a + b), b] if g.body == 0 else [0.75 * a + 0.25 * b]
-        for p in local:
-            w = np.einsum("tij,j->ti", global_rot[:, g.body], p) + joint_pos[:, g.body]
-            w[:, 2] -= g.size[0]
-            pts.append(w)
-    return np.stack(pts, axis=1)
+    """``(T, K, 3)`` lowest points of the shapes a seat carries: the pelvis capsule's and the
+    proximal half of each thigh's (:func:`prism_tools.synth.insole.body_contact_points`)."""
+    pts, bodies, where = body_contact_points(global_rot, joint_pos, body)
+    keep = (bodies == 0) | (np.isin(bodies, (1, 2)) & (where <= 0.5))
+    return pts[:, keep]
 
 
 def _outside_hull(p: np.ndarray, q: np.ndarray) -> float:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from grip.core import skeleton as sk
-from grip.core.body import BodyModel
+from grip.core.body import GRAVITY, BodyModel
 from grip.core.rotations import quat_to_axis_angle
 from prism_tools.schema import Recording
 from prism_tools.streams import (
@@ -182,7 +182,9 @@ def recording_from_motion(
     ``synthesis_config`` (JSON), ``body_params`` (JSON), ``source_meta`` (JSON), ``smpl_note``,
     ``dropped_frames``
     (``{"imu": {part: idx}, "insole": {foot: idx}}``) and insole diagnostics
-    (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``), and
+    (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``;
+    ``insole_other_support_frames``: frames where body parts other than the feet carry more than
+    5 % of the body weight), and
     ``props`` (JSON: kind, top height, top extent and frames of each prop).
 
     Args:
@@ -244,6 +246,8 @@ def recording_from_motion(
         "insole_zmp_outside_threshold_m": ZMP_OUTSIDE_M,
         "insole_max_zmp_error_m": float(ins.zmp_error_m.max(initial=0.0)),
         "insole_solver_fallback_frames": int(ins.fallback_frames.size),
+        "insole_other_support_frames": int(np.count_nonzero(
+            ins.other_support_force_n > 0.05 * syn.body.total_mass * GRAVITY)),
         "props": json.dumps([{"kind": p.kind, "height_m": round(p.height_m, 4),
                               "lo": p.lo.round(4).tolist(), "hi": p.hi.round(4).tolist(),
                               "frames": p.frames} for p in syn.props]),

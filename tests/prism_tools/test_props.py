@@ -29,7 +29,7 @@ def _sitting(n: int) -> tuple[np.ndarray, np.ndarray]:
     for hip, knee in ((1, 4), (2, 5)):
         rot[:, hip], rot[:, knee] = rot_x(np.array(-np.pi / 2)), rot_x(np.array(np.pi / 2))
     pos[:, 2] = 1.0
-    g, p = fk.forward_kinematics(rot, pos, BODY.offsets)
+    _, p = fk.forward_kinematics(rot, pos, BODY.offsets)
     pos[:, 2] -= p[0, 7, 2] - BODY.rest_joint_pos[7, 1]  # ankles at their standing height
     return fk.forward_kinematics(rot, pos, BODY.offsets)
 
@@ -73,7 +73,7 @@ def test_two_steps_stay_two_boxes_off_the_floor_stance():
                    _standing(60, at=(0, 0.6), raise_m=0.4), _standing(60, at=(0, 1.2)))
     props = infer_props(g, p, BODY, FPS)
     assert [round(x.height_m, 2) for x in props] == [0.2, 0.4]
-    low, high = props
+    high = props[1]
     assert not high.contains(fk.sole_points(g[60:120], p[60:120], BODY)[..., :2]).any()
     for q in props:  # neither covers the floor stances
         assert not q.contains(fk.sole_points(g[:60], p[:60], BODY)[..., :2]).any()
@@ -122,3 +122,21 @@ def test_the_insoles_stand_on_the_props_and_the_recording_carries_them():
     force = sum(rec.insole[f].force[:, 0] for f in rec.insole)  # body weights
     np.testing.assert_allclose(force[20:130], 1.0, atol=0.03)  # on the floor
     np.testing.assert_allclose(force[170:280], 1.0, atol=0.03)  # on the box
+
+
+def test_seated_the_seat_takes_its_share_and_the_insoles_feel_the_rest():
+    from grip.core.body import GRAVITY
+    from prism_tools.synth.insole import synthesize_insoles
+
+    g, p = _concat(_standing(100), _sitting(200), _standing(100))
+    props = infer_props(g, p, BODY, FPS)
+    syn = synthesize_insoles(g, p, BODY, FPS, ground=lambda xy: support_height(props, xy))
+    bw = BODY.total_mass * GRAVITY
+    feet = syn.cell_force_n.sum(axis=(1, 2)) / bw
+    other = syn.other_support_force_n / bw
+    seated = slice(140, 260)  # away from the (instant) transitions
+    assert np.all(feet[seated] < 0.8) and np.all(other[seated] > 0.2)
+    np.testing.assert_allclose(feet[seated] + other[seated], 1.0, atol=1e-3)  # F_z, at rest
+    np.testing.assert_allclose(feet[20:80], 1.0, atol=0.02)  # standing: the feet carry it all
+    assert np.all(other[20:80] < 1e-9)
+    assert np.all(syn.zmp_error_m[seated] < 0.01)  # the seat and feet together hold the ZMP
