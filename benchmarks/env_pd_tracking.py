@@ -15,13 +15,13 @@ import argparse
 
 import numpy as np
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from grip.cli.paths import default_motions_dir
 from grip.core.reference import ReferenceSet
 from grip.kinematics.reference import oracle_reference_clip
 from grip.motion.catalog import load_clip
 from grip.motion.retarget import retarget
+from grip.task.config import TrackingEnvConfig
 from prism_tools.synth import SynthConfig, recording_from_motion
 
 

@@ -18,10 +18,10 @@ import time
 import mujoco
 import numpy as np
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
 from grip.core.mjcf import build_mjcf
 from grip.core.reference import ReferenceSet
+from grip.task.config import TrackingEnvConfig
 
 
 def main() -> None:

@@ -35,8 +35,8 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
     import mujoco
     import numpy as np
 
-    from envs.config import TrackingEnvConfig
     from envs.tracking_env import GripTrackingEnv
+    from grip.task.config import TrackingEnvConfig
 
     env = GripTrackingEnv(TrackingEnvConfig(reference=reference or "", amp_window=amp_window))
     action = np.zeros(env.action_space.shape, dtype=np.float32)

@@ -40,9 +40,9 @@ from scipy.spatial import ConvexHull, QhullError
 
 from grip.core.body import GRAVITY
 from grip.dataset.build import BuildConfig, subject_for
-from prism_tools.chunking import group_source
 from grip.motion.catalog import find_clips, load_clip
 from grip.motion.retarget import retarget
+from prism_tools.chunking import group_source
 from prism_tools.synth.config import InsoleSynthConfig
 from prism_tools.synth.insole import synthesize_insoles
 from prism_tools.synth.recording import ZMP_OUTSIDE_M

@@ -27,11 +27,11 @@ import argparse
 import numpy as np
 import torch
 
-from envs import amp as A
 from envs.factory import make_tracking_env
 from grip.assets import SHIPPED_POLICY
 from grip.core import skeleton as sk
 from grip.core.reference_sets import load_reference, select_clips
+from grip.task import amp as A
 from policies.amp import RealSampler
 from policies.controller import load_controller
 from policies.vec_env import stage2_rollout_env

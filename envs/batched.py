@@ -28,12 +28,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from envs import amp as A
-from envs import observations as O
 from envs import rewards as R
 from envs.tracking_env import GripTrackingEnv
 from grip.core import skeleton as sk
 from grip.sim.humanoid import ROW, ROW_DIM, absurd_rows, body_state
+from grip.task import amp as A
+from grip.task import observations as O
 
 _N_TERMS = len(R.TERMS)
 _INFO_KEYS = tuple(f"reward/{k}" for k in R.TERMS)

@@ -11,10 +11,10 @@ from __future__ import annotations
 import gymnasium as gym
 
 from envs.batched import BatchedTrackingEnv
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.core.reference_sets import load_reference, select_clips
+from grip.task.config import TrackingEnvConfig
 
 
 def make_tracking_env(env_cfg: TrackingEnvConfig, categories: tuple[str, ...],

@@ -3,11 +3,12 @@ observation.
 
 :func:`rasterize` turns a :class:`envs.terrain.Scene` into a :class:`HeightField`,
 :func:`add_heightfield` writes it into the MJCF, and :func:`sample_heightmap` reads it at the
-points of :func:`heightmap_grid` for the observation. The design and its caveats are in
-:mod:`envs.terrain`.
+points of :func:`grip.task.observations.heightmap_grid` for the observation. The design and its
+caveats are in :mod:`envs.terrain`.
 
-Grid convention (shared by :class:`HeightField`, MuJoCo and :func:`heightmap_grid`): arrays are
-indexed ``[row, col]`` with rows along world (or local) y and columns along x.
+Grid convention (shared by :class:`HeightField`, MuJoCo and
+:func:`grip.task.observations.heightmap_grid`): arrays are indexed ``[row, col]`` with rows along
+world (or local) y and columns along x.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from envs.terrain import Scene
 __all__ = [
     "HeightField",
     "add_heightfield",
-    "heightmap_grid",
     "rasterize",
     "sample_heightmap",
 ]
@@ -253,26 +253,6 @@ def rasterize(scene: Scene, cell_m: float = 0.02, margin_m: float = 1.0) -> Heig
 # --------------------------------------------------------------------------------------------
 
 
-def heightmap_grid(n: int = 25, extent_m: float = 1.5) -> np.ndarray:
-    """Local sample offsets of the height-map observation.
-
-    Args:
-        n: Samples per side (>= 2).
-        extent_m: Side of the square, metres; samples span ``[-extent_m/2, extent_m/2]``.
-
-    Returns:
-        (n*n, 2) float64 offsets ``(x, y)`` in the heading frame (x = forward, y = left),
-        metres, row-major like :class:`HeightField`: ``grid.reshape(n, n, 2)[i, j] =
-        (s[j], s[i])`` with ``s = linspace(-extent_m/2, extent_m/2, n)``, i.e. rows run along
-        the left axis and columns along the forward axis.
-    """
-    if n < 2:
-        raise ValueError(f"n must be >= 2, got {n}")
-    s = np.linspace(-extent_m / 2.0, extent_m / 2.0, n)
-    gx, gy = np.meshgrid(s, s)  # gx[i, j] = s[j], gy[i, j] = s[i]
-    return np.ascontiguousarray(np.column_stack([gx.ravel(), gy.ravel()]))
-
-
 def sample_heightmap(
     hf: HeightField | None,
     center_xy: np.ndarray,
@@ -289,7 +269,8 @@ def sample_heightmap(
         center_xy: (2,) world xy of the frame origin (e.g. the pelvis), metres.
         rot2: (2, 2) heading rotation, local -> world: ``[[cos, -sin], [sin, cos]]`` of the yaw
             of the forward axis (yaw 90 deg = facing world +y, the rest pose).
-        grid: (n*n, 2) float64 local offsets from :func:`heightmap_grid`, metres.
+        grid: (n*n, 2) float64 local offsets from
+            :func:`grip.task.observations.heightmap_grid`, metres.
         out: Optional (n*n,) float64 buffer for the result (reused across steps).
 
     Returns:

@@ -1,14 +1,14 @@
 """Reward terms of the tracking task (GRIP supplement eq. 8-9), as pure numpy functions.
 
 Each function returns raw, unweighted terms; the environment multiplies them by
-:class:`envs.config.RewardWeights` and reports every term as ``info["reward/<name>"]``.
+:class:`grip.task.config.RewardWeights` and reports every term as ``info["reward/<name>"]``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from envs.config import RewardConfig
+from grip.task.config import RewardConfig
 
 IMITATION_TERMS: tuple[str, ...] = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel")
 TERMS: tuple[str, ...] = (*IMITATION_TERMS, "root_vel", "energy", "amp")

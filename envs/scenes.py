@@ -9,12 +9,12 @@ import types
 
 import mujoco
 
-from envs.config import TrackingEnvConfig
 from envs.heightfield import add_heightfield, rasterize, sample_heightmap
 from envs.terrain import make_scene
 from grip.core.body import BodyParams
 from grip.core.mjcf import MjcfConfig, build_mjcf
 from grip.sim.humanoid import Humanoid, HumanoidConfig
+from grip.task.config import TrackingEnvConfig
 
 SceneObjects = dict  # {name: (vertices (V, 3), faces (F, 3))}
 

@@ -22,15 +22,15 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from envs import amp as A
-from envs import observations as O
 from envs import rewards as R
-from envs.config import TrackingEnvConfig
-from envs.heightfield import heightmap_grid
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
 from grip.sim.humanoid import ROW, ROW_DIM, Humanoid, body_state
+from grip.task import amp as A
+from grip.task import observations as O
+from grip.task.config import TrackingEnvConfig
+from grip.task.observations import heightmap_grid
 
 SAMPLE_REFERENCE = Path(__file__).resolve().parent / "assets" / "sample_reference.npz"
 """The small bundled reference set used when the env is made without a reference."""
@@ -61,16 +61,16 @@ class GripTrackingEnv(gym.Env):
             settings and reference (:class:`envs.scenes.HumanoidScenes`); ``None``: its own.
 
     Observation: ``spaces.Dict`` with ``"sensor"`` (the KinematicsNet inputs of the next frame),
-    ``"kinematic"`` (State Difference, :func:`envs.observations.state_difference`), ``"self"``
-    (:func:`envs.observations.self_obs`) and ``"environment"`` (terrain height minus pelvis
-    height on a heading-aligned ``heightmap_size``^2 grid). Action: ``(69,)`` in [-1, 1], see
+    ``"kinematic"`` (State Difference) and ``"self"`` (both
+    :func:`grip.task.observations.observation_parts`) and ``"environment"`` (terrain height minus
+    pelvis height on a heading-aligned ``heightmap_size``^2 grid). Action: ``(69,)`` in [-1, 1], see
     :attr:`TrackingEnvConfig.action_mode`.
 
     ``info`` holds every reward term as ``"reward/<name>"``, the clip name and frame,
     ``"max_joint_err_m"`` and ``"mpjpe_m"`` (against the ground truth), ``"sim_unstable"``
     (this step blew up), ``"blowups"`` (count over the env's life), ``"root_height_m"`` and,
     with ``cfg.amp_window > 0``, ``"amp_obs"``: the last ``amp_window`` AMP frames of the
-    simulated humanoid (:mod:`envs.amp`; after a reset the window holds the ground truth of
+    simulated humanoid (:mod:`grip.task.amp`; after a reset the window holds the ground truth of
     the frames before the start).
     """
 
@@ -257,7 +257,7 @@ class GripTrackingEnv(gym.Env):
         return obs, info
 
     def _amp_frame(self, pvw: np.ndarray, rot: np.ndarray) -> np.ndarray:
-        """The AMP frame of the simulated state (:func:`envs.amp.amp_frame`)."""
+        """The AMP frame of the simulated state (:func:`grip.task.amp.amp_frame`)."""
         sim = self._sim
         return A.amp_frame(pvw, rot, sim.hinge_angles(), sim.hinge_velocities(), self._amp_buf)
 
@@ -281,7 +281,7 @@ class GripTrackingEnv(gym.Env):
                  h: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
         """The observation of a state (``pvw (3, J, 3)``, ``rot (J, 3, 3)``; ``h (1, 3, 3)``
         its heading matrix when known) against the estimate of the next frame: the numbers
-        of :meth:`envs.observations.EstimateFrames.observe`, as new float32 arrays (views of
+        of :meth:`grip.task.observations.EstimateFrames.observe`, as new float32 arrays (views of
         one block)."""
         t = min(self._t + 1, self._clip.n_frames - 1)
         est, cfg = self._est, self.cfg

@@ -25,10 +25,10 @@ import gymnasium as gym
 import numpy as np
 
 import envs.factory
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.core.reference_sets import load_reference, select_clips
+from grip.task.config import TrackingEnvConfig
 
 
 class RandomPushes(gym.Wrapper):

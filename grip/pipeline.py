@@ -5,7 +5,7 @@ from the calibration pose (:class:`grip.kinematics.features.Calibration`: the re
 frames where it has ground truth, else the standing rest pose turned to the heading of the foot
 IMUs, :func:`grip.kinematics.features.standing_calibration`) and the policy follows
 the KinematicsNet estimate, observing it exactly as the training task does
-(:class:`envs.observations.EstimateFrames`); no reward is computed. Offline and streaming share
+(:class:`grip.task.observations.EstimateFrames`); no reward is computed. Offline and streaming share
 :class:`Player`, which plays one control step at a time: offline runs KinematicsNet once over the
 whole recording (batched; the same numbers as its step-wise use within float32 rounding) and
 then steps the player over every frame (or several recordings side by side:
@@ -44,9 +44,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs import amp as A
-from envs.heightfield import heightmap_grid
-from envs.observations import EstimateFrames
 from envs.scenes import HumanoidScenes, humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.body import BodyParams
@@ -57,6 +54,8 @@ from grip.core.reference import Estimate, ground_truth_arrays, pose_vector
 from grip.core.rotations import matrix_to_6d
 from grip.kinematics.features import Calibration, SensorStream, first_state, stream_features
 from grip.sim.humanoid import Humanoid
+from grip.task import amp as A
+from grip.task.observations import EstimateFrames, heightmap_grid
 
 CONTACT_FORCE_N = 20.0
 """A foot is in contact when the vertical ground reaction force on it exceeds this (the same

@@ -1,7 +1,7 @@
 """The AMP discriminator: style reward for PPO and the fall detector's probability.
 
 Real samples are windows of ground-truth AMP frames of the training motions
-(:func:`envs.amp.reference_amp_features`); fake samples are the simulated humanoid's windows
+(:func:`grip.task.amp.reference_amp_features`); fake samples are the simulated humanoid's windows
 (``info["amp_obs"]`` of the environment), kept in a replay buffer. Both are normalised by a
 running mean and variance of the real samples and the policy's samples.
 
@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from envs import amp as A
+from grip.task import amp as A
 from policies.config import AmpConfig
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from envs.config import TrackingEnvConfig
 from grip.config import REMOVED_ANY_VALUE, ConfigError, RemovedSetting, apply_dict, drop_removed
 from grip.core.checks import check
+from grip.task.config import TrackingEnvConfig
 
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
@@ -236,7 +236,7 @@ REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
 files and run folders may hold (:func:`policy_config_from_dict`)."""
 
 REMOVED_KINEMATIC_OBS: tuple[str, ...] = ("OAV_Jhor",)
-"""Observation variants deleted from ``envs.config.KINEMATIC_OBS`` (in :data:`REMOVED_IN`)."""
+"""Observation variants deleted from ``grip.task.config.KINEMATIC_OBS`` (in :data:`REMOVED_IN`)."""
 
 
 def policy_config_from_dict(data: dict, where: str, training: bool = False) -> PolicyRunConfig:

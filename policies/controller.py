@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
-    from envs.config import TrackingEnvConfig
+    from grip.task.config import TrackingEnvConfig
     from policies.amp import Discriminator
 
 COMBINE_HOW: tuple[str, ...] = ("ensemble", "average")

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from envs.config import TrackingEnvConfig
+from grip.task.config import TrackingEnvConfig
 from policies.runner import PolicyRunner, read_policy_file
 
 _DROPPED = ("critic", "critic_sizes")  # the value networks: training only

@@ -22,11 +22,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from envs.amp import FRAME_DIM
-from envs.config import TrackingEnvConfig
 from grip.core.atomic import atomic_write
 from grip.core.limits import read_json_file
 from grip.core.loaderrors import describe_load_error
+from grip.task.amp import FRAME_DIM
+from grip.task.config import TrackingEnvConfig
 from policies.amp import Discriminator
 from policies.config import policy_config_from_dict
 

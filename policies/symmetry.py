@@ -26,11 +26,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from envs import observations as O
-from envs.config import TrackingEnvConfig
-from envs.heightfield import heightmap_grid
 from grip.core import skeleton as sk
 from grip.nn.symmetry import mirror_features
+from grip.task import observations as O
+from grip.task.config import TrackingEnvConfig
+from grip.task.observations import heightmap_grid
 
 if TYPE_CHECKING:
     from policies.controller import Controller

@@ -37,10 +37,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
-from envs import amp as A
 from grip.config import drop_removed
 from grip.core.reference_sets import load_reference, select_clips
 from grip.core.rundir import RunDir
+from grip.task import amp as A
 from policies.amp import AmpTrainer, RealSampler
 from policies.checkpoint import read_ppo_zip, read_vecnorm
 from policies.config import REMOVED_SETTINGS, PolicyRunConfig, StageConfig

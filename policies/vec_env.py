@@ -17,7 +17,7 @@ from stable_baselines3.common.vec_env import (
     VecNormalize,
 )
 
-from envs.config import TrackingEnvConfig
+from grip.task.config import TrackingEnvConfig
 from policies.amp import AmpTrainer
 from policies.config import PolicyRunConfig, StageConfig
 

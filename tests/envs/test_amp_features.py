@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs import amp as A
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from grip.core.rotations import axis_angle_to_matrix
+from grip.task import amp as A
+from grip.task.config import TrackingEnvConfig
 
 
 def test_simulated_frame_matches_ground_truth_at_reset(reference):

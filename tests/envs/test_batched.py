@@ -13,9 +13,9 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from envs.batched import BatchedTrackingEnv
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
+from grip.task.config import TrackingEnvConfig
 from policies.vec_env import BatchedVecEnv
 
 N = 3

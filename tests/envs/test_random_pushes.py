@@ -10,10 +10,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.assets import REPO_ROOT
+from grip.task.config import TrackingEnvConfig
 
 
 def _load():

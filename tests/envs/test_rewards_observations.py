@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from envs import observations as O
-from envs.config import RewardConfig
 from envs.rewards import imitation_terms, mechanical_power, root_velocity_term, rotation_angles
 from grip.core import skeleton as sk
 from grip.core.rotations import rot_x, rot_z
+from grip.task import observations as O
+from grip.task.config import RewardConfig
 
 
 def _state(n: int = 24, seed: int = 0):

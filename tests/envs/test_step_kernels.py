@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs import amp as A
-from envs import observations as O
 from envs import rewards as R
-from envs.config import RewardConfig
 from grip.core.rotations import rot_x, rot_z
+from grip.task import amp as A
+from grip.task import observations as O
+from grip.task.config import RewardConfig
 
 
 def _states(b: int, seed: int):

@@ -12,7 +12,6 @@ import trimesh
 from envs.heightfield import (
     HeightField,
     add_heightfield,
-    heightmap_grid,
     rasterize,
     sample_heightmap,
 )
@@ -26,6 +25,7 @@ from envs.terrain import (
     scene_from_objects,
     stairs_scene,
 )
+from grip.task.observations import heightmap_grid
 
 RADIUS = 0.05
 

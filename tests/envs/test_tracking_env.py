@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401  (registers GripTracking-v0)
-from envs.config import TrackingEnvConfig
-from envs.observations import kinematic_dim
 from envs.tracking_env import GripTrackingEnv
+from grip.task.config import TrackingEnvConfig
+from grip.task.observations import kinematic_dim
 
 
 def _env(ref, **kw) -> GripTrackingEnv:

@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
+from grip.task.config import TrackingEnvConfig
 
 
 def _env(reference, **kw) -> GripTrackingEnv:

@@ -17,10 +17,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import SAMPLE_REFERENCE
 from grip.core.reference import PRIMARY, ReferenceSet
 from grip.pipeline import Episode, GripPipeline, RecoveryConfig, start_from_clip
+from grip.task.config import TrackingEnvConfig
 
 
 class _RowRunner:

@@ -91,4 +91,10 @@ def test_kin_eval_over_segments_matches_recordings(files) -> None:
     segs = list_segments(files, 100, min_frames=MIN_SEGMENT_FRAMES)
     rows = evaluate_segments(est, segs)
     old = evaluate_recordings(est, [load_recording(f) for f in files], 100)
-    assert aggregate(rows) == aggregate(old)
+
+    def comparable(x):  # NaN (no settled frames in a 1 s segment) equals NaN here
+        if isinstance(x, dict):
+            return {k: comparable(v) for k, v in x.items()}
+        return "nan" if isinstance(x, float) and x != x else x
+
+    assert comparable(aggregate(rows)) == comparable(aggregate(old))

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 import grip.eval.policy as P
-from envs.config import TrackingEnvConfig
 from grip.kinematics.features import FeatureConfig
 from grip.pipeline import GripPipeline
+from grip.task.config import TrackingEnvConfig
 from prism_tools.io import load_recording
 
 

@@ -12,11 +12,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
 from envs.tracking_env import SAMPLE_REFERENCE
 from grip.core.body import GRAVITY
 from grip.core.reference import ReferenceSet
 from grip.pipeline import GripPipeline, RecoveryConfig, kinematic_frames, start_from_clip
+from grip.task.config import TrackingEnvConfig
 
 
 class _Runner:

@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
 from grip.core.rotations import matrix_to_6d
 from grip.eval.stream import LATENCY_FRAMES, GripStream
 from grip.kinematics.features import FeatureConfig, SensorFrame, sensor_frames, targets
 from grip.kinematics.reference import oracle_reference_clip
 from grip.pipeline import GripPipeline, RecoveryConfig, start_from_clip
+from grip.task.config import TrackingEnvConfig
 from prism_tools.io import load_recording
 
 SAMPLE = "grip/assets/sample_recording.npz"

@@ -267,8 +267,12 @@ def test_stored_configs_with_removed_settings():
 def test_standing_starts_equal_the_standing_calibration_of_a_recording():
     """A window started from the standing pose gets the states a recording without ground truth
     starts from (first_state of standing_calibration, heading from its foot IMUs)."""
-    from grip.kinematics.features import (first_state, input_features, recording_body,
-                                          standing_calibration)  # fmt: skip
+    from grip.kinematics.features import (
+        first_state,
+        input_features,
+        recording_body,
+        standing_calibration,  # fmt: skip
+    )
     from grip.kinematics.train import heading_of_feet, standing_first
 
     cfg = FeatureConfig()

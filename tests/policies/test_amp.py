@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from envs.amp import FRAME_DIM
+from grip.task.amp import FRAME_DIM
 from policies.amp import AmpTrainer, Discriminator, RealSampler, ReplayBuffer, RunningNorm
 from policies.config import AmpConfig
 

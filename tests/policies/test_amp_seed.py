@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from envs.amp import FRAME_DIM
+from grip.task.amp import FRAME_DIM
 from policies.amp import AmpTrainer, Discriminator, RealSampler
 from policies.config import AmpConfig
 

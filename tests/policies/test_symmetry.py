@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs.config import TrackingEnvConfig
-from envs.heightfield import heightmap_grid
 from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
 from grip.core.reference import ReferenceSet
 from grip.kinematics.reference import with_mirrored_clips
+from grip.task.config import TrackingEnvConfig
+from grip.task.observations import heightmap_grid
 from policies.symmetry import MirrorAveragedPolicy, ObservationMirror
 
 

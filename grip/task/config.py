@@ -101,7 +101,7 @@ class TrackingEnvConfig:
         max_episode_frames: Truncate episodes after this many steps (0: run to the clip's end).
         min_episode_frames: Random starts leave at least this many frames to play.
         amp_window: AMP frames in ``info["amp_obs"]`` (the discriminator's input, see
-            :mod:`envs.amp`); 0 leaves it out.
+            :mod:`grip.task.amp`); 0 leaves it out.
         action_repeat: The controller's decision period in frames: a policy action is held for
             this many frames (the environment itself always advances one frame per step; the
             training wrapper :class:`envs.wrappers.ActionRepeat` and the inference loop

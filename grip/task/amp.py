@@ -1,7 +1,7 @@
 """AMP observations: the humanoid state the discriminator judges (numpy only).
 
 One AMP frame (BASELINES_AND_METRICS 5.2, PHC's layout adapted to our hinge body), all in the
-pelvis' heading frame (:func:`envs.observations.heading_matrix`):
+pelvis' heading frame (:func:`grip.task.observations.heading_matrix`):
 
 ====================  ====  ===========================================================
 root height           1     pelvis z, m
@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from envs.observations import heading_matrices, heading_matrix
 from grip.core import skeleton as sk
+from grip.task.observations import heading_matrices, heading_matrix
 
 KEY_JOINTS: tuple[int, ...] = (20, 21, 7, 8)
 """L_Wrist, R_Wrist, L_Ankle, R_Ankle (PHC's key bodies: hands and feet)."""
@@ -135,7 +135,7 @@ def amp_frames(sim_pvw: np.ndarray, sim_rot: np.ndarray, hinges: np.ndarray, h: 
         sim_pvw: ``(B, 3, J, 3)`` world positions, linear and angular velocities of the bodies.
         sim_rot: ``(B, J, 3, 3)`` world rotations.
         hinges: ``(B, 138)`` hinge angles (rad) then hinge rates (rad/s).
-        h: ``(B, 3, 3)`` heading matrices of the pelvis (:func:`envs.observations.
+        h: ``(B, 3, 3)`` heading matrices of the pelvis (:func:`grip.task.observations.
             heading_matrices`).
         out: ``(B, FRAME_DIM)`` buffer (any float dtype), filled and returned.
     """

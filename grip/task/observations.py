@@ -180,6 +180,26 @@ def observation_parts_batch(
     return kin, self_vec
 
 
+def heightmap_grid(n: int = 25, extent_m: float = 1.5) -> np.ndarray:
+    """Local sample offsets of the height-map observation.
+
+    Args:
+        n: Samples per side (>= 2).
+        extent_m: Side of the square, metres; samples span ``[-extent_m/2, extent_m/2]``.
+
+    Returns:
+        (n*n, 2) float64 offsets ``(x, y)`` in the heading frame (x = forward, y = left),
+        metres, row-major like :class:`envs.heightfield.HeightField`: ``grid.reshape(n, n,
+        2)[i, j] = (s[j], s[i])`` with ``s = linspace(-extent_m/2, extent_m/2, n)``, i.e. rows
+        run along the left axis and columns along the forward axis.
+    """
+    if n < 2:
+        raise ValueError(f"n must be >= 2, got {n}")
+    s = np.linspace(-extent_m / 2.0, extent_m / 2.0, n)
+    gx, gy = np.meshgrid(s, s)  # gx[i, j] = s[j], gy[i, j] = s[i]
+    return np.ascontiguousarray(np.column_stack([gx.ravel(), gy.ravel()]))
+
+
 def observe(
     variant: str,
     sim_pvw: np.ndarray,
@@ -203,7 +223,7 @@ def observe(
             est_root_pos: As :func:`observation_parts` (the heading comes from ``sim_rot[0]``).
         sensor: ``(F,)`` KinematicsNet input features of the frame.
         grid: ``(N, 2)`` height-map offsets in the heading frame, m
-            (:func:`envs.heightfield.heightmap_grid`).
+            (:func:`heightmap_grid`).
         terrain: ``(center_xy, rot2, grid, out) -> (N,)`` terrain heights
             (:attr:`grip.sim.humanoid.Humanoid.terrain`), ``None`` for the flat floor.
         out: ``(N,)`` float64 buffer for the terrain heights.
