@@ -56,8 +56,10 @@ ALLOWED: dict[str, tuple[str, ...] | str] = {
     "grip.baselines": ("numpy", "mujoco", "grip.core", "grip.config", "grip.sim", "prism_tools"),
     "grip.export": ("numpy", "mujoco", "grip.core", "grip.sim", "grip.kinematics.features"),
     # inference without a training task: sensors -> KinematicsNet -> controller -> humanoid
+    "grip.player": ("numpy", "grip.core", "grip.config", "grip.sim", "grip.kinematics.features",
+                    "grip.task"),
     "grip.pipeline": ("numpy", "torch", "grip.core", "grip.config", "grip.sim", "grip.kinematics",
-                      "grip.task", "envs.scenes"),
+                      "grip.task", "grip.player", "envs.scenes"),
     "grip.eval": EDGE,
     "grip.cli": EDGE,
 }

@@ -64,6 +64,7 @@ def markdown_table(agg: dict, key: str = "category") -> str:
             "leaf vel. (m/s)", "root transl. (m)"]  # fmt: skip
     items = [*agg["categories"].items(), ("**all**", agg["overall"])]
     body = [[name, str(m["segments"]), str(m["frames"]), f"{m['PEL_MPJPE_mm']:.1f}",
-             f"{m.get('PEL_MPJPE_settled_mm', float('nan')):.1f}", f"{m['MPJRE_deg']:.2f}", f"{m['leaf_vel_err_mps']:.3f}", f"{m['trans_err_m']:.3f}"]
+             f"{m.get('PEL_MPJPE_settled_mm', float('nan')):.1f}", f"{m['MPJRE_deg']:.2f}",
+             f"{m['leaf_vel_err_mps']:.3f}", f"{m['trans_err_m']:.3f}"]
             for name, m in items]  # fmt: skip
     return table(head, body)

@@ -207,8 +207,10 @@ def sequence_sources(seqs: Sequence[SequenceArrays], groups: Mapping[str, str]) 
     return {s.name: clip_source(clip_of(s.name), groups.get(clip_of(s.name))) for s in seqs}
 
 
-def sample_windows(seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
-                   weights: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
+def sample_windows(
+    seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
+    weights: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), drawn with probabilities ``weights``
     (``(len(seqs),)`` summing to 1; default: in proportion to sequence length).

@@ -42,7 +42,7 @@ def segment_metrics(est_out, rec, joints: str = "pose") -> dict[str, float]:
     pos = est_out.joint_pos if joints == "pose" else est_out.fp_joint_pos
     est_glob = pos + est_out.root_pos[:, None]
     gt_glob = gt.joint_pos + gt.root_pos[:, None]
-    skip = int(round(SETTLE_S * float(rec.fps)))
+    skip = round(SETTLE_S * float(rec.fps))
     settled = (float(M.pel_mpjpe(pos[skip:], gt.joint_pos[skip:])) if rec.n_frames > skip
                else float("nan"))  # fmt: skip
     return {

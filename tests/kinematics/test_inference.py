@@ -157,7 +157,7 @@ def test_settled_error_leaves_out_the_first_second():
     rec = make_recording(250, seed=3)
     gt = targets(rec)
     pos = gt.joint_pos.copy()
-    fps = int(round(rec.fps))
+    fps = round(rec.fps)
     pos[:fps] += np.array([0.1, 0.0, 0.0])
     pos[:fps, 0] = 0.0  # root-relative: the pelvis stays at the origin
     est = SimpleNamespace(joint_pos=pos, global_rot=gt.global_rot, velocity=gt.velocity,
