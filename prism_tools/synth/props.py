@@ -17,9 +17,10 @@ Two kinds of evidence, both from the ground-truth motion alone:
    support patch (when the pelvis stands :data:`PELVIS_ABOVE_FOOT_M` above it): the sole
    outline's horizontal extent over the run at that height.
 2. **A seat.** The pelvis is still for at least :data:`MIN_SEATED_S`, the torso upright above it
-   (:data:`TORSO_ABOVE_SEAT_M`), while the whole-body centre of mass lies more than
-   :data:`COM_OUTSIDE_M` outside the hull of the soles on the ground: the feet cannot hold the
-   body up alone, so something under the pelvis and thighs does. The
+   (:data:`TORSO_ABOVE_SEAT_M`) and the thighs flexed (:data:`SEATED_THIGH_DEG`), while the
+   whole-body centre of mass lies more than :data:`COM_OUTSIDE_M` outside the hull of the soles
+   on the ground: the feet cannot hold the body up alone, so something under the pelvis and
+   thighs does. The
    patch's height is the lowest point of the pelvis and proximal thigh shapes
    (:class:`grip.core.body.Geom` capsules), its extent theirs plus :data:`SEAT_MARGIN_M`. Seats
    lower than :data:`MIN_HEIGHT_M` are the floor (sitting or lying on it needs no prop).
@@ -78,6 +79,10 @@ sitting upright they are 0.24 m or more above it; lying or leaning back on the f
 not, and then the back, not a prop, carries the body."""
 TORSO_JOINTS: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15)
 """Spine1, Spine2, Spine3, Neck, L_Collar, R_Collar, Head (``grip.core.skeleton.JOINT_NAMES``)."""
+SEATED_THIGH_DEG = 45.0
+"""Seated thighs point at least this far from straight down (perched on a high stool ~67 deg,
+on a stepstool ~100 deg, CMU 13_01 and 14_31); a standing leg (~10 deg) is not on a seat, even
+when the retargeted centre of mass strays outside the feet (a held dance pose)."""
 GROUND_SOLE_M = 0.03
 """Cells within this of the frame's lowest cell are the soles on the ground."""
 SEAT_MARGIN_M = 0.05
@@ -172,8 +177,11 @@ def _seat_patches(global_rot, joint_pos, body, cells, fps, floor) -> list[tuple]
     flat = cells[..., :2].reshape(len(cells), -1, 2)
     seat = _seat_points(global_rot, joint_pos, body)
     upright = (joint_pos[:, TORSO_JOINTS, 2].min(1) - seat[..., 2].min(1)) >= TORSO_ABOVE_SEAT_M
+    thigh = joint_pos[:, (4, 5)] - joint_pos[:, (1, 2)]  # hips -> knees
+    down = -thigh[..., 2] / np.maximum(np.linalg.norm(thigh, axis=-1), 1e-9)
+    flexed = np.degrees(np.arccos(np.clip(down, -1.0, 1.0))).mean(1) >= SEATED_THIGH_DEG
     needs = np.zeros(len(cells), dtype=bool)
-    for t in np.flatnonzero(still & upright):
+    for t in np.flatnonzero(still & upright & flexed):
         ground = z[t] <= z[t].min() + GROUND_SOLE_M
         needs[t] = _outside_hull(com[t, :2], flat[t, ground]) > COM_OUTSIDE_M
     out = []
