@@ -7,7 +7,7 @@ import os
 import time
 from pathlib import Path
 
-from grip.cli.recordings import add_limit_arguments, limits_from_args
+from grip.cli.recordings import add_init_argument, add_limit_arguments, limits_from_args
 
 
 def shipped_methods() -> list[str]:
@@ -26,8 +26,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Run every method on the same segments of a dataset split (500 frames by default,\n"
-            "each started from the ground truth at its first frame: the GRIP protocol), in\n"
-            "parallel worker processes, and write OUT/results.json ({method: {metric: value}}),\n"
+            "each started from the ground truth at its first frame: the GRIP protocol; --init\n"
+            "standing: from the standing pose, as without motion capture), in parallel worker\n"
+            "processes, and write OUT/results.json ({method: {metric: value}}, with 'init'),\n"
             "OUT/results.csv, OUT/segments.csv, OUT/table.md (the GRIP Table 1 layout plus\n"
             "runtime and failures) and plots (per-joint errors, the trajectory and the ground\n"
             "reaction force of a sample segment). Finished segments are kept in OUT/segments:\n"
@@ -75,6 +76,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="save every reconstruction (OUT/recons/<method>/<seg>.npz)")  # fmt: skip
     p.add_argument("--retry-failed", action="store_true",
                    help="run segments that failed in an earlier run again")  # fmt: skip
+    add_init_argument(p, "the methods (KinematicsNet's LSTMs and root, GRIP's humanoid, "
+                      "TransPose's root, PIP's learned initialisation and its physics' first "
+                      "state)", "; a folder resumes only with the --init it was written "
+                      "with")  # fmt: skip
     add_limit_arguments(p)
     p.set_defaults(func=cmd_bench)
 
@@ -118,7 +123,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         segs = select_segments(segs, args.segments)
         options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
                                 policy_checkpoint=args.policy,
-                                transpose_checkpoint=args.transpose, pip_checkpoint=args.pip)
+                                transpose_checkpoint=args.transpose, pip_checkpoint=args.pip,
+                                init=args.init)  # fmt: skip
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         for f, why in unreadable:
@@ -148,7 +154,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                              batch=args.batch)  # fmt: skip
         except BenchError as e:
             raise CliError(str(e)) from e
-    title = f"Benchmark on {args.data} ({args.split} split)"
+    title = f"Benchmark on {args.data} ({args.split} split, --init {args.init})"
     summary = write_outputs(args.out, rows, runs, segs, title)
     print(method_table(summary))
     if failed:

@@ -8,7 +8,12 @@ import time
 from pathlib import Path
 
 from grip.cli.policy_runs import build_training_reference, training_files
-from grip.cli.recordings import add_limit_arguments, add_tta_argument, limits_from_args
+from grip.cli.recordings import (
+    add_init_argument,
+    add_limit_arguments,
+    add_tta_argument,
+    limits_from_args,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -72,8 +77,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Run full episodes of the controller on test segments (500 frames by default),\n"
-            "each started from the ground truth at its first frame and following the\n"
-            "KinematicsNet estimate, without fall recovery. A segment fails when the fall\n"
+            "each started from the ground truth at its first frame (--init standing: from the\n"
+            "standing pose, as without motion capture) and following the KinematicsNet\n"
+            "estimate, without fall recovery. A segment fails when the fall\n"
             "detector fires (pelvis below 0.30 m and discriminator probability below 0.7).\n"
             "Reports success rate, MPJPE, PA-MPJPE, foot sliding, foot penetration and vGRF\n"
             "error (the keys of 'grip bench'), and the kinematics-only MPJPE on the same\n"
@@ -125,6 +131,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "success rate moves under a small perturbation; needs --action-noise > 0)",
                    )  # fmt: skip
     add_tta_argument(e)
+    add_init_argument(e, "KinematicsNet (its LSTMs and integrated root) and the humanoid",
+                      "; with --reference truth the humanoid still starts standing")  # fmt: skip
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
@@ -340,8 +348,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
             if i:
                 runner.use_action_noise(args.action_noise, args.seed + i)
             got = evaluate_segments(runner, est, segs, progress=bar.update,
-                                    reference=args.reference,
-                                    play_batch=args.batch)  # fmt: skip
+                                    reference=args.reference, play_batch=args.batch,
+                                    init=args.init)  # fmt: skip
             passes.append([dict(r, replay=i) for r in got] if args.repeats > 1 else got)
     rows = [r for p in passes for r in p]
     summary = summarize_rows(rows)
@@ -362,6 +370,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.json is not None:
         from grip.core.atomic import atomic_write_text
 
-        atomic_write_text(args.json, json.dumps(summary["overall"], indent=1))
+        atomic_write_text(args.json, json.dumps({**summary["overall"], "init": args.init},
+                                                indent=1))  # fmt: skip
         print(f"wrote {args.json}")
     return exit_status(skipped, len(files))

@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "is refused, --overwrite redoes them.\n"
             "The recording's first frame is the calibration pose the humanoid starts from\n"
             "(its ground truth, or the standing pose at the foot IMUs' heading without one or\n"
-            "with --init standing).\n"
+            "with --init standing; with ground truth, standing is placed at its frame-0 x, y).\n"
             "Sensor dropouts (NaN runs) up to --fill-gaps frames are interpolated; a recording\n"
             "with longer ones, or without a sensor the models read (an IMU site, an insole),\n"
             "is reported and skipped, the others go on (exit status 1)."
@@ -67,7 +67,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
     from grip.cli.recordings import add_init_argument, add_limit_arguments
 
-    add_init_argument(p)
+    add_init_argument(p, "KinematicsNet and the humanoid")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
 

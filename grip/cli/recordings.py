@@ -178,16 +178,18 @@ def add_tta_argument(parser) -> None:
     parser.add_argument("--tta", default="none", choices=tuple(TTA_MODES), help=TTA_HELP)
 
 
-def add_init_argument(parser) -> None:
-    """The ``--init`` option of the commands that start KinematicsNet on recordings with
-    ground truth."""
+def add_init_argument(parser, what: str = "KinematicsNet", note: str = "") -> None:
+    """The ``--init truth|standing`` option of the commands that start on recordings: where
+    ``what`` start on each segment or recording (for the help; ``note`` ends it)."""
     from grip.kinematics.features import INITS
 
     parser.add_argument(
         "--init", default="truth", choices=INITS,
-        help="how each segment starts: from the ground truth of its first frame (default, the "
-        "GRIP protocol) or from the standing rest pose at the heading of the foot IMUs, as a "
-        "user without motion capture must ('standing': no ground truth read)",
+        help=f"where {what} start on each segment: 'truth' (default, the GRIP protocol), the "
+        "ground truth of its first frame; 'standing', the standing rest pose at rest, turned "
+        "to the heading of the foot IMUs, as a user without motion capture must start (no "
+        "ground-truth pose is read; on a recording with ground truth the standing pelvis is "
+        f"put at its frame-0 horizontal position, so that trajectories share an origin){note}",
     )  # fmt: skip
 
 

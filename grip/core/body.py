@@ -17,6 +17,8 @@ kinematics (:mod:`grip.core.fk`) both read one :class:`BodyModel`, so they canno
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -275,13 +277,44 @@ def _frame_from_axis(axis: np.ndarray) -> np.ndarray:
 def build_body(params: BodyParams | None = None) -> BodyModel:
     """Build the body model for one subject.
 
+    Models are cached by their parameters (the last 256): evaluation, training and synthesis ask
+    for the same subject's body many times, and a build takes ~20 ms. A cached model is shared,
+    so its arrays are read-only.
+
     Args:
         params: Subject parameters; defaults to 1.70 m, 70 kg.
 
     Returns:
         The :class:`BodyModel` shared by numpy FK, sensor synthesis and the MJCF builder.
     """
-    p = params or BodyParams()
+    return _cached_body(params or BodyParams())
+
+
+def _read_only(x):
+    """``x`` with every numpy array in it (also inside tuples, dicts and geoms) made read-only."""
+    if isinstance(x, np.ndarray):
+        x.setflags(write=False)
+    elif isinstance(x, tuple | list):
+        for v in x:
+            _read_only(v)
+    elif isinstance(x, dict):
+        for v in x.values():
+            _read_only(v)
+    elif isinstance(x, Geom):
+        for f in ("pos", "size", "axis"):
+            _read_only(getattr(x, f))
+    return x
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_body(p: BodyParams) -> BodyModel:
+    body = _build_body(p)
+    for f in dataclasses.fields(body):
+        _read_only(getattr(body, f.name))
+    return body
+
+
+def _build_body(p: BodyParams) -> BodyModel:
     h = p.height_m
     rest = _REST_FRAC * h
     offsets = np.zeros_like(rest)

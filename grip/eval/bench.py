@@ -2,7 +2,8 @@
 
 Protocol (GRIP; BASELINES_AND_METRICS 4.1): the recordings of a dataset split are cut into
 consecutive ``segment_frames``-frame segments (500 by default; shorter tails are left out), every
-method reconstructs every segment starting from the ground truth at its first frame, the metrics
+method reconstructs every segment starting from the ground truth at its first frame (or from the
+standing calibration pose, ``MethodOptions.init == "standing"``: ``grip bench --init``), the metrics
 of :mod:`grip.core.metrics` are computed per segment (:mod:`grip.eval.scoring`) and averaged over
 the segments. The pieces are shared with ``grip kin eval`` and ``grip policy eval``: segments
 (:mod:`grip.eval.segments`), running (:mod:`grip.eval.runner`), aggregation and tables
@@ -29,7 +30,8 @@ ms_per_frame      ms     wall time of ``reconstruct`` per frame, measured by the
 
 ``results.json`` also counts ``blowups``: simulation blow-ups over the segments (a method's
 ``Reconstruction.notes["blowups"]``; GRIP recovers each like a fall, so its frames are never
-in the metrics; 0 for methods without a simulation); each segment's row carries its own.
+in the metrics; 0 for methods without a simulation); each segment's row carries its own. Its
+``init`` says where the method started (``"truth"`` or ``"standing"``).
 
 Output folder (``OUT``)::
 
@@ -87,6 +89,17 @@ def _sweep_table(summary: Mapping[str, Mapping], runs: Sequence[MethodRun]) -> s
     return markdown_table(head, body, ["---", "---:", ":---:", "---:", "---:", "---:"])
 
 
+def _start_text(runs: Sequence[MethodRun]) -> str:
+    """Where the runs started, for ``table.md``."""
+    inits = {r.options.init for r in runs}
+    if inits == {"truth"}:
+        return "from the ground truth at its first frame"
+    if inits == {"standing"}:
+        return ("from the standing pose at the foot IMUs' heading (no ground-truth pose read; "
+                "the pelvis at the truth's frame-0 horizontal position)")  # fmt: skip
+    return "from " + ", ".join(f"{r.label}: {r.options.init}" for r in runs)
+
+
 def write_outputs(
     out_dir: str | os.PathLike,
     rows: Sequence[dict],
@@ -104,6 +117,8 @@ def write_outputs(
     labels = [r.label for r in runs]
     summary = aggregate(rows, labels)
     results = results_json(summary)
+    for r in runs:  # where the method started (MethodOptions.init)
+        results[r.label]["init"] = r.options.init
     atomic_write_text(out_dir / "results.json", json.dumps(results, indent=1) + "\n")
     atomic_write_text(out_dir / "results.csv",
                       csv_text([{"method": k, **v} for k, v in results.items()],
@@ -119,7 +134,7 @@ def write_outputs(
     n_frames = sorted({s.n_frames for s in segments})
     parts = [f"# {title}" if title else "# Benchmark",
              f"{len(segments)} segment(s) of {', '.join(map(str, n_frames))} frames, each started "
-             "from the ground truth at its first frame; means over segments; n/a: the method "
+             f"{_start_text(runs)}; means over segments; n/a: the method "
              "has no such output (no forces, cannot fall).", "", method_table(summary), "",
              "ms/frame: wall time of one segment's reconstruction per frame, measured with "
              "the run's worker count (other processes share the cores).", "",

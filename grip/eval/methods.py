@@ -3,7 +3,13 @@
 A method turns one segment recording into a :class:`~grip.core.reconstruction.Reconstruction`.
 The segment's first frame is the ground-truth initialisation (the GRIP protocol: every method
 starts from the true pose and position at the first frame); a method reads nothing else of the
-ground truth (``smpl_params``, ``imu_gt``) after frame 0.
+ground truth (``smpl_params``, ``imu_gt``) after frame 0. With ``MethodOptions.init ==
+"standing"`` every method starts from the standing calibration instead
+(:func:`grip.kinematics.features.standing_calibration`: the rest pose at the foot IMUs' heading,
+at rest, where a user without motion capture starts): KinematicsNet's LSTMs and root, GRIP's
+humanoid, TransPose's root, PIP's learned initialisation and the PIP physics' first state read
+no ground-truth pose (only its frame-0 horizontal pelvis position, the gauge that gives the
+trajectories a common origin).
 
 Adding a method is one factory function ``factory(options) -> Method`` and one line in
 :data:`METHODS`. Factories load their models (the expensive part) once; ``grip bench`` calls a
@@ -73,6 +79,12 @@ class MethodOptions:
         policy_checkpoint: GRIP policy export; ``None``: the shipped one.
         transpose_checkpoint, pip_checkpoint: Baseline networks (``grip kin train --baseline``);
             ``None``: the shipped ones (:data:`SHIPPED_BASELINES`).
+        init: Where every method starts (:data:`grip.kinematics.features.INITS`): the ground
+            truth of the segment's first frame (``"truth"``, the GRIP protocol) or the standing
+            calibration (``"standing"``, no ground-truth pose read).
+
+    Raises:
+        ValueError: ``init`` is not one of :data:`grip.kinematics.features.INITS`.
     """
 
     kin_checkpoint: Path | None = None
@@ -81,6 +93,13 @@ class MethodOptions:
     policy_checkpoint: Path | None = None
     transpose_checkpoint: Path | None = None
     pip_checkpoint: Path | None = None
+    init: str = "truth"
+
+    def __post_init__(self) -> None:
+        from grip.kinematics.features import INITS
+
+        if self.init not in INITS:
+            raise ValueError(f"init must be one of {list(INITS)}, got {self.init!r}")
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""
@@ -143,7 +162,8 @@ class KinematicsOnly:
 
     The PIP ablation row "kinematics only" (BASELINES_AND_METRICS 2.4): no physics, so it cannot
     fall and has no forces. The LSTMs start from the segment's first-frame ground truth and the
-    root from the true first-frame pelvis position. The estimated root-relative joints are
+    root from the true first-frame pelvis position (``init="standing"``: both from the standing
+    calibration). The estimated root-relative joints are
     re-centred on the estimated pelvis (whose root-relative estimate is not exactly zero), so the
     pelvis lies on the integrated trajectory. Runs offline: the whole segment in one batch (the
     network is causal, so streaming gives the same numbers).
@@ -153,13 +173,14 @@ class KinematicsOnly:
     supports_sensors = True
     can_fall = False
 
-    def __init__(self, estimator, checkpoint: Path) -> None:
+    def __init__(self, estimator, checkpoint: Path, init: str = "truth") -> None:
         self.estimator = estimator
         self.checkpoint = Path(checkpoint)
+        self.init = init
 
     def reconstruct(self, rec) -> Reconstruction:
         t0 = time.perf_counter()
-        est = self.estimator.predict([rec])[0]
+        est = self.estimator.predict([rec], self.init)[0]
         rel = est.joint_pos - est.joint_pos[:, :1]
         pos = rel + est.root_pos[:, None]
         ms = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
@@ -197,15 +218,16 @@ def kinematics_method(options: MethodOptions) -> KinematicsOnly:
         if tuple(feats.sites) != s.sites or bool(feats.insoles) != s.insoles:
             raise ValueError(f"{ck}: trained on {feats.sites} (insoles={feats.insoles}), not "
                              f"the {s.name} configuration its folder names")  # fmt: skip
-    return KinematicsOnly(est, ck)
+    return KinematicsOnly(est, ck, options.init)
 
 
 # ------------------------------------------------------------------------------- GRIP
 class Grip:
     """GRIP: KinematicsNet, the policy in MuJoCo, fall recovery (:mod:`grip.eval.reconstruct`).
 
-    Starts from the segment's first-frame ground truth; the success rate counts the segments in
-    which the fall detector never fired (each fall is recovered, the segment still counts as a
+    Starts from the segment's first-frame ground truth (``init="standing"``: KinematicsNet and
+    the humanoid from the standing calibration); the success rate counts the segments in which
+    the fall detector never fired (each fall is recovered, the segment still counts as a
     failure, as in GRIP).
     """
 
@@ -213,11 +235,12 @@ class Grip:
     supports_sensors = False
     can_fall = True
 
-    def __init__(self, reconstructor) -> None:
+    def __init__(self, reconstructor, init: str = "truth") -> None:
         self.reconstructor = reconstructor
+        self.init = init
 
     def reconstruct(self, rec) -> Reconstruction:
-        return self.reconstructor.reconstruct([rec])[0]
+        return self.reconstructor.reconstruct([rec], init=self.init)[0]
 
     def reconstruct_many(self, recs: list, threads: int = 0) -> list:
         """:meth:`reconstruct` of each recording, all played side by side (each recording's
@@ -229,7 +252,8 @@ class Grip:
             threads: Threads stepping the humanoids (0: the usable cores).
         """
         return self.reconstructor.reconstruct(recs, batch=1, play_batch=max(len(recs), 1),
-                                              threads=threads, errors=True)  # fmt: skip
+                                              threads=threads, errors=True,
+                                              init=self.init)  # fmt: skip
 
 
 def grip_method(options: MethodOptions) -> Grip:
@@ -242,26 +266,33 @@ def grip_method(options: MethodOptions) -> Grip:
     for what, p in (("policy", policy), ("KinematicsNet", kin)):
         if not p.is_file():
             raise ValueError(f"{p}: no such {what} checkpoint")
-    return Grip(GripReconstructor.from_files(policy, kin))
+    return Grip(GripReconstructor.from_files(policy, kin), options.init)
 
 
 # ------------------------------------------------------------------ PIP physics on KinematicsNet
-def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float, cfg=None):
+def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float, cfg=None,
+                 init: str = "truth"):  # fmt: skip
     """PIP's optimiser on a kinematic estimate of ``rec``, started from the true first-frame
-    state (the GRIP protocol: the ground-truth pose and root at frame 0, the estimate after).
+    state (the GRIP protocol: the ground-truth pose and root at frame 0, the estimate after;
+    ``init="standing"``: the standing calibration's pose and root at frame 0).
 
     Starting from the estimate's own first pose instead can leave a foot deep in the floor at
     the true root height, which makes every later QP infeasible (PIP-4's nets: 20 deg off at
     frame 0 on some segments, 498 of 500 QPs failed and the body drifted off)."""
     from grip.baselines.pip_physics import PipPhysics
     from grip.core.metrics import global_to_local_rot
-    from grip.kinematics.features import recording_body, targets
+    from grip.kinematics.features import recording_body, recording_calibration, targets
 
-    first = targets(rec.slice_frames(0, 2))
     local = global_to_local_rot(global_rot)
-    local[0] = global_to_local_rot(first.global_rot[:1])[0]
+    if init == "truth":
+        first = targets(rec.slice_frames(0, 2))
+        local[0] = global_to_local_rot(first.global_rot[:1])[0]
+        root0 = first.root_pos[0]
+    else:  # (the standing pose stands on the floor: its feet are never below it)
+        cal = recording_calibration(rec, init=init)
+        local[0], root0 = cal.local_rot[0], cal.root_pos[0]
     pip = PipPhysics(recording_body(rec), cfg)
-    out = pip.reconstruct(local, joint_vel, contact_prob, first.root_pos[0], name=rec.name)
+    out = pip.reconstruct(local, joint_vel, contact_prob, root0, name=rec.name)
     out.method = name
     out.ms_per_frame = 1000.0 * (time.perf_counter() - t0) / rec.n_frames
     return out
@@ -274,9 +305,10 @@ class _OnPipPhysics:
     supports_sensors = False
     can_fall = False
 
-    def __init__(self, estimator, cfg=None) -> None:
+    def __init__(self, estimator, cfg=None, init: str = "truth") -> None:
         self.estimator = estimator
         self.cfg = cfg
+        self.init = init
 
 
 class KinematicsPip(_OnPipPhysics):
@@ -300,15 +332,16 @@ class KinematicsPip(_OnPipPhysics):
             prob = insole_contact_prob(rec)
         except KeyError as e:
             raise ValueError(f"{rec.name}: kin+pip needs both insoles ({e})") from e
-        est = self.estimator.predict([rec])[0]
+        est = self.estimator.predict([rec], self.init)[0]
         pos = est.joint_pos - est.joint_pos[:, :1] + est.root_pos[:, None]
         vel = backward_velocity(pos, float(rec.fps))
-        return _pip_physics(rec, est.global_rot, vel, prob, self.name, t0, self.cfg)
+        return _pip_physics(rec, est.global_rot, vel, prob, self.name, t0, self.cfg, self.init)
 
 
 def kinematics_pip_method(options: MethodOptions) -> KinematicsPip:
     """Factory of :class:`KinematicsPip` (KinematicsNet checkpoint as for ``kinematics``)."""
-    return KinematicsPip(kinematics_method(dataclasses.replace(options, sensors=None)).estimator)
+    kin = kinematics_method(dataclasses.replace(options, sensors=None))
+    return KinematicsPip(kin.estimator, init=options.init)
 
 
 # ------------------------------------------------------------------- PIP and TransPose
@@ -328,25 +361,30 @@ def _baseline_estimator(name: str, path: Path | None):
 class TransPose:
     """TransPose-4 (BASELINES_AND_METRICS 2.2): the pose nets, then the root from the supporting
     foot fused with Trans-B2's velocity (:func:`grip.baselines.transpose_translation.
-    root_translation`), from the true first-frame root. Offline (bidirectional) mode."""
+    root_translation`), from the true first-frame root (``init="standing"``: the standing
+    calibration's). Offline (bidirectional) mode."""
 
     name = "transpose"
     supports_sensors = False
     can_fall = False
 
-    def __init__(self, estimator) -> None:
+    def __init__(self, estimator, init: str = "truth") -> None:
         self.estimator = estimator
+        self.init = init
 
     def reconstruct(self, rec) -> Reconstruction:
         from grip.baselines.transpose_translation import joint_floor_height, root_translation
         from grip.core.body import build_body
         from grip.core.fk import joints_from_global
-        from grip.kinematics.features import recording_body, targets
+        from grip.kinematics.features import recording_body, recording_calibration, targets
 
         t0 = time.perf_counter()
         est = self.estimator.predict([rec])[0]
         body = build_body(recording_body(rec))
-        root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+        if self.init == "truth":
+            root0 = targets(rec.slice_frames(0, 2)).root_pos[0]
+        else:
+            root0 = recording_calibration(rec, init=self.init).root_pos[0]
         root = root_translation(est.global_rot, est.contact_prob, est.root_vel, body.offsets,
                                 root0, joint_floor_height(body))  # fmt: skip
         # the pose is the rotations, posed on the subject's body (as TransPose evaluates it)
@@ -359,25 +397,26 @@ class TransPose:
 
 class Pip(_OnPipPhysics):
     """PIP-4 (BASELINES_AND_METRICS 2.3 and 1): PIP's networks (learned RNN initialisation from
-    the first frame) feed its physics optimiser, contacts from its contact net."""
+    the first frame: its ground truth, or the standing calibration with ``init="standing"``)
+    feed its physics optimiser, contacts from its contact net."""
 
     name = "pip"
 
     def reconstruct(self, rec) -> Reconstruction:
         t0 = time.perf_counter()
-        est = self.estimator.predict([rec])[0]
+        est = self.estimator.predict([rec], init=self.init)[0]
         return _pip_physics(rec, est.global_rot, est.joint_vel, est.contact_prob, self.name, t0,
-                            self.cfg)  # fmt: skip
+                            self.cfg, self.init)  # fmt: skip
 
 
 def transpose_method(options: MethodOptions) -> TransPose:
     """Factory of :class:`TransPose`."""
-    return TransPose(_baseline_estimator("transpose", options.transpose_checkpoint))
+    return TransPose(_baseline_estimator("transpose", options.transpose_checkpoint), options.init)
 
 
 def pip_method(options: MethodOptions) -> Pip:
     """Factory of :class:`Pip`."""
-    return Pip(_baseline_estimator("pip", options.pip_checkpoint))
+    return Pip(_baseline_estimator("pip", options.pip_checkpoint), init=options.init)
 
 
 # ------------------------------------------------------------------------------- registry

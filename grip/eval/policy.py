@@ -1,8 +1,10 @@
 """Evaluation of a DynamicsNet policy on recordings (``grip policy eval``).
 
 Each segment is one episode: the simulation starts from the ground truth at the segment's first
-frame (the GRIP protocol) and the policy follows the KinematicsNet estimate, without early
-termination and without fall recovery. The fall detector of GRIP (pelvis below 0.30 m and the
+frame (the GRIP protocol; ``init="standing"``: KinematicsNet and the humanoid start from the
+standing calibration pose instead, :func:`grip.kinematics.features.standing_calibration`, as a
+user without motion capture must) and the policy follows the KinematicsNet estimate, without
+early termination and without fall recovery. The fall detector of GRIP (pelvis below 0.30 m and the
 discriminator's probability below 0.7, BASELINES_AND_METRICS 5.4) ends a segment as a failure;
 metrics cover the frames simulated until then.
 
@@ -33,15 +35,22 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from grip.core import metrics as M
-from grip.core.reference import ReferenceSet
 from grip.eval.report import category_summary, csv_text, weighted_means
 from grip.eval.report import markdown_table as table
 from grip.eval.runner import segment_keys
 from grip.eval.scoring import segment_metrics as bench_metrics
 from grip.eval.segments import Segment, SegmentReader
-from grip.kinematics.features import ground_truth
-from grip.pipeline import Episode, GripPipeline, RecoveryConfig, start_from_clip
+from grip.kinematics.features import INITS, ground_truth
+from grip.pipeline import (
+    Episode,
+    GripPipeline,
+    RecoveryConfig,
+    start_from_calibration,
+    start_from_clip,
+)
 
 if TYPE_CHECKING:
     from policies.controller import Controller
@@ -55,7 +64,9 @@ _MEAN_KEYS = tuple(k for k in METRIC_KEYS if k != "success_rate")
 
 def segment_row(recon, clip, rec) -> dict:
     """Metrics of one episode (a :class:`~grip.core.reconstruction.Reconstruction` that may
-    end at a fall) against its recording, with the kinematics-only MPJPE on the same frames."""
+    end at a fall) against its recording, with the kinematics-only MPJPE on the same frames
+    (``clip``: what the policy followed, a reference clip or a
+    :class:`~grip.core.reference.Estimate`)."""
     t = recon.n_frames
     gt = ground_truth(rec).head(t)
     row, _ = bench_metrics(recon, gt, can_fall=True)
@@ -81,75 +92,111 @@ REFERENCES: tuple[str, ...] = ("estimate", "truth")
 def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
                     progress: Callable[[int], object] | None = None,
                     reference: str = "estimate", play_batch: int = 1,
-                    threads: int = 0) -> list[dict]:  # fmt: skip
+                    threads: int = 0, init: str = "truth") -> list[dict]:  # fmt: skip
     """One row of metrics per recording (segment), with ``name`` and ``category``.
 
     ``reference``: what the controller follows: ``"estimate"`` (KinematicsNet's, the method) or
     ``"truth"`` (the ground-truth motion, a perfect KinematicsNet: separates the controller's
-    own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0). ``batch``:
-    recordings per KinematicsNet forward pass; ``progress``: called after each episode;
-    ``play_batch``: episodes played side by side (:meth:`grip.pipeline.GripPipeline.
-    play_many`; 1: one after another), their humanoids stepped by ``threads`` threads (0: the
-    usable cores). An episode that raises raises here.
+    own failures from those the estimate causes; ``kin_MPJPE_mm`` is then ~0). ``init``: where
+    the episodes start (:data:`grip.kinematics.features.INITS`): ``"truth"``, the ground truth
+    of the first frame (KinematicsNet's LSTMs, its integrated root and the humanoid), or
+    ``"standing"``, the standing calibration pose
+    (:func:`grip.kinematics.features.standing_calibration`; with ``reference="truth"`` the
+    humanoid still starts standing). ``batch``: recordings per KinematicsNet forward pass;
+    ``progress``: called after each episode; ``play_batch``: episodes played side by side
+    (:meth:`grip.pipeline.GripPipeline.play_many`; 1: one after another), their humanoids
+    stepped by ``threads`` threads (0: the usable cores). An episode that raises raises here.
     """
-    pipe = _pipeline(runner, estimator, reference)
-    chunks = [([{}] * len(recs), recs, _reference_set(estimator, recs, batch, reference))]
-    return _play_rows(pipe, chunks, len(recs), play_batch, threads, progress)
+    pipe = _pipeline(runner, estimator, reference, init)
+    chunks = [([{}] * len(recs), recs, _estimates(estimator, recs, batch, reference, init))]
+    return _play_rows(pipe, chunks, len(recs), play_batch, threads, progress, init)
 
 
 def evaluate_segments(runner: Controller, estimator, segments: Sequence[Segment],
                       batch: int = 16, progress: Callable[[int], object] | None = None,
                       reference: str = "estimate", play_batch: int = 1,
-                      threads: int = 0) -> list[dict]:  # fmt: skip
+                      threads: int = 0, init: str = "truth") -> list[dict]:  # fmt: skip
     """:func:`evaluate_policy` on :mod:`grip.eval.segments` (read and estimated ``batch`` at a
     time, when the player needs the next): one row per segment, in order, starting with its
     segment keys (:func:`grip.eval.runner.segment_keys`)."""
-    pipe = _pipeline(runner, estimator, reference)
+    pipe = _pipeline(runner, estimator, reference, init)
 
-    def chunks() -> Iterator[tuple[list[dict], list, ReferenceSet]]:
+    def chunks() -> Iterator[tuple[list[dict], list, list]]:
         read = SegmentReader()
         for i in range(0, len(segments), batch):
             part = list(segments[i : i + batch])
             recs = [read(s) for s in part]
             heads = [segment_keys(seg, rec) for seg, rec in zip(part, recs, strict=True)]
-            yield heads, recs, _reference_set(estimator, recs, batch, reference)
+            yield heads, recs, _estimates(estimator, recs, batch, reference, init)
 
-    return _play_rows(pipe, chunks(), len(segments), play_batch, threads, progress)
+    return _play_rows(pipe, chunks(), len(segments), play_batch, threads, progress, init)
 
 
-def _pipeline(runner: Controller, estimator, reference: str) -> GripPipeline:
+def _pipeline(runner: Controller, estimator, reference: str, init: str) -> GripPipeline:
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {list(REFERENCES)}, got {reference!r}")
+    if init not in INITS:
+        raise ValueError(f"init must be one of {list(INITS)}, got {init!r}")
     return GripPipeline(runner, estimator, RecoveryConfig(enabled=False))
 
 
-def _reference_set(estimator, recs: list, batch: int, reference: str) -> ReferenceSet:
+def _estimates(estimator, recs: list, batch: int, reference: str, init: str) -> list:
+    """What the controller follows on each recording: the ground truth as a reference clip
+    (``reference="truth"``), KinematicsNet's estimate as a reference clip (``init="truth"``:
+    its root integrated from the truth's) or as an :class:`~grip.core.reference.Estimate`
+    started from the standing calibration (``init="standing"``: no ground-truth pose read)."""
     from grip.kinematics.reference import build_reference_set, oracle_reference_clip
 
+    cfg = estimator.cfg.features
     if reference == "truth":
-        cfg = estimator.cfg.features
-        return ReferenceSet([oracle_reference_clip(r, cfg) for r in recs], tuple(cfg.sites),
-                            cfg.insoles, "<ground truth>")  # fmt: skip
-    return build_reference_set(recs, estimator, batch=batch)
+        return [oracle_reference_clip(r, cfg) for r in recs]
+    if init == "truth":
+        return list(build_reference_set(recs, estimator, batch=batch).clips)
+    from grip.core.reference import Estimate
+    from grip.core.rotations import matrix_to_6d
+    from grip.kinematics.features import input_features
+
+    out = []
+    for i in range(0, len(recs), batch):
+        part = list(recs[i : i + batch])
+        for rec, e in zip(part, estimator.predict(part, init), strict=True):
+            out.append(Estimate(rec.name, float(rec.fps), e.joint_pos, matrix_to_6d(e.global_rot),
+                                e.velocity, input_features(rec, cfg), e.root_pos[0]))  # fmt: skip
+    return out
 
 
-def _play_rows(pipe: GripPipeline, chunks: Iterable[tuple[list[dict], list, ReferenceSet]],
-               n: int, play_batch: int, threads: int,
-               progress: Callable[[int], object] | None) -> list[dict]:  # fmt: skip
-    """Play the episodes of ``chunks`` (``(row heads, recordings, their reference set)``, taken
-    as the player needs them) from the ground truth's first frame to the first fall; one row
-    per recording, in order: its head, ``name``, ``category`` and :func:`segment_row`."""
+def _episode(rec, est, init: str, cfg) -> Episode:
+    """The evaluation episode of ``rec`` following ``est`` (:func:`_estimates`), started from
+    ``est``'s first ground-truth frame (``init="truth"``) or the standing calibration."""
+    if init == "truth":
+        return Episode(est, start_from_clip(est), est.body, est.objects, stop_at_fall=True)
+    from grip.kinematics.features import recording_body, recording_calibration
+
+    body = recording_body(rec)
+    start = start_from_calibration(recording_calibration(rec, cfg, init), body, float(rec.fps))
+    objects = None
+    if rec.objects:
+        objects = {n: (np.asarray(o.vertices), np.asarray(o.faces)) for n, o in rec.objects.items()}
+    return Episode(est, start, body, objects, stop_at_fall=True)
+
+
+def _play_rows(pipe: GripPipeline, chunks: Iterable[tuple[list[dict], list, list]],
+               n: int, play_batch: int, threads: int, progress: Callable[[int], object] | None,
+               init: str = "truth") -> list[dict]:  # fmt: skip
+    """Play the episodes of ``chunks`` (``(row heads, recordings, what the controller follows
+    on each)``, taken as the player needs them) from the ground truth's first frame (or the
+    standing calibration: ``init``) to the first fall; one row per recording, in order: its
+    head, ``name``, ``category`` and :func:`segment_row`."""
     held: dict[int, tuple[dict, object, object]] = {}  # until the episode's row is made
+    cfg = pipe.estimator.cfg.features
 
     def episodes() -> Iterator[Episode]:
         k = 0
-        for heads, recs, ref in chunks:
-            for j, (head, rec) in enumerate(zip(heads, recs, strict=True)):
-                clip = ref.clip(j)
+        for heads, recs, ests in chunks:
+            for head, rec, clip in zip(heads, recs, ests, strict=True):
                 held[k] = (head, rec, clip)
                 k += 1
-                yield Episode(clip, start_from_clip(clip), clip.body, clip.objects,
-                              stop_at_fall=True)  # fmt: skip
+                yield _episode(rec, clip, init, cfg)
 
     rows: list = [None] * n
     for i, recon, _ in pipe.play_many(episodes(), play_batch, threads):

@@ -353,6 +353,9 @@ def _check_method_settings(out_dir: Path, run: MethodRun) -> None:
             have = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as e:
             raise BenchError(f"{path}: unreadable ({e})") from e
+        if isinstance(have, dict) and isinstance(have.get("options"), dict):
+            # (written before MethodOptions.init existed: those runs started from the truth)
+            have["options"].setdefault("init", "truth")
         if have != want:
             raise BenchError(f"{path.parent}: results of {run.label} with other settings "
                              f"({have} vs now {want}); use another output folder")  # fmt: skip

@@ -59,6 +59,8 @@ import numpy as np
 import torch
 
 from grip.core import skeleton as sk
+from grip.core.body import build_body
+from grip.core.fk import forward_kinematics
 from grip.core.rotations import sixd_to_matrix
 from grip.kinematics.baseline_config import (
     RunConfig,
@@ -75,7 +77,12 @@ from grip.kinematics.baseline_nets import (
     build_nets,
 )
 from grip.kinematics.dataset import Normalizer
-from grip.kinematics.features import input_features, targets
+from grip.kinematics.features import (
+    input_features,
+    recording_body,
+    recording_calibration,
+    targets,
+)
 from grip.kinematics.train import export_for_inference
 from grip.nn.weights import load_checkpoint, unpack_weights
 
@@ -144,22 +151,33 @@ class BaselineEstimator:
         """``(T, n_inputs)`` normalised net inputs of a recording."""
         return self.norm(input_features(rec, self.features)[:, self.cols])
 
-    def first_quantities(self, rec, gt_init_velocity: bool) -> tuple[torch.Tensor, torch.Tensor]:
-        """PIP's learned-init inputs from a recording's first (ground-truth) frame.
+    def first_quantities(self, rec, gt_init_velocity: bool, init: str = "truth"
+                         ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+        """PIP's learned-init inputs from a recording's first (ground-truth) frame, or with
+        ``init="standing"`` from the standing calibration pose
+        (:func:`grip.kinematics.features.standing_calibration`: no ground-truth pose read).
 
         Returns:
             ``(1, 15)`` leaf positions (root or world frame per ``init_leaf_frame``), m, and
             ``(1, 72)`` joint velocities in the root frame / vel_scale (zeros unless
-            ``gt_init_velocity``).
+            ``gt_init_velocity``; always zero standing, at rest).
+
+        Raises:
+            ValueError: ``init`` is not one of :data:`grip.kinematics.features.INITS`.
         """
-        t = targets(rec.slice_frames(0, 2) if rec.n_frames > 2 else rec)
-        lp0 = t.leaf_pos[0]
+        if init == "truth":
+            t = targets(rec.slice_frames(0, 2) if rec.n_frames > 2 else rec)
+            g_rot, pos, lp0 = t.global_rot, t.joint_pos + t.root_pos[:, None], t.leaf_pos[0]
+        else:  # the calibration's two frames (the same pose: zero velocity)
+            cal = recording_calibration(rec, self.features, init)
+            offsets = build_body(recording_body(rec)).offsets
+            g_rot, pos = forward_kinematics(cal.local_rot, cal.root_pos, offsets)
+            lp0 = (pos[0] - pos[0, :1])[list(sk.LEAF_JOINTS)]
         if self.cfg.net.init_leaf_frame == "root":
-            lp0 = lp0 @ t.global_rot[0, 0]  # R^T p for each row
+            lp0 = lp0 @ g_rot[0, 0]  # R^T p for each row
         vel0 = np.zeros((sk.N_JOINTS, 3))
         if gt_init_velocity and rec.n_frames > 1:
-            pos = t.joint_pos + t.root_pos[:, None]
-            vel0 = (pos[1] - pos[0]) * float(rec.fps) @ t.global_rot[0, 0] / self.cfg.net.vel_scale
+            vel0 = (pos[1] - pos[0]) * float(rec.fps) @ g_rot[0, 0] / self.cfg.net.vel_scale
         return (torch.from_numpy(lp0.reshape(1, -1).astype(np.float32)),
                 torch.from_numpy(vel0.reshape(1, -1).astype(np.float32)))  # fmt: skip
 
@@ -169,6 +187,7 @@ class BaselineEstimator:
         online: bool = False,
         gt_init_velocity: bool = False,
         insole_contact: bool = False,
+        init: str = "truth",
     ) -> list[BaselineEstimate]:
         """Estimates for a list of recordings (each run on its own: bidirectional nets must
         not see padding).
@@ -182,6 +201,9 @@ class BaselineEstimator:
             insole_contact: Replace the contact net's probabilities by the insole rule
                 (1 where the front or back of the insole is in contact; section 2.4's
                 "insole contact" rows).
+            init: PIP: the learned initialisation from the first frame's ground truth
+                (``"truth"``) or the standing calibration (``"standing"``,
+                :meth:`first_quantities`); TransPose: no effect (no learned initialisation).
 
         Raises:
             KeyError / ValueError naming the recording when a sensor is missing or non-finite.
@@ -193,7 +215,7 @@ class BaselineEstimator:
                 if self.method == "transpose":
                     o = self.run_online(x) if online else self.nets(x)
                 else:
-                    o = self.nets(x, *self.first_quantities(rec, gt_init_velocity))[0]
+                    o = self.nets(x, *self.first_quantities(rec, gt_init_velocity, init))[0]
             est = self._estimate({k: v[0].double().numpy() for k, v in o.items()})
             if insole_contact:
                 est.contact_prob = insole_contact_prob(rec)

@@ -280,7 +280,15 @@ def standing_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibrati
     above the origin) turned to the heading of the foot IMUs at frame 0 (:data:`HEADING_SITES`,
     :func:`sensor_heading`), at rest (frames 0 and 1 the same pose);
     :func:`calibration_orientations` as with ground truth (NaN without ``imu_gt``: the recorded
-    orientations are used as they are, already aligned with their segments as PRISM's are)."""
+    orientations are used as they are, already aligned with their segments as PRISM's are).
+
+    Gauge: on a recording that has ground truth (``smpl_params``, evaluated with
+    ``init="standing"``) the pelvis stands at the ground truth's horizontal position of frame 0
+    (its height stays the standing pose's, its heading the foot IMUs'). Without motion capture
+    the place on the floor is a free choice that carries no information about the pose; putting
+    it there gives the estimate and the truth a common origin, so that world trajectories
+    compare (root translation errors, ``root_err_m``) between the two starts. A recording
+    without ground truth keeps the origin."""
     from grip.core.mjcf import standing_qpos
     from grip.core.reference import local_rot_from_qpos
 
@@ -292,6 +300,10 @@ def standing_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibrati
     local = local_rot_from_qpos(q[None])[0]
     local[0] = yaw @ local[0]
     root = yaw @ q[:3]
+    if rec.smpl_params is not None:  # the gauge: the truth's place on the floor
+        sp = rec.smpl_params
+        root[:2] = (np.asarray(sp.trans, dtype=np.float64)[0]
+                    + np.asarray(sp.root_offset, dtype=np.float64))[:2]  # fmt: skip
     return Calibration(np.repeat(local[None], 2, axis=0), np.repeat(root[None], 2, axis=0),
                        calibration_orientations(rec, cfg))  # fmt: skip
 

@@ -216,7 +216,8 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
     assert summary["oracle"]["failed"] == 1 and summary["oracle"]["segments"] == 4
     assert summary["oracle"]["MPJPE_mm"] == pytest.approx(0.0, abs=1e-6)
     results = json.loads((out / "results.json").read_text())
-    assert set(results["oracle"]) == {*report.RESULT_KEYS, "failed"}
+    assert set(results["oracle"]) == {*report.RESULT_KEYS, "failed", "init"}
+    assert results["oracle"]["init"] == "truth"
     assert results["oracle"]["success_rate"] == 100.0 and results["oracle"]["segments"] == 4
     table = (out / "table.md").read_text()
     assert "| oracle | 0.00 |" in table and "| 4 | 1 |" in table
@@ -385,7 +386,9 @@ def test_cli_bench_kinematics_writes_results_and_resumes(dataset, tmp_path, caps
     out1 = tmp_path / "one"
     assert main([*args, "--out", str(out1), "--workers", "1", "--segments", "3"]) == 0
     res = json.loads((out1 / "results.json").read_text())
-    assert set(res["kinematics"]) == {*report.RESULT_KEYS, "failed"}
+    assert set(res["kinematics"]) == {*report.RESULT_KEYS, "failed", "init"}
+    assert res["kinematics"]["init"] == "truth"
+    assert "started from the ground truth at its first frame" in (out1 / "table.md").read_text()
     assert res["kinematics"]["segments"] == 3 and res["kinematics"]["failed"] == 0
     assert res["kinematics"]["vGRF_N"] is None and res["kinematics"]["success_rate"] is None
     assert res["kinematics"]["MPJPE_mm"] > 0
