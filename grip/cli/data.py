@@ -81,6 +81,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--height", type=float, default=1.70, help="body height, m (--fixed-body)")
     b.add_argument("--mass", type=float, default=70.0, help="body mass, kg (--fixed-body)")
     b.add_argument("--seed", type=int, default=0, help="base seed of noise and subjects")
+    b.add_argument("--zmp-filter", action="store_true",
+                   help="shift each retargeted motion's pelvis by a few millimetres so that the "
+                   "ZMP lies on the feet where they alone carry the body (the dynamic filter, "
+                   "docs/insoles_zmp.md); part of the clip settings")  # fmt: skip
     b.add_argument("--split-by", choices=SPLIT_MODES, default="person",
                    help="keep whole performers (else the source's finest grouping) or whole "
                    "clips on one side of the split (default person)")  # fmt: skip
@@ -240,7 +244,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     cfg = BuildConfig(noise_variants=args.noise_variants, clean_variant=args.clean,
                       vary_body=not args.fixed_body, height_m=args.height, mass_kg=args.mass,
                       test_fraction=args.test_fraction, seed=args.seed,
-                      split_seed=args.split_seed, split_by=args.split_by)  # fmt: skip
+                      split_seed=args.split_seed, split_by=args.split_by,
+                      zmp_filter=args.zmp_filter)  # fmt: skip
     cmap = category_map(args.categories) if args.categories else default_category_map()
     if cmap is None:
         print("no configs/categories.toml in this installation: categories are the sources' "

@@ -87,6 +87,11 @@ class BuildConfig:
             (:func:`grip.motion.catalog.clip_group`), chosen within each source
             (:func:`dataset_split`); ``"clip"``: whole clips per side, drawn as before split
             modes existed. Either way all variants and chunks of a clip share a side.
+        zmp_filter: Run the dynamic filter (:func:`grip.dataset.zmp_filter.zmp_filter`, default
+            settings) on every retargeted motion before it is stored and synthesised: a
+            horizontal pelvis shift of a few millimetres, feet kept, that brings the ZMP onto
+            the feet where they alone carry the body (docs/insoles_zmp.md). Off until the
+            corpus is rebuilt and KinematicsNet retrained with it.
     """
 
     noise_variants: int = 1
@@ -101,6 +106,7 @@ class BuildConfig:
     split_seed: int = 42
     seed: int = 0
     split_by: str = "person"
+    zmp_filter: bool = False
 
     def __post_init__(self) -> None:
         if self.split_by not in SPLIT_MODES:
@@ -170,6 +176,7 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
     The recordings and the motion file carry ``clip.category`` (recordings also
     ``extras["label"]``), whatever a search of the clip's file alone would say.
     """
+    from grip.dataset.zmp_filter import inferred_ground, zmp_filter
     from grip.motion.catalog import clip_ref, load_clip
     from grip.motion.retarget import retarget
     from prism_tools.chunking import chunk_recording
@@ -196,6 +203,9 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
         for tag, noisy, k in variants:
             if k not in motions:
                 motion = retarget(src, subject_for(clip_id, k, cfg))
+                if cfg.zmp_filter:
+                    motion = zmp_filter(motion, synth_cfg=SynthConfig().insole,
+                                        ground=inferred_ground(motion)).motion  # fmt: skip
                 motions[k] = motion
                 if k == 0:
                     motion.save(out / "motions" / f"{name}.npz")

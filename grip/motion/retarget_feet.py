@@ -274,16 +274,18 @@ def floor_offset(
 def leg_ik(
     local_rot: np.ndarray, root: np.ndarray, body: BodyModel, lift: np.ndarray
 ) -> np.ndarray:
-    """Move each ankle vertically by ``lift`` with two-bone IK, keeping the foot's orientation.
+    """Move each ankle by ``lift`` with two-bone IK, keeping the foot's world orientation.
 
     The knee stays in the plane it bends in (its offset from the hip-ankle line; the thigh's
-    forward axis for a straight leg); targets out of reach are clamped to the reachable range.
+    forward axis for a straight leg); targets out of reach are clamped to the reachable range
+    (along the hip-target line).
 
     Args:
         local_rot: ``(T, 24, 3, 3)`` local rotations.
         root: ``(T, 3)`` root positions, m.
         body: The body model.
-        lift: ``(T, 2)`` vertical ankle displacement of the left and right leg, m.
+        lift: ``(T, 2)`` vertical ankle displacement of the left and right leg, or ``(T, 2, 3)``
+            a displacement in any direction (world frame), m.
 
     Returns:
         ``(T, 24, 3, 3)`` local rotations with new hip, knee and ankle rows.
@@ -296,7 +298,7 @@ def leg_ik(
         l1 = np.linalg.norm(body.offsets[knee])
         l2 = np.linalg.norm(body.offsets[ankle])
         ph, pk, pa = p[:, hip], p[:, knee], p[:, ankle]
-        target = pa + lift[:, f, None] * _Z
+        target = pa + (lift[:, f, None] * _Z if lift.ndim == 2 else lift[:, f])
         reach = target - ph
         dist = np.clip(np.linalg.norm(reach, axis=-1), abs(l1 - l2) + 1e-4, l1 + l2 - 1e-6)
         axis = _normalize(reach)

@@ -340,6 +340,11 @@ class InsoleSynth:
         other_support_force_n: ``(T,)`` vertical force carried by body parts other than the
             feet that rest on the ground or a prop (:func:`body_contact_points`: seat, knees,
             hands, back), N; the insoles do not feel it.
+        zmp_world: ``(T, 2)`` the ZMP the cells were asked to follow, world x/y, m: on the
+            plane of the supported cells' mean ground height (``wrench.zmp_world`` on the flat
+            floor).
+        other_support: ``(T, K)`` soft support weight of each of those body points, in
+            ``[0, 1]`` (0: well above the ground or sliding).
     """
 
     wrench: Wrench
@@ -352,6 +357,8 @@ class InsoleSynth:
     zmp_error_m: np.ndarray
     fallback_frames: np.ndarray
     other_support_force_n: np.ndarray
+    zmp_world: np.ndarray
+    other_support: np.ndarray
 
 
 def synthesize_insoles(
@@ -421,6 +428,8 @@ def synthesize_insoles(
         zmp_error_m=zmp_err,
         fallback_frames=np.flatnonzero(fallback).astype(np.int64),
         other_support_force_n=forces[:, n_cells:].sum(axis=1),
+        zmp_world=zmp,
+        other_support=support[:, n_cells:],
     )
 
 
