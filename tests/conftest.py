@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -66,3 +67,25 @@ def tiny_policy_run(tmp_path_factory):
     argv = ["policy", "train", "--data", str(data), "--out", str(run), *TINY_POLICY]
     assert main(argv) == 0
     return data, run
+
+
+WALK_TAKES = {"take0": 230, "take1": 120, "take2": 160}
+"""The takes of :func:`walk_takes` and their frame counts."""
+
+
+@pytest.fixture(scope="session")
+def walk_takes(tmp_path_factory):
+    """A dataset folder of synthetic takes (:data:`WALK_TAKES`; seeds 0, 1, 2; category
+    ``walk``), all in its test split. Read-only."""
+    from prism_tools.chunking import make_split, save_split
+    from prism_tools.io import save_recording
+    from prism_tools.synthetic import make_recording
+
+    root = tmp_path_factory.mktemp("walk_takes")
+    for i, (name, n) in enumerate(WALK_TAKES.items()):
+        rec = make_recording(n, seed=i)
+        rec = dataclasses.replace(rec, extras={**rec.extras, "take_name": name,
+                                               "category": "walk"})  # fmt: skip
+        save_recording(rec, root / "sequences" / f"{name}.npz")
+    save_split(make_split(list(WALK_TAKES), test_fraction=1.0), root / "split.json")
+    return root

@@ -11,7 +11,9 @@ metrics cover the frames simulated until then.
 The episode is :meth:`grip.pipeline.GripPipeline.play` with recovery off, stopped at the
 first fall; ``play_batch`` episodes play side by side (:class:`grip.pipeline.BatchedPlayer`: one
 controller forward per frame over the batch; the numbers of each episode played alone, up to
-the float32 rounding of the batched forward). Metrics are ``grip bench``'s
+the float32 rounding of the batched forward). ``grip policy eval`` plays whole batches of
+segments, in this process or in worker processes (:func:`evaluate_batches`: the same rows
+whatever the number of workers). Metrics are ``grip bench``'s
 (:func:`grip.eval.scoring.segment_metrics`: ``MPJPE_mm``, ``PEL_MPJPE_mm``, ``PA_MPJPE_mm``,
 ``MPJRE_deg``, ``Acc_mps2``, ``FS_mps``, ``FP_mm``, ``vGRF_N`` from MuJoCo's foot-ground
 contact forces) plus ``kin_MPJPE_mm``: the kinematics-only MPJPE
@@ -32,17 +34,19 @@ blown-up frame: no frame of a blown-up state enters the metrics.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from grip.core import metrics as M
+from grip.eval.pool import WorkerPool, one_torch_thread
 from grip.eval.report import category_summary, csv_text, weighted_means
 from grip.eval.report import markdown_table as table
 from grip.eval.runner import segment_keys
 from grip.eval.scoring import segment_metrics as bench_metrics
-from grip.eval.segments import Segment, SegmentReader
+from grip.eval.segments import BenchError, Segment, SegmentReader
 from grip.kinematics.features import INITS, ground_truth
 from grip.pipeline import (
     Episode,
@@ -53,6 +57,7 @@ from grip.pipeline import (
 )
 
 if TYPE_CHECKING:
+    from grip.kinematics.inference import KinematicsEstimator
     from policies.controller import Controller
 
 METRIC_KEYS: tuple[str, ...] = (
@@ -130,6 +135,163 @@ def evaluate_segments(runner: Controller, estimator, segments: Sequence[Segment]
             yield heads, recs, _estimates(estimator, recs, batch, reference, init)
 
     return _play_rows(pipe, chunks(), len(segments), play_batch, threads, progress, init)
+
+
+@dataclass(frozen=True)
+class PolicySetup:
+    """What ``grip policy eval`` builds its controller and KinematicsNet from (files and
+    options, so that a worker process builds its own: :meth:`build`).
+
+    Attributes:
+        policies: Policy files (several: their ensemble, :func:`policies.controller.
+            load_controller`).
+        kin: KinematicsNet checkpoint.
+        tta: KinematicsNet's test-time augmentation (:data:`grip.kinematics.features.
+            TTA_MODES`).
+        mirror: Average each action with its mirror image's (with KinematicsNet's sensors).
+    """
+
+    policies: tuple[str, ...]
+    kin: str
+    tta: str = "none"
+    mirror: bool = False
+
+    def build(self) -> tuple[Controller, KinematicsEstimator]:
+        """The controller and the KinematicsNet.
+
+        Raises:
+            ValueError, OSError: A file that is not what it should be.
+        """
+        from grip.kinematics.inference import KinematicsEstimator
+        from policies.controller import load_controller
+
+        est = KinematicsEstimator.from_checkpoint(self.kin, tta=self.tta)
+        f = est.cfg.features
+        runner = load_controller(list(self.policies),
+                                 mirror=(f.sites, f.insoles) if self.mirror else None)  # fmt: skip
+        return runner, est
+
+
+def unit_seed(seed: int, unit: int) -> int:
+    """The action-noise seed of batch ``unit`` of a pass seeded with ``seed``
+    (:func:`evaluate_batches`): ``seed`` itself for the first batch, so a pass of one batch
+    draws the noise it always did."""
+    if unit == 0:
+        return int(seed)
+    return int(np.random.SeedSequence([int(seed), int(unit)]).generate_state(1)[0])
+
+
+def _play_unit(runner: Controller, estimator, segments: Sequence[Segment], play_batch: int,
+               reference: str, init: str, action_noise: float, seed: int, threads: int,
+               progress: Callable[[int], object] | None = None) -> list[dict]:  # fmt: skip
+    """One batch of :func:`evaluate_batches`: its own pipeline, its own noise generator."""
+    runner.use_action_noise(action_noise, seed)
+    return evaluate_segments(runner, estimator, segments, progress=progress, reference=reference,
+                             play_batch=play_batch, threads=threads, init=init)  # fmt: skip
+
+
+_WORKER_MODELS: dict[PolicySetup, tuple] = {}
+"""A worker process' controller and KinematicsNet (of the last setup it was given)."""
+
+
+def _worker_unit(setup: PolicySetup, segments: Sequence[Segment], play_batch: int,
+                 reference: str, init: str, action_noise: float, seed: int,
+                 threads: int) -> list[dict]:  # fmt: skip
+    """:func:`_play_unit` in a worker process: the models are built on the first call (torch
+    on one thread) and kept."""
+    models = _WORKER_MODELS.get(setup)
+    if models is None:
+        import torch
+
+        torch.set_num_threads(1)
+        _WORKER_MODELS.clear()
+        models = _WORKER_MODELS[setup] = setup.build()
+    return _play_unit(*models, segments, play_batch, reference, init, action_noise, seed,
+                      threads)  # fmt: skip
+
+
+def evaluate_batches(
+    setup: PolicySetup, segments: Sequence[Segment], play_batch: int = 16, workers: int = 1, *,
+    reference: str = "estimate", init: str = "truth", action_noise: float = 0.0,
+    seeds: Sequence[int] = (0,), progress: Callable[[int], object] | None = None,
+    threads: int = 0, built: tuple[Controller, KinematicsEstimator] | None = None,
+    pool: WorkerPool | None = None,
+) -> list[list[dict]]:  # fmt: skip
+    """``grip policy eval``: :func:`evaluate_segments` batch by batch, in ``workers`` processes.
+
+    Segment ``i`` belongs to batch ``i // play_batch``; a batch is played whole, by one process
+    (:func:`evaluate_segments` of its segments, ``play_batch`` side by side, a pipeline of its
+    own, the action noise drawn from :func:`unit_seed`), with torch on one thread. So every
+    batch meets the same controller forwards, and its rows are bit-identical, whatever
+    ``workers`` is.
+
+    Args:
+        setup: What the controller and KinematicsNet are built from (in each worker).
+        segments: What to play, in order.
+        play_batch: Segments per batch, played side by side (1: one after another).
+        workers: Processes (1: in this process, with ``built`` where given).
+        reference, init: As :func:`evaluate_policy`.
+        action_noise: The controller's action noise scale (0: the mean action).
+        seeds: One pass over all segments per seed (``--repeats``; the action noise of batch
+            ``j`` of a pass comes from ``unit_seed(seed, j)``).
+        progress: Called with the number of segments finished (in a worker: per batch).
+        threads: Threads stepping a batch's humanoids in each process (0: the usable cores
+            shared out over the processes).
+        built: ``(controller, KinematicsNet)`` of ``setup``, already built here.
+        pool: Worker processes to use (kept by the caller across calls; ``workers`` is then
+            ignored). None: a pool of ``workers`` for this call when there is more than one
+            batch to play.
+
+    Returns:
+        One list of rows per seed, each in segment order (:func:`evaluate_segments`).
+
+    Raises:
+        The exception a segment raised (as :func:`evaluate_segments`). BenchError: a worker
+        process died.
+    """
+    from grip.pipeline import usable_cores
+
+    if play_batch < 1:
+        raise ValueError(f"play_batch must be >= 1, got {play_batch}")
+    parts = [list(segments[i : i + play_batch]) for i in range(0, len(segments), play_batch)]
+    units = [(p, j, part) for p in range(len(seeds)) for j, part in enumerate(parts)]
+    got: dict[tuple[int, int], list[dict]] = {}
+    if pool is None and (workers <= 1 or len(units) <= 1):
+        runner, est = built if built is not None else setup.build()
+        with one_torch_thread():
+            for p, j, part in units:
+                got[p, j] = _play_unit(runner, est, part, play_batch, reference, init,
+                                       action_noise, unit_seed(seeds[p], j), threads,
+                                       progress)  # fmt: skip
+    else:
+        n = pool.workers if pool is not None else min(workers, len(units))
+        per = threads if threads > 0 else max(1, usable_cores() // n)
+        calls = [(_worker_unit, (setup, part, play_batch, reference, init, action_noise,
+                                 unit_seed(seeds[p], j), per))
+                 for p, j, part in units]  # fmt: skip
+
+        def done(k: int, rows) -> None:
+            if isinstance(rows, BaseException):
+                raise rows  # (its worker's traceback is its cause)
+            p, j, part = units[k]
+            got[p, j] = rows
+            if progress is not None:
+                progress(len(part))
+
+        if pool is not None:
+            lost = pool.run(calls, done)
+        else:
+            with WorkerPool(n) as own:
+                lost = own.run(calls, done)
+        if lost:
+            first = [units[k][2][0].id for k in lost]
+            raise BenchError(
+                f"a worker process died (a crash or out of memory) while playing one of the "
+                f"{len(lost)} batch(es) not finished (starting at segment "
+                f"{', '.join(first[:4])}{', ...' if len(first) > 4 else ''}); run with "
+                "--workers 1 to see the error"
+            )  # fmt: skip
+    return [[r for j in range(len(parts)) for r in got[p, j]] for p in range(len(seeds))]
 
 
 def _pipeline(runner: Controller, estimator, reference: str, init: str) -> GripPipeline:

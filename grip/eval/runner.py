@@ -16,14 +16,11 @@ Rows are dicts. Every row starts with the segment's keys (:func:`segment_keys`: 
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 import sys
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +29,7 @@ import numpy as np
 from grip.core.atomic import atomic_write_text
 from grip.core.reconstruction import Reconstruction
 from grip.eval.methods import METHODS, Method, MethodFactory, MethodOptions, make_method
+from grip.eval.pool import one_torch_thread, run_pool
 from grip.eval.report import jsonable, nan_floats
 from grip.eval.scoring import segment_metrics
 from grip.eval.segments import BenchError, Segment, SegmentReader
@@ -296,12 +294,10 @@ class _State:
 _WORKER_STATE: _State | None = None
 
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-
-
 def _init_worker() -> None:
-    """Worker process set-up (the BLAS thread count comes from :func:`_pool_round`'s
-    environment: a worker has imported numpy before its initializer runs)."""
+    """Worker process set-up (the BLAS thread count comes from
+    :func:`grip.eval.pool.run_pool`'s environment: a worker has imported numpy before its
+    initializer runs)."""
     global _WORKER_STATE
     _WORKER_STATE = _State(one_thread=True)
 
@@ -361,10 +357,6 @@ def _check_method_settings(out_dir: Path, run: MethodRun) -> None:
                              f"({have} vs now {want}); use another output folder")  # fmt: skip
     else:
         atomic_write_text(path, json.dumps(want, indent=1) + "\n")
-
-
-def _start_method() -> str:
-    return "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
 
 
 def run_bench(
@@ -449,19 +441,11 @@ def run_bench(
     units = _units(tasks, batch, workers, lambda run: _batchable(state.method(run)))
     threads = max(1, usable_cores() // max(workers, 1))
     if workers <= 1:
-        # One torch thread, as in a worker process, so that runtimes compare; restored after.
-        torch = sys.modules.get("torch")
-        prev_threads = torch.get_num_threads() if torch is not None else 0
-        if torch is not None:
-            torch.set_num_threads(1)
-        try:
+        with one_torch_thread():  # as in a worker process, so that runtimes compare
             for run, segs in units:
                 for row in _run_task(run, segs, out_dir, [save(s) for s in segs], state,
                                      threads):  # fmt: skip
                     done(row)
-        finally:
-            if torch is not None:
-                torch.set_num_threads(prev_threads)
     elif units:
         _run_pool(units, out_dir, save, workers, done, threads)
     return [rows[(r.label, s.id)] for s in segments for r in runs if (r.label, s.id) in rows]
@@ -487,43 +471,20 @@ def _units(tasks: Sequence[tuple[MethodRun, Segment]], batch: int, workers: int,
 
 
 def _pool_round(units, out_dir: Path, save, workers: int, done, threads: int) -> list:
-    """Run ``units`` in one pool; returns the units lost when a worker process died."""
-    ctx = mp.get_context(_start_method())
-    lost: list = []
-    # one BLAS thread per worker: set before the workers (and the forkserver) start, because
-    # OpenBLAS reads it when numpy is first imported
-    saved = {v: os.environ.get(v) for v in _THREAD_VARS}
-    os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
-    try:
-        return _pool_round_in_env(ctx, units, out_dir, save, workers, done, lost, threads)
-    finally:
-        for v, old in saved.items():
-            if old is None:
-                os.environ.pop(v, None)
-            else:
-                os.environ[v] = old
+    """Run ``units`` in one pool (:func:`grip.eval.pool.run_pool`); returns the units lost when
+    a worker process died."""
 
+    def finished(k: int, rows) -> None:
+        run, segs = units[k]
+        if isinstance(rows, Exception):  # outside the per-segment guard (building the method)
+            # Reported but not stored: the next run tries again.
+            rows = [error_row(run.label, seg, f"{type(rows).__name__}: {rows}") for seg in segs]
+        for row in rows:
+            done(row)
 
-def _pool_round_in_env(ctx, units, out_dir: Path, save, workers: int, done, lost,
-                       threads: int) -> list:  # fmt: skip
-    with ProcessPoolExecutor(max_workers=min(workers, len(units)), mp_context=ctx,
-                             initializer=_init_worker) as pool:  # fmt: skip
-        futures = {pool.submit(_run_task, run, segs, out_dir, [save(s) for s in segs], None,
-                               threads): (run, segs)
-                   for run, segs in units}  # fmt: skip
-        for fut in as_completed(futures):
-            run, segs = futures[fut]
-            try:
-                rows = fut.result()
-            except BrokenProcessPool:
-                lost.append((run, segs))
-                continue
-            except Exception as e:  # outside the per-segment guard (building the method)
-                # Reported but not stored: the next run tries again.
-                rows = [error_row(run.label, seg, f"{type(e).__name__}: {e}") for seg in segs]
-            for row in rows:
-                done(row)
-    return lost
+    calls = [(_run_task, (run, segs, out_dir, [save(s) for s in segs], None, threads))
+             for run, segs in units]  # fmt: skip
+    return [units[k] for k in run_pool(calls, workers, finished, _init_worker)]
 
 
 def _run_pool(units, out_dir: Path, save, workers: int, done, threads: int = 1) -> None:

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -11,23 +10,13 @@ import numpy as np
 import pytest
 
 from grip.cli.main import main
-from prism_tools.chunking import make_split, save_split
-from prism_tools.io import save_recording
-from prism_tools.synthetic import make_recording
 
-LENGTHS = {"take0": 230, "take1": 120, "take2": 160}
+LENGTHS = {"take0": 230, "take1": 120, "take2": 160}  # the takes of walk_takes (conftest.py)
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("data")
-    for i, (name, n) in enumerate(LENGTHS.items()):
-        rec = make_recording(n, seed=i)
-        rec = dataclasses.replace(rec, extras={**rec.extras, "take_name": name,
-                                               "category": "walk"})  # fmt: skip
-        save_recording(rec, root / "sequences" / f"{name}.npz")
-    save_split(make_split(list(LENGTHS), test_fraction=1.0), root / "split.json")
-    return root
+def dataset(walk_takes) -> Path:
+    return walk_takes
 
 
 def test_policy_eval_batch(dataset: Path, tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ from grip.cli.main import main
 from grip.core import metrics as M
 from grip.core.reconstruction import Reconstruction
 from grip.eval import bench as B
-from grip.eval import report, scoring
+from grip.eval import pool, report, scoring
 from grip.eval import runner as R
 from grip.eval import segments as S
 from grip.eval.methods import (
@@ -298,7 +298,7 @@ def test_a_worker_that_dies_fails_only_its_segment(segments, tmp_path, monkeypat
     mod_dir.mkdir()
     (mod_dir / "bench_crashy_method.py").write_text(textwrap.dedent(CRASHY))
     monkeypatch.syspath_prepend(str(mod_dir))
-    monkeypatch.setattr(R, "_start_method", lambda: "spawn")  # children inherit sys.path
+    monkeypatch.setattr(pool, "start_method", lambda: "spawn")  # children inherit sys.path
     import bench_crashy_method
 
     run = R.MethodRun("crashy", "crashy", bench_crashy_method.factory, MethodOptions())
