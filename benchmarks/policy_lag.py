@@ -1,5 +1,5 @@
 """Where the controller falls behind: per-frame trace of one episode, or an evaluation on
-time-reversed walks (the README's "Why walking backwards fails").
+time-reversed walks (docs/controller.md, "Why walking backwards fails").
 
 ``trace`` plays one 500-frame segment (no fall recovery) and prints every 10th frame: pelvis
 height of the simulation and of the ground truth, the simulation's distance behind (-) or ahead
