@@ -3,8 +3,9 @@
 Plays a clip through ``GripTrackingEnv`` with ``pin_root=True``, relative actions of 0 and a
 perfect estimate (the ground truth), with and without the velocity feed-forward, and prints the
 MPJPE, the mean per-frame worst joint error against the ground truth and the mean mechanical
-power of the actuators (the raw energy term of the reward, W). These are the numbers docs/controller.md
-quotes for the environment's PD control and for the energy weight of configs/policy.
+power of the actuators (the raw energy term of the reward, W). These are the numbers
+docs/controller.md quotes for the environment's PD control and for the energy weight of
+configs/policy.
 
     python benchmarks/env_pd_tracking.py [--clip ../shared/data/motions/cmu/bvh/07_05.bvh]
 """

@@ -104,6 +104,7 @@ class BatchedTrackingEnv:
         self._lo, self._hi = np.zeros((n, nh)), np.zeros((n, nh))
         self._half = np.zeros((n, nh))
         self._root_offset = np.zeros((n, 3))
+        self._root_offset_truth = np.zeros((n, 3))  # (cfg.teacher_obs)
         self._hist = np.zeros((n, self._hist_n, 2))  # ring of pelvis xy, newest at _hist_pos - 1
         self._hist_pos = np.zeros(n, dtype=np.int64)
         self._hist_len = np.zeros(n, dtype=np.int64)
@@ -137,6 +138,7 @@ class BatchedTrackingEnv:
         self._lo[i], self._hi[i], self._half[i] = sim.lo, sim.hi, sim.half
         self._z_range[i] = sim.z_range
         self._root_offset[i] = e._root_offset
+        self._root_offset_truth[i] = e._root_offset_truth
         self._hist_len[i] = len(e._root_hist)
         self._hist[i, : self._hist_len[i]] = np.asarray(e._root_hist)
         self._hist_pos[i] = self._hist_len[i] % self._hist_n
@@ -318,12 +320,32 @@ class BatchedTrackingEnv:
             if terrain is not None:
                 rp = pvw[i, 0, 0]
                 hm[i] = terrain(rp[:2], h[i, :2, :2], e._grid, self._hm) - rp[2]
-        return {
+        obs = {
             "sensor": sensor,
             "kinematic": kin,
             "self": self_vec,
             "environment": hm.astype(np.float32),
         }
+        if cfg.teacher_obs:
+            self._teacher_obs(obs, t, h, pvw, rot)
+        return obs
+
+    def _teacher_obs(self, obs: dict, t: list, h, pvw, rot) -> None:
+        """A privileged teacher's inputs (:attr:`grip.task.config.TrackingEnvConfig.
+        teacher_obs`), as :meth:`GripTrackingEnv._observe` adds them."""
+        n = self.num_envs
+        er = self._est_rows
+        shift = np.zeros((n, self._gain.shape[1]), np.float32)
+        for i, e in enumerate(self.envs):
+            ti = t[i]
+            er[i] = e._truth.obs_rows[ti]
+            if self._relative:
+                shift[i] = (e._truth.target[ti] - e._est.target[ti]) / self._gain[i]
+        er[:, _ROOT] += self._root_offset_truth
+        kin = np.empty_like(obs["kinematic"])
+        O.observation_rows(self.cfg.kinematic_obs, h, pvw, rot, er, kin,
+                           np.empty_like(obs["self"]))  # fmt: skip
+        obs["teacher_kinematic"], obs["teacher_shift"] = kin, shift
 
     def close(self) -> None:
         if self._pool is not None:

@@ -112,6 +112,10 @@ class GripTrackingEnv(gym.Env):
             "self": box(O.SELF_DIM),
             "environment": box(len(self._grid)),
         })  # fmt: skip
+        if cfg.teacher_obs:  # (TrackingEnvConfig.teacher_obs: a privileged teacher's inputs)
+            self.observation_space.spaces["teacher_kinematic"] = box(
+                O.kinematic_dim(cfg.kinematic_obs))
+            self.observation_space.spaces["teacher_shift"] = box(3 * (sk.N_JOINTS - 1))
         self.action_space = spaces.Box(-1.0, 1.0, (3 * (sk.N_JOINTS - 1),), np.float32)
         self.blowups = 0
         self._clip: ReferenceClip = clip0
@@ -126,6 +130,9 @@ class GripTrackingEnv(gym.Env):
         self._clip_arrays: dict[int, tuple] = {}
         self._gt_rows = np.zeros((0, _GT_DIM))  # the episode's clip: ground-truth rows
         self._est = O.EstimateFrames()  # the estimate laid out for the step
+        self._truth: O.EstimateFrames | None = None  # the ground truth so (teacher_obs)
+        self._root_offset_truth = np.zeros(3)  # (as _root_offset, for the truth)
+        self._self_scratch = np.empty((1, O.SELF_DIM), np.float32)
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
@@ -239,6 +246,8 @@ class GripTrackingEnv(gym.Env):
         # from where the episode starts (the ground truth there), not with the drift before
         self._root_offset = clip.gt_qpos[start, :3] - clip.est_root_pos[start]
         self._per_clip_arrays(clip, i)
+        if self._truth is not None:
+            self._root_offset_truth = clip.gt_qpos[start, :3] - self._truth.est.est_root_pos[start]
         pvw, rot = self._sim.state()
         window = cfg.reward.root_vel_window_frames + 1
         self._root_hist = deque([pvw[0, 0, :2].copy()], maxlen=window)
@@ -272,9 +281,12 @@ class GripTrackingEnv(gym.Env):
             gt[:, : _GT_DIM // 2] = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel],
                                              axis=1).reshape(t, -1)  # fmt: skip
             gt[:, _GT_DIM // 2 :] = clip.gt_rot.reshape(t, -1)
-            got = (sim, O.EstimateFrames(), gt, cfg.action_scale * sim.half)
+            truth = O.EstimateFrames() if cfg.teacher_obs else None
+            if truth is not None:
+                truth.update(clip.oracle(), sim.kd_over_kp, cfg.velocity_feedforward, key=sim)
+            got = (sim, O.EstimateFrames(), gt, cfg.action_scale * sim.half, truth)
             _clip_cache_put(self._clip_arrays, i, got)
-        _, self._est, self._gt_rows, self._action_gain = got
+        _, self._est, self._gt_rows, self._action_gain, self._truth = got
         self._est.update(clip, sim.kd_over_kp, cfg.velocity_feedforward, key=sim)
 
     def _observe(self, pvw: np.ndarray, rot: np.ndarray,
@@ -302,6 +314,16 @@ class GripTrackingEnv(gym.Env):
             obs["environment"][:] = -root[2]
         else:
             obs["environment"][:] = terrain(root[:2], h[0, :2, :2], self._grid, self._hm) - root[2]
+        if self._truth is not None:
+            tr = self._truth
+            er[0] = tr.obs_rows[t]
+            er[0, _ROOT] += self._root_offset_truth
+            O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er,
+                               obs["teacher_kinematic"][None], self._self_scratch)  # fmt: skip
+            if self._relative:
+                obs["teacher_shift"][:] = (tr.target[t] - est.target[t]) / self._action_gain
+            else:  # (an absolute action is the same PD target whoever follows what)
+                obs["teacher_shift"][:] = 0.0
         return obs
 
     def step(self, action):
@@ -393,6 +415,8 @@ class GripTrackingEnv(gym.Env):
         sim.teleport(qpos76, qvel75)
         r = sim.index.root_qpos_adr
         self._root_offset = sim.qpos[r : r + 3] - clip.est_root_pos[self._t]
+        if self._truth is not None:
+            self._root_offset_truth = sim.qpos[r : r + 3] - self._truth.est.est_root_pos[self._t]
         pvw, rot = sim.state()
         self._root_hist.clear()
         self._root_hist.append(pvw[0, 0, :2].copy())

@@ -1,8 +1,9 @@
 """Random pushes on the pelvis while the controller trains or distils (an experiment).
 
-Measured, not adopted (docs/controller.md, "Random pushes" and run X ``policy_x28`` in "Two more runs on T's
-lineage"; the pushes again from the shipped file's members; the distillation's ``d4``): the
-library had it as ``push_force_n`` / ``push_every_s`` / ``push_duration_s`` up to commit 42da3e6.
+Measured, not adopted (docs/controller.md, "Random pushes" and run X ``policy_x28`` in "Two
+more runs on T's lineage"; the pushes again from the shipped file's members; the
+distillation's ``d4``): the library had it as ``push_force_n`` / ``push_every_s`` /
+``push_duration_s`` up to commit 42da3e6.
 This script reruns it without a library setting: it wraps every training environment in
 :class:`RandomPushes` and hands the command its own environment constructor.
 

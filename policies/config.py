@@ -16,6 +16,8 @@ from grip.task.config import TrackingEnvConfig
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
 VEC_ENVS: tuple[str, ...] = ("subproc", "dummy", "batched")
+FOLLOW: tuple[str, ...] = ("estimate", "truth")
+"""What a run's controller follows (:attr:`PolicyRunConfig.follow`)."""
 
 GRIP_NET_ARCH: tuple[int, ...] = (2048, 1536, 1024, 1024, 512, 512)
 """GRIP's policy MLP (8.6M parameters); ``--set ppo.net_arch=[2048,1536,1024,1024,512,512]``."""
@@ -180,6 +182,13 @@ class PolicyRunConfig:
     also holds the left-right mirror image of every clip
     (:func:`grip.kinematics.reference.with_mirrored_clips`): twice the motions, left and
     right balanced."""
+    follow: str = "estimate"
+    """What the controller learns to follow: ``"estimate"`` (GRIP's DynamicsNet: the
+    KinematicsNet estimates of the training clips) or ``"truth"`` (a privileged tracker, the
+    teacher of ``grip policy distill``: the reference set's "estimate" is the ground truth
+    itself, :func:`grip.kinematics.reference.oracle_reference_clip`, with the sensor features
+    of the ``--kin`` checkpoint so that teacher and student observe the same layout). Evaluate
+    such a policy with ``grip policy eval --reference truth``."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a
@@ -200,6 +209,7 @@ class PolicyRunConfig:
              "ppo.batch_size must not exceed ppo.n_steps x ppo.n_envs"),
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
+            (self.follow in FOLLOW, f"follow must be one of {FOLLOW}"),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip

@@ -12,6 +12,14 @@ network to act like the teacher on the states the *student* visits (DAgger, Ross
    newest ``max_samples`` are kept).
 3. Fit the student to all labels by mean-squared error for ``epochs`` passes.
 
+A *privileged* teacher (a policy trained with ``follow = "truth"``, ``configs/policy/
+teacher.toml``) follows the ground truth, the student the KinematicsNet estimate. The rollout
+environments then add the teacher's inputs to every observation
+(:attr:`grip.task.config.TrackingEnvConfig.teacher_obs`): the teacher acts on the kinematic
+observation against the truth, and its action becomes the student's label shifted by the
+difference of the two PD targets, so that the student learns to reach the truth's pose from
+what GRIP sees. The student's file follows the estimate.
+
 The student has one member's network shape and observation normaliser and starts from that
 member's weights (``init_member``), so its file is an ordinary policy file: ``grip policy eval``
 plays it and ``grip policy train --init`` fine-tunes it with PPO. Runs checkpoint after every
@@ -199,6 +207,13 @@ class Distiller:
         self.teacher = (
             runners[0] if len(runners) == 1 else PolicyEnsemble(runners, self.teacher_names)
         )
+        follows = {r.info.get("follow", "estimate") for r in runners}
+        if len(follows) > 1:
+            raise ValueError(f"{', '.join(self.teacher_files)}: the teacher's members follow "
+                             "different references (some the ground truth, some the estimate)")
+        self.privileged = follows == {"truth"}
+        """The teacher follows the ground truth (``follow = "truth"``): it acts on the truth's
+        observation of each state and its actions are shifted to the student's estimate."""
         # the student's file: the member's payload, with the teacher's fall detector (the
         # first member's discriminator) where the member's file stores none
         disc = {k: payloads[0][k] for k in ("disc", "amp_frame_dim") if k in payloads[0]}
@@ -283,8 +298,9 @@ class Distiller:
 
         c = self.cfg
         seed = c.seed + 7919 * self.iteration
+        teacher_env = dataclasses.replace(self.teacher.env_cfg, teacher_obs=self.privileged)
         if c.vec_env == "dummy":
-            return stage2_rollout_env(self.make_env, self.teacher.env_cfg, self.reference,
+            return stage2_rollout_env(self.make_env, teacher_env, self.reference,
                                       c.categories, c.n_envs, seed, c.fall_height_m,
                                       c.max_episode_frames)  # fmt: skip
         batched = getattr(self.make_env, "batched", None)
@@ -295,7 +311,7 @@ class Distiller:
         stage2 = {"reference": self.reference, "random_start": True, "clip_index": -1,
                   "termination_dist_m": 0.0, "fall_height_m": c.fall_height_m,
                   "max_episode_frames": c.max_episode_frames}  # fmt: skip
-        env_cfg = dataclasses.replace(self.teacher.env_cfg, **stage2)
+        env_cfg = dataclasses.replace(teacher_env, **stage2)
         seeds = [seed + 1000 * i for i in range(c.n_envs)]
         return BatchedVecEnv(batched(env_cfg, tuple(c.categories), seeds, 0))
 
@@ -317,7 +333,7 @@ class Distiller:
             obs = venv.reset()
             for _ in range(steps):
                 x = self.student._flat(obs)
-                a_t = self.teacher.act(obs)
+                a_t = self._teacher_action(obs)
                 with torch.no_grad():
                     a_s = self.student.actor(torch.as_tensor(x, dtype=torch.float32)).numpy()
                 a_s = np.clip(a_s, -1.0, 1.0)
@@ -345,6 +361,15 @@ class Distiller:
                  "ep_len": float(np.mean(lens)) if lens else float("nan"),
                  "onpolicy_mse": sq_err / n}  # fmt: skip
         return np.concatenate(xs), np.concatenate(ys), stats
+
+    def _teacher_action(self, obs: dict) -> np.ndarray:
+        """The teacher's action in the student's terms: a privileged teacher acts on the
+        observation against the ground truth, and its action (relative to the truth) becomes
+        the student's (relative to the estimate) with the environment's ``teacher_shift``."""
+        if not self.privileged:
+            return self.teacher.act(obs)
+        a = self.teacher.act({**obs, "kinematic": obs["teacher_kinematic"]})
+        return np.clip(a + obs["teacher_shift"], -1.0, 1.0)
 
     def fit(self, x: np.ndarray, y: np.ndarray) -> float:
         """``epochs`` passes of mean-squared error over ``(x, y)``; returns the last pass's mean
@@ -415,6 +440,10 @@ class Distiller:
 
         payload = dict(self.base)
         payload["actor"] = pack_weights(self.student.actor.state_dict(), precision)
+        if self.privileged:  # the student follows the estimate, whatever its teacher followed
+            config = json.loads(payload["config"])
+            config["follow"] = "estimate"
+            payload["config"] = json.dumps(config)
         info = json.loads(payload.get("info", "{}"))
         info = {k: v for k, v in info.items() if k == "holdout"}
         info["distilled"] = {"teacher": self.teacher_names, "init_member": self.cfg.init_member,

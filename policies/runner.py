@@ -280,6 +280,8 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         raise ValueError(f"{zpath}: no log_std in its policy state")
     precision = precision or ("fp16" if half else "fp32")
     info = dict(info or {})
+    if cfg.follow != "estimate":  # a privileged tracker (grip policy eval says how to judge it)
+        info["follow"] = cfg.follow
     holdout = run_dir / "holdout.json"  # grip policy train's held-out clips (holdout_fraction)
     if holdout.is_file():
         seqs = read_json_file(holdout, "held-out sequence list").get("sequences")

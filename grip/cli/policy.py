@@ -221,7 +221,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     kins = [kin_checkpoint(k) for k in (args.kin or [None])]
     ref_path = out / "reference_train.npz"
     files = training_files(split_paths(args.data, "train"), cfg, out)
-    build_training_reference(ref_path, args.data, files, kins, mirror=cfg.mirror_references)
+    build_training_reference(ref_path, args.data, files, kins, mirror=cfg.mirror_references,
+                             follow=cfg.follow)  # fmt: skip
     resuming = RunDir(out).has_checkpoint()
     init = None if resuming else args.init
     try:  # (refuses to resume with settings other than RESUMABLE changed)
@@ -334,6 +335,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(f"--batch must be >= 1, got {args.batch}")
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
+    if runner.info.get("follow") == "truth" and args.reference != "truth":
+        print(f"note: {pol} was trained to follow the ground truth (a privileged tracker, "
+              "follow = \"truth\"); it is judged on its task with --reference truth")  # fmt: skip
     held = set(runner.info.get("holdout") or ()) if args.split == "holdout" else set()
     if args.split == "holdout" and not held:
         raise CliError(f"{pol}: no clips were held out of this policy's training (train "

@@ -34,11 +34,12 @@ def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
 
 def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins: list[Path],
                              reverse_categories: tuple[str, ...] = (),
-                             mirror: bool = False) -> None:  # fmt: skip
+                             mirror: bool = False, follow: str = "estimate") -> None:  # fmt: skip
     """Write the training reference set ``ref_path`` (the recordings ``files`` of dataset
     ``data`` with the estimates of each KinematicsNet checkpoint in ``kins``; training clips of
-    ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``)
-    unless it exists. Shared by ``grip policy train`` and ``grip policy distill``."""
+    ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``;
+    with ``follow="truth"`` the ground truth is the reference, with the feature settings of
+    ``kins[0]``) unless it exists. Shared by ``grip policy train`` and ``grip policy distill``."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
@@ -60,9 +61,13 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
             est = KinematicsEstimator.from_checkpoint(kin)
         except ValueError as e:
             raise CliError(str(e)) from e
-        desc = f"KinematicsNet estimates ({kin.name})"
+        truth = follow == "truth"
+        desc = "ground truth as the reference" if truth else f"KinematicsNet estimates ({kin.name})"
         with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
-            sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin)))
+            sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin),
+                                            truth=truth))  # fmt: skip
+        if truth:
+            break  # (the truth is the same whichever checkpoint gave the feature settings)
     try:
         ref = merge_reference_sets(sets, source=str(ref_path))
     except ValueError as e:

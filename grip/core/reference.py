@@ -189,6 +189,20 @@ class ReferenceClip:
     def n_frames(self) -> int:
         return int(self.gt_qpos.shape[0])
 
+    def oracle(self) -> ReferenceClip:
+        """This clip with its ground truth as the estimate (joints minus the root, global
+        rotations, velocities of the velocity joints), the same sensors and scene: what a
+        privileged tracker (``follow = "truth"``) follows. Equals
+        :func:`grip.kinematics.reference.oracle_reference_clip` of the clip's recording to
+        float rounding."""
+        return ReferenceClip(
+            name=self.name, category=self.category, fps=self.fps, body=self.body,
+            gt_qpos=self.gt_qpos.copy(), est_pos=self.gt_pos - self.gt_pos[:, :1],
+            est_rot6d=matrix_to_6d(self.gt_rot),
+            est_vel=self.gt_vel[:, list(sk.VELOCITY_JOINTS)], sensor=self.sensor,
+            objects=self.objects,
+        )  # fmt: skip
+
     def _derive(self) -> None:
         for k, v in ground_truth_arrays(self.gt_qpos, self.body, self.fps).items():
             setattr(self, k, v)

@@ -71,6 +71,7 @@ def build_reference_set(
     batch: int = 16,
     progress: Callable[[int], object] | None = None,
     source: str = "<memory>",
+    truth: bool = False,
 ) -> ReferenceSet:
     """Run KinematicsNet over recordings (batched) and package them for the environment.
 
@@ -81,14 +82,20 @@ def build_reference_set(
         batch: Recordings per forward pass.
         progress: Called with the number of recordings finished after each batch.
         source: Description stored for messages.
+        truth: The clips' "estimate" is the ground truth (:func:`oracle_reference_clip`, the
+            references of a privileged tracker); the network is not run, only its feature
+            settings are used.
     """
     clips = []
     cfg = estimator.cfg.features
     for i in range(0, len(recs), batch):
         part = list(recs[i : i + batch])
-        for rec, est in zip(part, estimator.predict(part), strict=True):
-            clips.append(reference_clip(rec, est.joint_pos, est.global_rot, est.velocity,
-                                        input_features(rec, cfg)))  # fmt: skip
+        if truth:
+            clips += [oracle_reference_clip(rec, cfg) for rec in part]
+        else:
+            for rec, est in zip(part, estimator.predict(part), strict=True):
+                clips.append(reference_clip(rec, est.joint_pos, est.global_rot, est.velocity,
+                                            input_features(rec, cfg)))  # fmt: skip
         if progress is not None:
             progress(len(part))
     return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)

@@ -119,6 +119,12 @@ class TrackingEnvConfig:
         pin_root: Drive the pelvis along the ground-truth root trajectory (position and
             orientation written before every substep): a physics check of the PD tracking, not
             a training mode.
+        teacher_obs: Add the inputs of a privileged teacher to every observation (``grip policy
+            distill`` from a policy trained with ``follow = "truth"``): ``teacher_kinematic``,
+            the kinematic observation against the ground truth (as the teacher saw it in
+            training), and ``teacher_shift`` (69), the relative action that moves the PD target
+            from the estimate's to the truth's (a teacher action ``a`` is the student action
+            ``a + teacher_shift``). Not a training setting: policies never see these keys.
         mjcf: Humanoid and simulation options.
         reward: Reward settings.
     """
@@ -147,6 +153,7 @@ class TrackingEnvConfig:
     blowup_depth_m: float = 1.0
     action_repeat: int = 1
     amp_window: int = 10
+    teacher_obs: bool = False
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
 

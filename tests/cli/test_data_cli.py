@@ -574,3 +574,65 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     with np.load(out / "data" / "iter_000.npz") as a, np.load(noisy / "data" / "iter_000.npz") as b:
         assert a["x"].shape == b["x"].shape and not np.array_equal(a["x"], b["x"])
         np.testing.assert_array_equal(a["x"][:2], b["x"][:2])  # the same first states
+
+
+def test_a_teacher_run_follows_the_ground_truth(built: Path, tmp_path: Path, capsys,
+                                                tiny_policy_settings) -> None:  # fmt: skip
+    """``follow = "truth"`` (configs/policy/teacher.toml): the run's references are the ground
+    truth with the KinematicsNet's sensor features, the export says so, and ``grip policy eval``
+    notes that such a policy is judged with ``--reference truth``."""
+    import numpy as np
+
+    from grip.assets import REPO_ROOT
+    from grip.cli.recordings import load_recordings, split_paths
+    from grip.kinematics.features import targets
+    from policies.controller import load_controller
+
+    run = tmp_path / "teacher"
+    args = ["policy", "train", "--data", str(built), "--out", str(run), "--config",
+            str(REPO_ROOT / "configs" / "policy" / "teacher.toml"), *tiny_policy_settings,
+            "--set", "stage1.termination_anneal_steps=0"]  # fmt: skip
+    assert main(args) == 0
+    assert json.loads((run / "config.json").read_text())["config"]["follow"] == "truth"
+    ref = ReferenceSet.load(run / "reference_train.npz")
+    (rec,) = load_recordings(split_paths(built, "train"))
+    (clip,) = ref.clips
+    t = targets(rec)
+    np.testing.assert_allclose(clip.est_pos, t.joint_pos, atol=1e-6)
+    np.testing.assert_allclose(clip.est_hinge, clip.gt_qpos[:, 7:], atol=1e-5)
+    assert "ground truth as the reference" in capsys.readouterr().err
+
+    assert load_controller(run / "policy.pt").info["follow"] == "truth"
+    ev = ["policy", "eval", "--policy", str(run / "policy.pt"), "--data", str(built), "--split",
+          "train", "--segment-frames", "60", "--segments", "1", "--out", str(tmp_path / "ev")]
+    assert main(ev) == 0
+    assert "judged on its task with --reference truth" in capsys.readouterr().out
+    assert main([*ev, "--reference", "truth"]) == 0
+    assert "--reference truth" not in capsys.readouterr().out
+    assert main([*args, "--set", "follow=nothing"]) == 2
+    assert "follow must be one of" in capsys.readouterr().err
+    # distilled into a student that follows the estimate: the teacher acts on the truth's
+    # observation of the student's states, its action shifted to the estimate's targets
+    import torch
+
+    out = tmp_path / "student"
+    dist = ["policy", "distill", "--teacher", str(run / "policy.pt"), "--data", str(built),
+            "--out", str(out), *TINY_DISTILL]  # fmt: skip
+    assert main(dist) == 0
+    student, teacher = load_controller(out / "policy.pt"), load_controller(run / "policy.pt")
+    assert "follow" not in student.info
+    stored = torch.load(out / "policy.pt", weights_only=True)["members"][0]["config"]
+    assert json.loads(stored)["follow"] == "estimate"
+    with np.load(out / "data" / "iter_000.npz") as z:  # beta0 = 1: the teacher's own rollout
+        x, y = torch.from_numpy(z["x"]).float(), z["y"].astype(np.float32)
+    with torch.no_grad():  # (the student's inputs are normalised as the teacher's)
+        on_estimate = np.clip(teacher.actor(x).numpy(), -1, 1)
+    assert np.abs(on_estimate - y).max() > 1e-2  # the labels are not its action on the estimate
+    # a teacher whose members follow different references is refused
+    plain = tmp_path / "plain"
+    assert main(["policy", "train", "--data", str(built), "--out", str(plain),
+                 *tiny_policy_settings]) == 0  # fmt: skip
+    assert main(["policy", "distill", "--teacher", str(run / "policy.pt"), "--teacher",
+                 str(plain / "policy.pt"), "--data", str(built), "--out",
+                 str(tmp_path / "mixed"), *TINY_DISTILL]) == 2  # fmt: skip
+    assert "follow different references" in capsys.readouterr().err
