@@ -81,10 +81,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--height", type=float, default=1.70, help="body height, m (--fixed-body)")
     b.add_argument("--mass", type=float, default=70.0, help="body mass, kg (--fixed-body)")
     b.add_argument("--seed", type=int, default=0, help="base seed of noise and subjects")
-    b.add_argument("--zmp-filter", action="store_true",
+    b.add_argument("--zmp-filter", action=argparse.BooleanOptionalAction, default=True,
                    help="shift each retargeted motion's pelvis by a few millimetres so that the "
                    "ZMP lies on the feet where they alone carry the body (the dynamic filter, "
-                   "docs/insoles_zmp.md); part of the clip settings")  # fmt: skip
+                   "docs/insoles_zmp.md; default on); part of the clip settings: a folder "
+                   "built before the filter existed resumes with --no-zmp-filter")  # fmt: skip
     b.add_argument("--split-by", choices=SPLIT_MODES, default="person",
                    help="keep whole performers (else the source's finest grouping) or whole "
                    "clips on one side of the split (default person)")  # fmt: skip

@@ -60,6 +60,10 @@ SPLIT_MODES = ("person", "clip")
 """``split_by`` values: whole groups (performers, else the source's finest grouping) or whole
 clips per side."""
 SPLIT_SETTINGS = ("test_fraction", "split_seed", "split_by")
+PREDATED_SETTINGS: dict[str, object] = {"zmp_filter": False}
+"""How a folder that predates a setting was built when that is not the setting's default now:
+a folder built before ``zmp_filter`` existed holds unfiltered motions, so resuming it needs
+``--no-zmp-filter``."""
 """The :class:`BuildConfig` fields that only choose the split; a finished dataset may be split
 again with other values (its clips are kept)."""
 
@@ -90,8 +94,9 @@ class BuildConfig:
         zmp_filter: Run the dynamic filter (:func:`grip.dataset.zmp_filter.zmp_filter`, default
             settings) on every retargeted motion before it is stored and synthesised: a
             horizontal pelvis shift of a few millimetres, feet kept, that brings the ZMP onto
-            the feet where they alone carry the body (docs/insoles_zmp.md). Off until the
-            corpus is rebuilt and KinematicsNet retrained with it.
+            the feet where they alone carry the body (docs/insoles_zmp.md). On by default
+            since the corpus was rebuilt with it; a folder that predates the setting was
+            built without it (:data:`PREDATED_SETTINGS`).
     """
 
     noise_variants: int = 1
@@ -106,7 +111,7 @@ class BuildConfig:
     split_seed: int = 42
     seed: int = 0
     split_by: str = "person"
-    zmp_filter: bool = False
+    zmp_filter: bool = True
 
     def __post_init__(self) -> None:
         if self.split_by not in SPLIT_MODES:
@@ -366,7 +371,7 @@ def _settings_check(out: Path, cfg: BuildConfig) -> None:
     then record this build's settings (the split settings may differ, :data:`SPLIT_SETTINGS`;
     settings a folder predates take their defaults)."""
     new = asdict(cfg)
-    defaults = asdict(BuildConfig())
+    defaults = {**asdict(BuildConfig()), **PREDATED_SETTINGS}
     manifest_path = out / MANIFEST
     if manifest_path.exists():
         try:

@@ -135,8 +135,8 @@ def test_frames_not_carried_by_the_feet_alone_want_nothing() -> None:
     assert not res.feet_alone.any() and not res.shift_m.any() and res.motion is motion
 
 
-def test_settings_are_checked_and_the_build_setting_is_off_by_default() -> None:
-    assert BuildConfig().zmp_filter is False
+def test_settings_are_checked_and_the_build_setting_is_on_by_default() -> None:
+    assert BuildConfig().zmp_filter is True
     with pytest.raises(ValueError):
         ZmpFilterConfig(shift_weight=0.0)
     with pytest.raises(ValueError):
@@ -162,3 +162,20 @@ def test_build_setting_filters_the_stored_motion_and_its_recordings(tmp_path: Pa
         assert ("zmp_filter" in meta) is on
     assert res[True].synth_frames == res[False].synth_frames
     assert res[True].zmp_outside_frames < 0.5 * res[False].zmp_outside_frames
+
+
+def test_a_folder_that_predates_the_filter_resumes_only_without_it(tmp_path: Path) -> None:
+    """Its motions are unfiltered: resuming it with the default (filter on) is refused by name,
+    with ``zmp_filter=False`` (``--no-zmp-filter``) it resumes."""
+    import json
+    from dataclasses import asdict
+
+    from grip.core.runs import SettingsMismatch
+    from grip.dataset.build import SETTINGS, _settings_check
+
+    old = asdict(BuildConfig())
+    del old["zmp_filter"]
+    (tmp_path / SETTINGS).write_text(json.dumps(old))
+    with pytest.raises(SettingsMismatch, match="zmp_filter"):
+        _settings_check(tmp_path, BuildConfig())
+    _settings_check(tmp_path, BuildConfig(zmp_filter=False))
