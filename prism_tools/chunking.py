@@ -283,7 +283,8 @@ def stratified_test_groups(sizes: Mapping[str, int], strata: Mapping[str, str],
     So every such stratum has a group on each side and about the test fraction of its size in
     test, as near as its group sizes allow, and the choice depends only on ``seed``, the sizes
     and the names (not their order). A stratum of one group stays in train; with
-    ``test_fraction`` 0 nothing goes to test.
+    ``test_fraction`` 0 nothing goes to test, with 1 everything does (a folder of one's own
+    recordings to evaluate).
 
     Args:
         sizes: Group -> size (chunks).
@@ -300,6 +301,8 @@ def stratified_test_groups(sizes: Mapping[str, int], strata: Mapping[str, str],
     chosen: list[str] = []
     if test_fraction <= 0:
         return chosen
+    if test_fraction >= 1:
+        return sorted(sizes)
     for stratum in sorted(by_stratum):
         names = by_stratum[stratum]
         if len(names) < 2:

@@ -91,11 +91,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "clips on one side of the split (default person)")  # fmt: skip
     b.add_argument("--test-fraction", type=float, default=0.2,
                    help="share of the sequences in the test split, of each source's with "
-                   "--split-by person (default 0.2)")  # fmt: skip
+                   "--split-by person (default 0.2; 0: all in train; 1: all in test, e.g. a "
+                   "folder of one's own recordings to evaluate)")  # fmt: skip
     b.add_argument("--split-seed", type=int, default=42, help="seed of the split (default 42)")
-    b.add_argument("--categories", type=Path, default=None, metavar="TOML",
-                   help="map of the sources' labels to shared categories (default: "
-                   "configs/categories.toml)")  # fmt: skip
+    b.add_argument("--categories", type=Path, default=None, metavar="FILE",
+                   help="a .toml map of the sources' labels to shared categories (default: "
+                   "configs/categories.toml), or a .csv table of clips and their categories "
+                   "(columns 'clip' or 'file', and 'category'; the default map translates "
+                   "them) for one's own clips; without either, a clip without a label takes "
+                   "its folder's name")  # fmt: skip
     add_limit_arguments(b)
     b.set_defaults(func=cmd_build)
 
@@ -186,9 +190,11 @@ def select_clips(roots: list[Path], limit: int | None, categories=None) -> list:
     return scan_motions(roots, limit, categories)[0]
 
 
-def scan_motions(roots: list[Path], limit: int | None, categories=None
+def scan_motions(roots: list[Path], limit: int | None, categories=None, table=None
                  ) -> tuple[list, list[tuple[str, str]]]:  # fmt: skip
-    """The clips under ``roots`` as :func:`select_clips` gives them, and the files skipped.
+    """The clips under ``roots`` as :func:`select_clips` gives them, and the files skipped;
+    ``table``: a user's clip -> category table (:func:`grip.motion.catalog.
+    load_clip_categories`) that overrides the labels of the clips it lists.
 
     Returns:
         ``(clips, skipped)``: :class:`grip.dataset.build.ClipSpec` s (path, clip id, category,
@@ -197,19 +203,29 @@ def scan_motions(roots: list[Path], limit: int | None, categories=None
     """
     from grip.cli.errors import CliError
     from grip.dataset.build import ClipSpec
-    from grip.motion.catalog import scan_clips
+    from grip.motion.catalog import scan_clips, table_category
 
     if categories is None:
         categories = default_category_map()
-    clips, skipped = [], []
+    clips, skipped, used = [], [], set()
     for root in roots:
         if not root.is_dir():
             raise CliError(f"--motions {root}: not a folder")
         refs, bad = scan_clips(root, categories)
-        clips += [ClipSpec(str(c.path), c.clip_id, c.category, c.label, c.group) for c in refs]
+        for c in refs:
+            label, cat = c.label, c.category
+            got = table_category(table, c.clip_id, c.path, root, categories) if table else None
+            if got is not None:
+                label, cat, key = got
+                used.add(key)
+            clips.append(ClipSpec(str(c.path), c.clip_id, cat, label, c.group))
         skipped += [(str(b.path), b.reason) for b in bad]
     if not clips:
         raise CliError(f"no supported clips (bvh, amc, DeepMimic json, npz) under {roots}")
+    unused = sorted(set(table or ()) - used)
+    if unused:
+        print(f"--categories: {len(unused)} listed clip(s) not found under the motion folders: "
+              f"{', '.join(unused[:5])}{' ...' if len(unused) > 5 else ''}", file=sys.stderr)
     if limit is not None and limit < len(clips):
         if limit < 1:
             raise CliError("--limit must be >= 1")
@@ -238,8 +254,8 @@ def cmd_build(args: argparse.Namespace) -> int:
         roots = [d]
     if args.noise_variants < 0 or (args.noise_variants == 0 and not args.clean):
         raise CliError("--noise-variants must be >= 1 (or 0 together with --clean)")
-    if not 0.0 <= args.test_fraction < 1.0:
-        raise CliError("--test-fraction must be in [0, 1)")
+    if not 0.0 <= args.test_fraction <= 1.0:
+        raise CliError("--test-fraction must be in [0, 1] (0: all train, 1: all test)")
     if args.split_seed < 0:
         raise CliError("--split-seed must be >= 0")
     cfg = BuildConfig(noise_variants=args.noise_variants, clean_variant=args.clean,
@@ -247,11 +263,22 @@ def cmd_build(args: argparse.Namespace) -> int:
                       test_fraction=args.test_fraction, seed=args.seed,
                       split_seed=args.split_seed, split_by=args.split_by,
                       zmp_filter=args.zmp_filter)  # fmt: skip
-    cmap = category_map(args.categories) if args.categories else default_category_map()
+    table = None
+    if args.categories is not None and args.categories.suffix.lower() == ".csv":
+        from grip.motion.catalog import load_clip_categories
+
+        try:
+            table = load_clip_categories(args.categories)
+        except ValueError as e:
+            raise CliError(f"--categories: {e}") from e
+    if args.categories is not None and table is None:
+        cmap = category_map(args.categories)
+    else:
+        cmap = default_category_map()
     if cmap is None:
         print("no configs/categories.toml in this installation: categories are the sources' "
               "own labels (pass --categories FILE)", file=sys.stderr)  # fmt: skip
-    clips, skipped = scan_motions(roots, args.limit, cmap)
+    clips, skipped = scan_motions(roots, args.limit, cmap, table)
     counts: dict[str, int] = {}
     t0 = time.perf_counter()
     with tqdm(total=len(clips), desc="clips", unit="clip") as bar:

@@ -285,7 +285,10 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, default=None,
                    help="checkpoint (default: the shipped one in grip/assets)")  # fmt: skip
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
-    p.add_argument("--split", default="test", choices=("train", "test"), help="split to use")
+    p.add_argument("--split", default="test", choices=("train", "test", "all"),
+                   help="dataset split (default test)")  # fmt: skip
+    p.add_argument("--category", action="append", default=[], metavar="GLOB",
+                   help="only these motion categories (glob, repeatable)")  # fmt: skip
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     p.add_argument("--out", type=Path, default=None, help="folder for the table and the plot")
     p.add_argument("--segment-frames", type=int, default=500, help="segment length (frames)")
@@ -391,7 +394,8 @@ def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> 
     unreadable: list[tuple[str, str]] = []
     try:
         segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
-                             errors=unreadable, min_frames=MIN_SEGMENT_FRAMES)  # fmt: skip
+                             args.category, errors=unreadable,
+                             min_frames=MIN_SEGMENT_FRAMES)  # fmt: skip
     except BenchError as e:
         raise CliError(str(e)) from e
     finally:

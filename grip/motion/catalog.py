@@ -17,7 +17,13 @@ A clip's **label** is the source's own name for its motion:
 * else a Bandai-Namco JSON sidecar ``{"content": id}`` indexing ``cfg/content_label.txt``
   (searched in the clip's folder and upwards), ``dataset-N_`` prefix removed (``"walk-back"``);
 * else a DeepMimic clip's name (``"getup_faceup"``);
+* else the name of a folder it sits in: the nearest one below the searched root whose name the
+  category map knows (``walk/subject01/take.bvh`` -> ``walk``), so that one's own clips sorted
+  into folders by motion get their categories;
 * else none (``""``).
+
+``grip data build --categories FILE.csv`` (clip -> category, :func:`load_clip_categories`)
+overrides all of these for the clips it lists.
 
 Its **category** is the label translated by a :class:`CategoryMap` (``configs/categories.toml``,
 read by :func:`load_category_map`) into a vocabulary shared by every source, ``"unknown"`` where
@@ -157,6 +163,59 @@ def _label_keys(label: str) -> list[str]:
     first = _first_item(label)
     keys = [_label_key(label), first, re.sub(r"[\s\-]+", "_", first).strip("_")]
     return [k for i, k in enumerate(keys) if k and k not in keys[:i]]
+
+
+def load_clip_categories(path: str | os.PathLike) -> dict[str, str]:
+    """A user's table of clips and their categories (``grip data build --categories FILE.csv``):
+    a CSV with a ``clip`` or ``file`` column (a clip id such as ``mine/take1``, a file name, a
+    stem, or a path relative to the searched root) and a ``category`` column.
+
+    Raises:
+        ValueError: Naming the file (and the line): unreadable, missing columns, an empty
+            category, or a clip listed twice.
+    """
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise ValueError(f"{path}: not a readable CSV ({e})") from e
+    table: dict[str, str] = {}
+    for line, row in enumerate(rows, start=2):
+        key = (row.get("clip") or row.get("file") or "").strip()
+        cat = (row.get("category") or "").strip()
+        if not key or not cat:
+            raise ValueError(f"{path}, line {line}: needs a 'clip' (or 'file') and a 'category' "
+                             "value")  # fmt: skip
+        if key in table:
+            raise ValueError(f"{path}, line {line}: {key!r} is listed twice")
+        table[key] = cat
+    if not table:
+        raise ValueError(f"{path}: no rows (columns 'clip' or 'file', and 'category')")
+    return table
+
+
+def table_category(table: Mapping[str, str], clip_id: str, path: Path, root: Path | None,
+                   cmap: CategoryMap | None) -> tuple[str, str, str] | None:  # fmt: skip
+    """``(label, category, key)`` of a clip from a :func:`load_clip_categories` table (matched
+    by ``key``: clip id, path relative to ``root``, file name or stem), ``None`` when it is not
+    listed. The
+    value is the label; the map translates it, and a value the map does not know is kept as
+    the category (lower case, spaces as ``-``)."""
+    keys = [clip_id, path.name, path.stem]
+    if root is not None:
+        try:
+            keys.insert(1, path.relative_to(root).as_posix())
+        except ValueError:
+            pass
+    key = next((k for k in keys if k in table), None)
+    if key is None:
+        return None
+    value = table[key]
+    cat = cmap.category(value) if cmap is not None else UNKNOWN
+    if cat == UNKNOWN:
+        cat = "-".join(value.lower().split())
+    return value, cat, key
 
 
 def load_category_map(path: str | os.PathLike) -> CategoryMap:
@@ -437,6 +496,9 @@ def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex
         label = _bandai_label(path, stop)
     if label is None and fmt == "deepmimic":
         label = stem
+    if label is None:
+        label = _folder_label(path, stop, cmap)
+        from_csv = bool(label)  # (a folder name is the user's own label, as a clips.csv one)
     label = label or ""
     if cmap is not None:
         category = cmap.category(label)
@@ -452,6 +514,28 @@ def _make_ref(path: Path, fmt: str, top: str, stop: Path | None, csvs: _CsvIndex
     return ClipRef(clip_id=clip_id, path=path, fmt=fmt, category=category, asf_path=asf_path,
                    label=label, person=person,
                    group=clip_group(clip_id, path.stem, person))  # fmt: skip
+
+
+def _folder_label(path: Path, stop: Path | None, cmap: CategoryMap | None) -> str | None:
+    """A clip without a label anywhere else takes a folder's name as its label: the nearest
+    folder between it and the searched root (the root itself excluded; a single file outside a
+    search: its own folder) whose name the map knows (``walk/subject01/take.bvh`` -> ``walk``);
+    ``None`` when there is none or no map (folder names such as ``bvh`` or ``takes`` are not
+    categories)."""
+    if cmap is None:
+        return None
+    if stop is None:
+        folders = [path.parent]
+    else:
+        try:
+            rel = path.parent.relative_to(stop)
+        except ValueError:
+            rel = Path()
+        folders = [stop.joinpath(*rel.parts[:k]) for k in range(len(rel.parts), 0, -1)]
+    for folder in folders:
+        if cmap.category(folder.name) != UNKNOWN:
+            return folder.name
+    return None
 
 
 def find_clips(root: str | Path, categories: CategoryMap | None = None) -> list[ClipRef]:

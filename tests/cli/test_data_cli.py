@@ -180,6 +180,16 @@ def test_eval_kin_reports_json_table_and_plot(built: Path, tmp_path: Path, capsy
     tta = json.loads(js.read_text())
     assert tta["tta"] == "mirror" and tta["frames"] == fig["frames"]
     assert tta["PEL_MPJPE_mm"] != pytest.approx(fig["PEL_MPJPE_mm"], rel=1e-4)
+    # the evaluation interface of every dataset command: --split all, --category GLOB
+    assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
+                 "--split", "all", "--json", str(js)]) == 0  # fmt: skip
+    every = json.loads(js.read_text())
+    assert every["frames"] > fig["frames"]  # (the fixture's training clip joins)
+    cats = sorted(every["categories"])
+    assert len(cats) >= 2
+    assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
+                 "--split", "all", "--category", cats[0], "--json", str(js)]) == 0  # fmt: skip
+    assert sorted(json.loads(js.read_text())["categories"]) == [cats[0]]
     assert main(["kin", "eval", "--model", str(tmp_path / "none.pt"), "--data", str(built)]) == 2
     assert "none.pt" in capsys.readouterr().err
 

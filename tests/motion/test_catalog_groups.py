@@ -201,3 +201,43 @@ def test_shared_corpus_groups_and_categories(cmap: CategoryMap) -> None:
     assert labels["hdm05/HDM_bd_squat1Reps_001_120"] == "squat1Reps"
     assert labels["bandai_namco/dataset-1_dash_active_001"] == "dash"
     assert json.dumps(sorted(cmap.vocabulary))  # plain strings
+
+
+def test_clips_without_a_label_take_their_folders_name(tmp_path: Path, cmap: CategoryMap) -> None:
+    """One's own clips sorted into folders by motion get categories without a clips.csv."""
+    root = tmp_path / "mine"
+    for rel in ("walk/subject01/t1.bvh", "Run/t2.bvh", "session/t3.bvh", "t4.bvh"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(BVH)
+    got = {r.path.name: (r.category, r.label) for r in find_clips(root, cmap)}
+    assert got == {"t1.bvh": ("walk", "walk"), "t2.bvh": ("run", "Run"),
+                   "t3.bvh": ("unknown", ""), "t4.bvh": ("unknown", "")}  # fmt: skip
+    # without a map a folder's name is no category (it may be "bvh" or "takes")
+    assert {r.category for r in find_clips(root)} == {"unknown"}
+
+
+def test_a_users_category_table_overrides_labels(tmp_path: Path, capsys,
+                                                 cmap: CategoryMap) -> None:  # fmt: skip
+    """``grip data build --categories FILE.csv``: clip -> category, matched by clip id, path,
+    file name or stem; the map translates known names, others are kept; bad tables are named."""
+    from grip.cli.data import scan_motions
+    from grip.motion.catalog import load_clip_categories
+
+    root = tmp_path / "mine"
+    (root / "walk").mkdir(parents=True)
+    for name in ("a", "b", "c", "d"):
+        (root / "walk" / f"{name}.bvh").write_text(BVH)
+    table_csv = tmp_path / "cats.csv"
+    table_csv.write_text("clip,category\nwalk/a,Running\nwalk/b.bvh,sit-stand\n"
+                         "c,Juggling Balls\nnowhere,walk\n")  # fmt: skip
+    table = load_clip_categories(table_csv)
+    clips, _ = scan_motions([root], None, cmap, table)
+    got = {Path(c.path).stem: (c.category, c.label) for c in clips}
+    assert got == {"a": ("run", "Running"), "b": ("sit-stand", "sit-stand"),
+                   "c": ("juggling-balls", "Juggling Balls"), "d": ("walk", "walk")}
+    assert "1 listed clip(s) not found" in capsys.readouterr().err
+    for text, why in (("clip,label\nx,walk\n", "line 2"), ("clip,category\n", "no rows"),
+                      ("clip,category\nx,walk\nx,run\n", "twice")):  # fmt: skip
+        table_csv.write_text(text)
+        with pytest.raises(ValueError, match=why):
+            load_clip_categories(table_csv)

@@ -192,5 +192,10 @@ def test_stratified_split_of_two_unequal_groups_picks_the_nearer_one() -> None:
         test = stratified_test_groups(sizes, strata, 0.2, seed)
         assert "s/small" in test and "s/big" not in test
         assert sum(g.startswith("t/") for g in test) == 1  # 5 of 20 is nearest to 4
+    # 0 and 1: everything on one side (grip data build --test-fraction 0|1), single-group
+    # strata included
+    assert stratified_test_groups(sizes | {"u/alone": 3}, strata | {"u/alone": "u"}, 0.0, 0) == []
+    assert stratified_test_groups(sizes | {"u/alone": 3}, strata | {"u/alone": "u"}, 1.0, 0) \
+        == sorted([*sizes, "u/alone"])  # fmt: skip
     with pytest.raises(ValueError, match="strata need groups"):
         make_split(["a"], strata={"a": "s"})
