@@ -102,6 +102,11 @@ class MjcfConfig:
             constant must be at least twice ``timestep_s``.
         contact_solimp: ``(dmin, dmax, width_m)`` impedance of those contacts.
         insole_sensors: Add a ``touch`` sensor per insole cell site (``touch_<L|R>_<k>``).
+        foot_force_sensors: Add a net contact-force sensor per foot (``grf_L``, ``grf_R``:
+            the contacts of the ankle's subtree with the world body, i.e. the
+            floor, terrain and props; force, torque and point in the world frame), from which
+            :class:`grip.sim.model.FootContacts` reads the ground reaction force and centre of
+            pressure in C instead of a Python loop over the contacts.
         imu_sensors: Add ``framequat``, ``gyro`` and ``accelerometer`` sensors per IMU site
             (``imu_<part>_quat|_gyro|_acc``; the accelerometer measures specific force, i.e.
             includes gravity, in the site frame).
@@ -128,6 +133,7 @@ class MjcfConfig:
     contact_solref: tuple[float, float] = (0.02, 1.0)
     contact_solimp: tuple[float, float, float] = (0.9, 0.95, 0.001)
     insole_sensors: bool = True
+    foot_force_sensors: bool = True
     imu_sensors: bool = True
     floor: bool = True
     actuator: str = "position"
@@ -184,6 +190,11 @@ def imu_site_names() -> list[str]:
 def insole_site_names() -> list[list[str]]:
     """Insole cell site names ``insole_<L|R>_<k>``, nested ``[2][16]`` (left foot first)."""
     return [[f"insole_{s}_{k}" for k in range(sk.N_INSOLE_CELLS)] for s in FOOT_SIDES]
+
+
+def foot_force_sensor_names() -> list[str]:
+    """Net foot contact-force sensor names (``MjcfConfig.foot_force_sensors``), left first."""
+    return [f"grf_{s}" for s in FOOT_SIDES]
 
 
 def touch_sensor_names() -> list[list[str]]:
@@ -473,12 +484,18 @@ def build_mjcf(body: BodyModel | BodyParams | None = None, cfg: MjcfConfig | Non
                      gainprm=_num(kp), biastype="affine",
                      biasprm=f"0 {_num(-kp)} {_num(-kv)}")  # fmt: skip
 
-    if cfg.insole_sensors or cfg.imu_sensors:
+    if cfg.insole_sensors or cfg.imu_sensors or cfg.foot_force_sensors:
         sensor = _sub(root, "sensor")
         if cfg.insole_sensors:
             for sites, touches in zip(insole_site_names(), touch_sensor_names(), strict=True):
                 for site, touch in zip(sites, touches, strict=True):
                     _sub(sensor, "touch", name=touch, site=site)
+        if cfg.foot_force_sensors:
+            for side, name in zip(FOOT_SIDES, foot_force_sensor_names(), strict=True):
+                _sub(sensor, "contact", name=name,
+                     subtree1=sk.JOINT_NAMES[sk.FOOT_BODY[f"{side}_Foot"]],
+                     body2="world", data="force torque pos", reduce="netforce",
+                     num="1")  # fmt: skip
         if cfg.imu_sensors:
             for site in imu_site_names():
                 _sub(sensor, "framequat", name=f"{site}_quat", objtype="site", objname=site)

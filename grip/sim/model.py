@@ -18,6 +18,7 @@ from grip.core.mjcf import (
     ROOT_JOINT,
     MjcfConfig,
     build_mjcf,
+    foot_force_sensor_names,
     hinge_names,
     imu_site_names,
     insole_site_names,
@@ -186,16 +187,28 @@ def insole_forces(data: mujoco.MjData, index: HumanoidIndex) -> np.ndarray:
 class FootContacts:
     """Ground reaction force and centre of pressure of each foot from MuJoCo's contacts.
 
-    Resolves once which geoms belong to each foot (ankle and toe bodies), then per call sums
-    the forces of the foot-ground contacts (``mj_contactForce``, turned to the world frame)
-    acting on each foot; contacts with other body parts are not ground reaction forces.
+    With the model's net foot-force sensors (``MjcfConfig.foot_force_sensors``, the default)
+    MuJoCo sums the contacts of each foot's subtree with the world body in C; the centre of
+    pressure is the point on the contact's level where the net wrench has no horizontal moment
+    (equal to the vertical-force-weighted mean of the contact points where they lie at one
+    height, as on a floor or a box top). Without them (``loop=True`` or a model built without),
+    the foot-ground contacts are summed here (``mj_contactForce``, turned to the world frame;
+    the CoP weighted by the normal forces); contacts with other body parts are not ground
+    reaction forces either way.
 
     Args:
         model: The humanoid model.
         index: Its :class:`HumanoidIndex`.
+        loop: Sum the contacts in Python even when the sensors exist (the reference the
+            sensors are tested against).
     """
 
-    def __init__(self, model: mujoco.MjModel, index: HumanoidIndex) -> None:
+    def __init__(self, model: mujoco.MjModel, index: HumanoidIndex, loop: bool = False) -> None:
+        self._sensor_adr = None
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, n)
+               for n in foot_force_sensor_names()]  # fmt: skip
+        if not loop and min(ids) >= 0:
+            self._sensor_adr = [int(model.sensor_adr[i]) for i in ids]
         self._side = np.full(model.ngeom, -1, dtype=np.int64)
         for s, side in enumerate(("L_Foot", "R_Foot")):
             for joint in (sk.FOOT_BODY[side], sk.TOE_BODY[side]):
@@ -215,6 +228,8 @@ class FootContacts:
         mujoco.mj_fwdActuation(m, data)
         mujoco.mj_fwdAcceleration(m, data)
         mujoco.mj_fwdConstraint(m, data)
+        if self._sensor_adr is not None:
+            return self._from_sensors(data)
         grf = np.zeros((2, 3))
         moment = np.zeros((2, 3))
         fz = np.zeros(2)
@@ -234,6 +249,20 @@ class FootContacts:
         cop = np.full((2, 3), np.nan)
         on = fz > 1e-9
         cop[on] = moment[on] / fz[on, None]
+        return grf, cop
+
+    def _from_sensors(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`__call__` from the net foot-force sensors (the constraint forces solved)."""
+        mujoco.mj_sensorAcc(self._model, data)
+        s = data.sensordata
+        grf = np.empty((2, 3))
+        cop = np.full((2, 3), np.nan)
+        for k, a in enumerate(self._sensor_adr):
+            w = s[a : a + 9]  # the wrench the foot exerts on the world, about the point w[6:9]
+            grf[k] = -w[:3]
+            fz = grf[k, 2]
+            if fz > 1e-9:  # the point on its level where the GRF's horizontal moment vanishes
+                cop[k] = (w[6] + w[4] / fz, w[7] - w[3] / fz, w[8])
         return grf, cop
 
 

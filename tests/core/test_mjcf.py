@@ -148,7 +148,8 @@ def test_general_and_position_actuators_give_the_same_torques(body) -> None:
 
 
 def test_config_switches(body) -> None:
-    bare = MjcfConfig(insole_sensors=False, imu_sensors=False, floor=False, sole_pads=False)
+    bare = MjcfConfig(insole_sensors=False, imu_sensors=False, floor=False, sole_pads=False,
+                      foot_force_sensors=False)  # fmt: skip
     model = mujoco.MjModel.from_xml_string(build_mjcf(body, bare))
     assert model.nsensor == 0
     assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor") == -1
@@ -158,7 +159,7 @@ def test_config_switches(body) -> None:
     g = next(g for g in body.geoms if g.body == sk.FOOT_BODY["L_Foot"])
     np.testing.assert_allclose(box.size, g.size)
     full = mujoco.MjModel.from_xml_string(build_mjcf(body))
-    assert full.nsensor == 32 + 3 * 8
+    assert full.nsensor == 32 + 3 * 8 + 2  # touch cells, IMUs, the feet's net contact forces
     assert all(full.site(n).id >= 0 for row in insole_site_names() for n in row)
 
 

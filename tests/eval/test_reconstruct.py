@@ -140,6 +140,30 @@ def test_reading_foot_forces_does_not_change_the_simulation(clip) -> None:
     np.testing.assert_array_equal(final[0], final[1])
 
 
+def test_foot_force_sensors_give_the_contact_sums(clip) -> None:
+    """The net contact-force sensors (C) and the loop over the contacts (Python) agree: the GRF
+    to rounding, the CoP within a millimetre (the sensors' point has no horizontal moment; the
+    loop weights the contact points by their normal forces, which differ where the points do
+    not lie at one height)."""
+    from grip.sim.model import FootContacts
+
+    h = GripPipeline(_Runner(0.0), None).humanoid(clip.body, None)
+    sensors, loop = FootContacts(h.model, h.index), FootContacts(h.model, h.index, loop=True)
+    assert sensors._sensor_adr is not None and loop._sensor_adr is None
+    h.reset(clip.gt_qpos[0], clip.gt_qvel[0])
+    contact = 0
+    for t in range(1, min(clip.n_frames, 150)):
+        h.set_targets(clip.est_hinge[t])
+        h.step()
+        (g1, c1), (g2, c2) = sensors(h.data), loop(h.data)
+        np.testing.assert_allclose(g1, g2, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(np.isnan(c1), np.isnan(c2))
+        on = ~np.isnan(c2[:, 0])
+        contact += int(on.sum())
+        np.testing.assert_allclose(c1[on], c2[on], atol=1e-3)
+    assert contact > 100  # (the feet were on the ground)
+
+
 class _CountingRunner(_Runner):
     """Counts its decisions; a different action at each."""
 
