@@ -54,7 +54,8 @@ ALLOWED: dict[str, tuple[str, ...] | str] = {
     "policies": ("numpy", "torch", "stable_baselines3", "gymnasium.spaces", "grip.core",
                  "grip.config", "grip.nn", "grip.task"),
     "grip.baselines": ("numpy", "mujoco", "grip.core", "grip.config", "grip.sim", "prism_tools"),
-    "grip.export": ("numpy", "mujoco", "grip.core", "grip.sim", "grip.kinematics.features"),
+    "grip.export": ("numpy", "mujoco", "grip.core", "grip.sim", "grip.kinematics.features",
+                    "grip.assets"),  # (the viewer page's three.js files)
     # inference without a training task: sensors -> KinematicsNet -> controller -> humanoid
     "grip.player": ("numpy", "grip.core", "grip.config", "grip.sim", "grip.kinematics.features",
                     "grip.task"),

@@ -1,4 +1,4 @@
-"""``grip export``: write reconstructions as BVH, GLB, MP4 and PNG files."""
+"""``grip export``: write reconstructions as BVH, GLB, MP4, PNG and AMASS-style npz files."""
 
 from __future__ import annotations
 
@@ -11,7 +11,9 @@ from pathlib import Path
 from grip.cli.common import positive_float
 from grip.cli.recordings import add_limit_arguments, limits_from_args
 
-FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")
+FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png", "amass", "html")
+DEFAULT_FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")
+"""What a plain ``grip export`` writes; the data formats (amass) are asked for by name."""
 
 _DEFAULT_HEIGHT_M = 1.70
 _DEFAULT_MASS_KG = 70.0
@@ -43,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grip export`` on the ``grip`` subparsers."""
     p = sub.add_parser(
         "export",
-        help="write reconstructions as BVH, GLB, MP4 and PNG files",
+        help="write reconstructions as BVH, GLB, MP4, PNG and AMASS-style npz files",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Export reconstructions (.npz files written by GRIP or a baseline) for other tools.\n"
@@ -54,6 +56,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  mp4  STEM.mp4            MuJoCo offscreen rendering (needs OpenGL: MUJOCO_GL=egl\n"
             "                           is set when unset; ground truth as a green ghost)\n"
             "  png  STEM.png            trajectory, GRF vs insoles, contacts, falls, errors\n"
+            "  amass STEM_amass.npz     SMPL-order axis-angle poses (T, 72), trans, z up, m:\n"
+            "                           GRIP's SMPL-topology body, not SMPL (docs/exports.md)\n"
+            "  html STEM.html           interactive 3D page, one self-contained file (the body,\n"
+            "                           --gt as a ghost, GRF vs insoles; 'grip view' compares\n"
+            "                           several methods; docs/viewer.md)\n"
             "The body is the subject of --gt (its height and mass), overridden by\n"
             "--body-height/--body-mass, else 1.70 m / 70 kg. A format that fails (e.g. mp4\n"
             "without OpenGL) or a RECON.npz that cannot be read is reported and the others\n"
@@ -69,9 +76,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--formats",
         type=_formats,
-        default=FORMATS,
+        default=DEFAULT_FORMATS,
         metavar="LIST",
-        help="comma-separated subset of " + ",".join(FORMATS) + " (default: all)",
+        help="comma-separated subset of " + ",".join(FORMATS) + " (default: "
+        + ",".join(DEFAULT_FORMATS) + ")",
     )
     p.add_argument("--gt", type=Path, default=None, metavar="RECORDING",
                    help="PRISM-format recording the reconstructions were made from: ground "
@@ -156,13 +164,14 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
             "overwrite each other (export them into separate --out folders)"
         )
 
-    gt = None
+    gt = recording = None
     if args.gt is not None:
         from grip.kinematics.features import ground_truth
         from prism_tools.io import load_recording
 
         try:
-            gt = ground_truth(load_recording(args.gt))
+            recording = load_recording(args.gt)
+            gt = ground_truth(recording)
         except (OSError, ValueError, KeyError) as e:
             raise CliError(f"{args.gt}: cannot read the recording ({e})") from e
         for path, recon in recons:
@@ -192,9 +201,9 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         print(f"{path}: {recon.name} ({recon.method}), {recon.n_frames} frames at "
               f"{recon.fps:g} Hz")  # fmt: skip
         mismatch_mm = 1000.0 * fk_mismatch_m(recon, body)
-        if mismatch_mm > 10.0 and {"bvh", "glb", "mp4"} & set(args.formats):
+        if mismatch_mm > 10.0 and {"bvh", "glb", "mp4", "amass"} & set(args.formats):
             print(f"  note: the body model's joints differ from the reconstruction's by up to "
-                  f"{mismatch_mm:.0f} mm (other subject?); BVH/GLB/MP4 show the body model "
+                  f"{mismatch_mm:.0f} mm (other subject?); BVH/GLB/MP4/AMASS show the body model "
                   "with the reconstruction's rotations and pelvis trajectory")  # fmt: skip
         for fmt in args.formats:
             if fmt == "mp4" and video_broken is not None:
@@ -202,7 +211,7 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
                 continue
             try:
                 for line in _export_one(fmt, recon, args, stem, body, gt, video_cfg,
-                                        glb_frames[path]):  # fmt: skip
+                                        glb_frames[path], recording):  # fmt: skip
                     print(f"  {line}")
             except ExportError as e:
                 failures += 1
@@ -222,9 +231,18 @@ def cmd_export(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
 
 
 def _export_one(fmt: str, recon, args: argparse.Namespace, stem: str, body, gt, video_cfg,
-                frames: list[int]) -> Iterator[str]:  # fmt: skip
-    """Write one format of one reconstruction, yielding a line to print per file written."""
+                frames: list[int], recording=None) -> Iterator[str]:  # fmt: skip
+    """Write one format of one reconstruction, yielding a line to print per file written
+    (``recording``: the --gt recording, for the html page's insoles and props)."""
     out: Path = args.out
+    if fmt == "html":
+        from grip.assets import ASSETS
+        from grip.export.html import load_web_assets, write_viewer
+
+        page = write_viewer(recon, out / f"{stem}.html", load_web_assets(ASSETS / "web"),
+                            recording=recording, body=body)  # fmt: skip
+        yield f"wrote {page.path} ({page.n_bytes / 1e6:.2f} MB, {len(page.labels)} bodies)"
+        return
     if fmt == "bvh":
         from grip.export.bvh import write_bvh
 
@@ -250,6 +268,12 @@ def _export_one(fmt: str, recon, args: argparse.Namespace, stem: str, body, gt, 
             raise _NoRenderBackend(str(e)) from e
         ghost = ", ground truth in green" if gt is not None else ""
         yield f"wrote {out / f'{stem}.mp4'} ({n} frames at {video_cfg.fps:g} fps{ghost})"
+        return
+    if fmt == "amass":
+        from grip.export.amass import write_amass
+
+        path = write_amass(recon, out / f"{stem}_amass.npz", body)
+        yield f"wrote {path} (SMPL joint order, axis-angle, z up, m; GRIP's body, not SMPL)"
         return
     if fmt == "png":
         from grip.export.summary import write_summary_png

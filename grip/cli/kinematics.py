@@ -19,7 +19,7 @@ BASELINE_NAMES: tuple[str, ...] = ("transpose", "pip")
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grip kin`` and its subcommands on the ``grip`` subparsers."""
-    from grip.cli.common import add_group, add_output_arguments
+    from grip.cli.common import PRECISIONS, add_group
 
     ksub = add_group(sub, "kin", "train, evaluate and export KinematicsNet (or a baseline's "
                      "kinematics nets)", "The kinematics estimators: KinematicsNet (GRIP's), and "
@@ -77,24 +77,62 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_eval_parser(ksub)
     x = ksub.add_parser(
         "export",
-        help="write a small inference-only copy of a KinematicsNet or baseline checkpoint",
-        description="Drop the optimiser state and store the weights as float16 (or int8 with "
-        "a scale per row, or float32): the form in which the default models ship "
-        "(grip/assets/kinematics_default.pt, transpose4.pt, pip4.pt).",
+        help="write a small inference-only copy of a KinematicsNet or baseline checkpoint, or "
+        "KinematicsNet's streaming step as ONNX",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "By the suffix of --out:\n"
+            "  FILE.pt    drop the optimiser state and store the weights as float16 (or int8\n"
+            "             with a scale per row, or float32): the form in which the default\n"
+            "             models ship (grip/assets/kinematics_default.pt, transpose4.pt,\n"
+            "             pip4.pt)\n"
+            "  FILE.onnx  KinematicsNet's streaming step for use outside Python, one frame at a\n"
+            "             time: FILE.onnx maps 'features' (B, F) raw sensor features of one\n"
+            "             frame (the input normaliser is inside the graph) and the LSTM states\n"
+            "             'h', 'c' (4 L, B, H) to 'outputs' (B, 249) = lp|fp|fa|lv and 'h_out',\n"
+            "             'c_out'; FILE_init.onnx maps 'first_state' (B, 249), the calibration\n"
+            "             pose in the output layout, to the initial 'h', 'c'. float32, no\n"
+            "             test-time augmentation; KinematicsNet only (not the baselines). Needs\n"
+            "             the onnx package (docs/exports.md: layouts, running with onnxruntime)"
+        ),
         epilog="example: grip kin export runs/kin/best.pt --out grip/assets/kinematics_default.pt\n"
-        "         grip kin export runs/tp4/best.pt --out grip/assets/transpose4.pt",
+        "         grip kin export runs/tp4/best.pt --out grip/assets/transpose4.pt\n"
+        "         grip kin export grip/assets/kinematics_default.pt --out kin.onnx",
     )
-    x.add_argument("checkpoint", type=Path, help="training checkpoint (RUN/best.pt)")
-    add_output_arguments(x, "fp16", "weight storage (default fp16; int8 halves the file again)")
+    x.add_argument("checkpoint", type=Path,
+                   help="training checkpoint (RUN/best.pt) or an export of one")  # fmt: skip
+    x.add_argument("--out", required=True, type=Path, metavar="FILE",
+                   help="output, written atomically: FILE.pt (an inference copy) or FILE.onnx "
+                   "(the ONNX step, and FILE_init.onnx beside it)")  # fmt: skip
+    x.add_argument("--precision", choices=PRECISIONS, default=None,
+                   help="weight storage of a .pt (default fp16; int8 halves the file again); an "
+                   "ONNX graph is fp32")  # fmt: skip
     x.set_defaults(func=cmd_export)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
     from grip.cli.common import write_artifact
-    from grip.kinematics.train import export_for_inference
+    from grip.cli.errors import CliError
 
-    return write_artifact(args.out, lambda: export_for_inference(args.checkpoint, args.out,
-                                                                 precision=args.precision))
+    if args.out.suffix.lower() != ".onnx":
+        from grip.kinematics.train import export_for_inference
+
+        return write_artifact(args.out, lambda: export_for_inference(
+            args.checkpoint, args.out, precision=args.precision or "fp16"))  # fmt: skip
+    if args.precision not in (None, "fp32"):
+        raise CliError(f"--precision {args.precision}: an ONNX graph holds fp32 weights")
+
+    def write() -> tuple[int, str]:
+        from grip.kinematics.onnx import export_kinematics_onnx
+
+        try:
+            (_, size), (first, first_size) = export_kinematics_onnx(args.checkpoint, args.out)
+        except ImportError as e:
+            raise CliError(str(e)) from e
+        return size, (f", the ONNX step; and {first} ({first_size / 1e6:.1f} MB), its initial "
+                      "LSTM states from the calibration pose")
+
+    return write_artifact(args.out, write)
 
 
 def cmd_train(args: argparse.Namespace) -> int:

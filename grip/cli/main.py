@@ -12,7 +12,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from grip.cli import bench, body, data, demo, export, kinematics, policy
+from grip.cli import bench, body, data, demo, export, kinematics, policy, view
 from grip.cli import reconstruct as reconstruct_cmd
 from grip.cli.errors import CliError
 
@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
     sub.required = True
-    for module in (data, body, kinematics, policy, reconstruct_cmd, bench, demo, export):
+    for module in (data, body, kinematics, policy, reconstruct_cmd, bench, demo, export, view):
         module.add_parser(sub)
     return parser
 

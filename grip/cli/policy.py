@@ -18,7 +18,7 @@ from grip.cli.recordings import (
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grip policy`` and its subcommands on the ``grip`` subparsers."""
-    from grip.cli.common import add_group, add_output_arguments
+    from grip.cli.common import PRECISIONS, add_group, add_output_arguments
 
     psub = add_group(sub, "policy", "train, evaluate, export, combine and distil DynamicsNet "
                      "policies", "The controller (DynamicsNet, PPO + AMP) that drives the MuJoCo "
@@ -148,16 +148,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     x = psub.add_parser(
         "export",
-        help="write the small inference file of a 'grip policy train' run",
-        description="Policy MLP (fp16), observation normaliser, value network and AMP "
-        "discriminator in one file loaded with torch.load(weights_only=True): a policy file of "
-        "one member, the form every command that takes --policy reads.",
-        epilog="example: grip policy export runs/policy --out runs/policy_fp16.pt",
+        help="write the small inference file of a 'grip policy train' run, or an ONNX graph of "
+        "a run or policy file",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "By the suffix of --out:\n"
+            "  FILE.pt    policy MLP (fp16), observation normaliser, value network and AMP\n"
+            "             discriminator of a run in one file loaded with\n"
+            "             torch.load(weights_only=True): a policy file of one member, the form\n"
+            "             every command that takes --policy reads\n"
+            "  FILE.onnx  an ONNX graph of a run or of a policy file (one policy or an\n"
+            "             ensemble): input 'obs' (B, N) float32, the observation parts\n"
+            "             concatenated in the order of the metadata's obs_keys (obs_slices:\n"
+            "             their columns); output 'action' (B, A) float32, the deterministic\n"
+            "             action clipped to [-1, 1] (an ensemble: the mean of its members', each\n"
+            "             member with its own normaliser). The observation normalisation is\n"
+            "             inside the graph; float32 weights; no discriminator, no value network.\n"
+            "             Needs the onnx package (docs/exports.md: running it with onnxruntime)"
+        ),
+        epilog="example: grip policy export runs/policy --out runs/policy_fp16.pt\n"
+        "         grip policy export grip/assets/policy_default.pt --out policy.onnx",
     )
-    x.add_argument("run", type=Path, help="'grip policy train' run folder")
-    add_output_arguments(x, "fp16", "weights of the policy, value and discriminator networks: "
-                         "fp16 (default), fp32, or int8 with a float32 scale per row (about a "
-                         "third of the fp16 file; what an ensemble stores)")  # fmt: skip
+    x.add_argument("run", type=Path, metavar="RUN|POLICY",
+                   help="'grip policy train' run folder; with --out FILE.onnx also a policy "
+                   "file (e.g. grip/assets/policy_default.pt)")  # fmt: skip
+    x.add_argument("--out", required=True, type=Path, metavar="FILE",
+                   help="output, written atomically: FILE.pt (a policy file) or FILE.onnx (an "
+                   "ONNX graph)")  # fmt: skip
+    x.add_argument("--precision", choices=PRECISIONS, default=None,
+                   help="weights of the policy, value and discriminator networks of a .pt: fp16 "
+                   "(default), fp32, or int8 with a float32 scale per row (about a third of the "
+                   "fp16 file; what an ensemble stores); an ONNX graph is fp32")  # fmt: skip
     x.set_defaults(func=cmd_export)
 
     c = psub.add_parser(
@@ -263,18 +284,55 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from grip.cli.common import write_artifact
-    from grip.core.limits import read_json_file
+    from grip.cli.errors import CliError
     from policies.runner import export_policy
 
-    def write() -> int:
+    onnx = args.out.suffix.lower() == ".onnx"
+    if not args.run.exists():
+        raise CliError(f"{args.run}: no such run folder or policy file")
+    if onnx and args.precision not in (None, "fp32"):
+        raise CliError(f"--precision {args.precision}: an ONNX graph holds fp32 weights")
+    if args.run.is_file() and not onnx:
+        raise CliError(f"{args.run} is a policy file, already the inference file: --out "
+                       "FILE.onnx converts it to ONNX ('grip policy combine --precision' "
+                       "stores it at another precision)")  # fmt: skip
+
+    def write_pt(out: Path, precision: str) -> int:
+        from grip.core.limits import read_json_file
+
         state = read_json_file(args.run / "checkpoint" / "state.json", "training state")
         hist = state.get("history")
         last = hist[-1] if isinstance(hist, list) and hist and isinstance(hist[-1], dict) else {}
-        return export_policy(args.run, args.out, precision=args.precision,
+        return export_policy(args.run, out, precision=precision,
                              info={"timesteps": last.get("timesteps"),
                                    "wall_s": state.get("wall_s")})  # fmt: skip
 
-    return write_artifact(args.out, write)
+    if not onnx:
+        return write_artifact(args.out, lambda: write_pt(args.out, args.precision or "fp16"))
+
+    def write_onnx() -> tuple[int, str]:
+        import tempfile
+
+        from grip.nn.onnx import read_metadata
+        from policies.onnx import export_policy_onnx
+
+        try:
+            if args.run.is_dir():  # the run's policy file first, at full precision
+                with tempfile.TemporaryDirectory() as tmp:
+                    write_pt(Path(tmp) / "policy.pt", "fp32")
+                    size, n = export_policy_onnx(Path(tmp) / "policy.pt", args.out,
+                                                 source=str(args.run))  # fmt: skip
+            else:
+                size, n = export_policy_onnx(args.run, args.out)
+            meta = read_metadata(args.out)
+        except ImportError as e:
+            raise CliError(str(e)) from e
+        width = sum(json.loads(meta["obs_sizes"]).values())
+        what = "one policy" if n == 1 else f"an ensemble of {n} policies"
+        return size, (f", ONNX of {what}: obs ({width},) in the order "
+                      f"{', '.join(json.loads(meta['obs_keys']))} -> action in [-1, 1]")
+
+    return write_artifact(args.out, write_onnx)
 
 
 def cmd_combine(args: argparse.Namespace) -> int:

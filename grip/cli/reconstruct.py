@@ -59,7 +59,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=int, default=0,
                    help="crop each recording to its first N frames (0: all)")
     p.add_argument("--formats", default="npz",
-                   help="comma-separated: npz (always), bvh, glb, mp4, png (default npz)")
+                   help="comma-separated: npz (always), bvh, glb, mp4, png, amass, html "
+                   "(default npz)")  # fmt: skip
     p.add_argument("--fill-gaps", type=int, default=10, metavar="N",
                    help="interpolate sensor dropouts (NaN runs) of up to N frames, listed in "
                         "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
@@ -252,9 +253,11 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     limits_from_args(args)  # also for the worker processes ($GRIP_LIMITS)
     formats = [f.strip() for f in args.formats.split(",") if f.strip()]
-    unknown = sorted(set(formats) - {"npz", "bvh", "glb", "mp4", "png"})
+    from grip.export import FORMATS
+
+    unknown = sorted(set(formats) - {"npz", *FORMATS})
     if unknown:
-        raise CliError(f"--formats: unknown {unknown}; use npz, bvh, glb, mp4, png")
+        raise CliError(f"--formats: unknown {unknown}; use npz, {', '.join(FORMATS)}")
     missing = [str(f) for f in args.recordings if not f.is_file()]
     if missing:
         raise CliError(f"no such recording file(s): {', '.join(missing)}")

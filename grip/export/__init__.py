@@ -9,6 +9,8 @@ module                       writes
 :mod:`grip.export.glb`       glTF binary meshes: one posed frame, or a strobe of every Nth frame
 :mod:`grip.export.video`     MP4 rendered offscreen by MuJoCo (needs an OpenGL backend)
 :mod:`grip.export.summary`   PNG overview: trajectory, GRF vs insoles, contacts, falls, errors
+:mod:`grip.export.amass`     AMASS-style npz: SMPL-order axis-angle poses, trans (our body)
+:mod:`grip.export.html`      one self-contained interactive 3D page (three.js, ``grip view``)
 ===========================  ====================================================================
 
 Shared conventions
@@ -47,7 +49,7 @@ from grip.kinematics.features import ground_truth
 __all__ = ["FORMATS", "export_reconstruction"]
 
 
-FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png")
+FORMATS: tuple[str, ...] = ("bvh", "glb", "mp4", "png", "amass", "html")
 
 
 def export_reconstruction(
@@ -65,7 +67,7 @@ def export_reconstruction(
     Args:
         recon: The reconstruction.
         out_dir: Folder; files are ``<stem>.bvh``, ``<stem>_strobe.glb``, ``<stem>.mp4``,
-            ``<stem>.png``.
+            ``<stem>.png``, ``<stem>_amass.npz``, ``<stem>.html``.
         formats: Any of :data:`FORMATS`.
         stem: File name stem.
         recording: The source recording, if any: its subject's body is used and its ground
@@ -104,6 +106,17 @@ def export_reconstruction(
 
                 write_video(recon, out / f"{stem}.mp4", body, gt=gt)
                 written.append(out / f"{stem}.mp4")
+            elif fmt == "amass":
+                from grip.export.amass import write_amass
+
+                written.append(write_amass(recon, out / f"{stem}_amass.npz", body))
+            elif fmt == "html":
+                from grip.assets import ASSETS
+                from grip.export.html import load_web_assets, write_viewer
+
+                page = write_viewer(recon, out / f"{stem}.html", load_web_assets(ASSETS / "web"),
+                                    recording=recording, body=body)  # fmt: skip
+                written.append(page.path)
             else:
                 from grip.export.summary import write_summary_png
 

@@ -84,13 +84,17 @@ def takes(tmp_path_factory):
 
 def test_outputs_of_different_inputs_never_share_a_name(takes, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["reconstruct", *map(str, takes), "--out", str(out), "--formats", "npz,bvh"]) == 0
+    assert main(["reconstruct", *map(str, takes), "--out", str(out), "--formats",
+                 "npz,bvh,amass,html"]) == 0  # fmt: skip
     printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     stems = [r["stem"] for r in summary["recordings"]]
     assert stems == ["a__subj001__take001_npz", "b__subj001__take001", "a__subj001__take001_pkl"]
-    assert sorted(p.name for p in out.glob("*.npz")) == sorted(f"{s}.npz" for s in stems)
+    assert sorted(p.name for p in out.glob("*.npz") if not p.name.endswith("_amass.npz")) \
+        == sorted(f"{s}.npz" for s in stems)  # fmt: skip
     assert sorted(p.name for p in out.glob("*.bvh")) == sorted(f"{s}.bvh" for s in stems)
+    assert sorted(p.name for p in out.glob("*.html")) == sorted(f"{s}.html" for s in stems)
+    assert len(list(out.glob("*_amass.npz"))) == 3
     assert "wrote 3 reconstruction(s)" in printed and "0 blow-up(s) recovered" in printed
     assert summary["blowups"] == sum(r["blowups"] for r in summary["recordings"]) == 0
     # a single input keeps its file name; a later input with that name gets another one
