@@ -118,6 +118,8 @@ class Reconstruction(PoseTrack):
         where = f"reconstruction {self.name!r} ({self.method})"
         if not self.fps > 0:
             raise ReconstructionError(f"{where}: fps must be positive, got {self.fps}")
+        if self.joint_pos is None:
+            raise ReconstructionError(f"{where}: no joint positions ('joint_pos')")
         t = np.shape(self.joint_pos)[0] if np.ndim(self.joint_pos) else 0
         if t < 1:
             raise ReconstructionError(f"{where}: no frames")
