@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from grip.cli.devices import add_import_parser
 from grip.cli.recordings import add_limit_arguments, limits_from_args
 
 # grip.dataset.build.SPLIT_MODES, not imported so that `grip --help` imports no numpy
@@ -161,6 +162,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="crop each recording to its first N frames")  # fmt: skip
     add_limit_arguments(r)
     r.set_defaults(func=cmd_reference)
+
+    add_import_parser(dsub)  # grip data import (grip/cli/devices.py)
 
 
 def default_category_map():
