@@ -146,6 +146,7 @@ def make_split(
     frames_per_chunk: int | Mapping[str, int] = 1000,
     groups: Mapping[str, str] | None = None,
     strata: Mapping[str, str] | None = None,
+    test_groups: Iterable[str] = (),
 ) -> dict[str, Any]:
     """Chunk-level random train/test split, in the shape of PRISM's statistics JSON.
 
@@ -190,6 +191,9 @@ def make_split(
             about ``test_fraction`` of its eligible chunks in test and at least one group on
             each side; a stratum of one group stays in train. Groups missing from ``strata``
             form one stratum of their own.
+        test_groups: Groups put in test whatever the draw (needs ``groups``), e.g. the one
+            performer whose clips have props; the draw then picks the other test groups among
+            the rest as usual.
 
     Returns:
         The split dict described above.
@@ -210,6 +214,9 @@ def make_split(
         raise ValueError(f"make_split: train_only ids not in chunk_ids: {unknown[:5]}")
     if strata is not None and groups is None:
         raise ValueError("make_split: strata need groups")
+    must = {str(g) for g in test_groups}
+    if must and groups is None:
+        raise ValueError("make_split: test_groups need groups")
     eligible = sorted(set(ids) - forced)
     n_test = min(len(eligible), math.ceil(test_fraction * len(eligible) - 1e-9))
     group_lists: dict[str, list[str]] | None = None
@@ -223,15 +230,20 @@ def make_split(
         members: dict[str, list[str]] = {}
         for i in ids:
             members.setdefault(str(groups[i]), []).append(i)
+        unknown = sorted(must - set(members))
+        if unknown:
+            raise ValueError(f"make_split: test_groups {unknown[:5]} are not groups of the "
+                             f"chunks (e.g. {sorted(members)[:3]})")  # fmt: skip
         blocked = {g for g, m in members.items() if forced.intersection(m)}
-        names = sorted(g for g in members if g not in blocked)
-        test_set = set()
-        test_groups = []
+        names = sorted(g for g in members if g not in blocked and g not in must)
+        test_set = {i for g in must for i in members[g]}  # (they count toward n_test)
+        test_groups = sorted(must)
         if strata is not None:
             sizes = {g: len(members[g]) for g in names}
-            test_groups = stratified_test_groups(sizes, {g: strata.get(g, "") for g in names},
-                                                 test_fraction, seed)  # fmt: skip
-            for g in test_groups:
+            drawn = stratified_test_groups(sizes, {g: strata.get(g, "") for g in names},
+                                           test_fraction, seed)  # fmt: skip
+            test_groups += drawn
+            for g in drawn:
                 test_set.update(members[g])
         else:
             perm = np.random.default_rng(seed).permutation(len(names))

@@ -95,6 +95,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "--split-by person (default 0.2; 0: all in train; 1: all in test, e.g. a "
                    "folder of one's own recordings to evaluate)")  # fmt: skip
     b.add_argument("--split-seed", type=int, default=42, help="seed of the split (default 42)")
+    b.add_argument("--test-group", action="append", default=[], metavar="GROUP",
+                   help="put this group in the test split whatever the draw (repeatable; a "
+                   "performer such as cmu/14 with --split-by person, 'grip data info' lists "
+                   "the groups; a clip id with --split-by clip); like the other split settings "
+                   "it re-splits a built folder without building a clip")  # fmt: skip
     b.add_argument("--categories", type=Path, default=None, metavar="FILE",
                    help="a .toml map of the sources' labels to shared categories (default: "
                    "configs/categories.toml), or a .csv table of clips and their categories "
@@ -265,7 +270,8 @@ def cmd_build(args: argparse.Namespace) -> int:
                       vary_body=not args.fixed_body, height_m=args.height, mass_kg=args.mass,
                       test_fraction=args.test_fraction, seed=args.seed,
                       split_seed=args.split_seed, split_by=args.split_by,
-                      zmp_filter=args.zmp_filter)  # fmt: skip
+                      zmp_filter=args.zmp_filter,
+                      test_groups=tuple(args.test_group))  # fmt: skip
     table = None
     if args.categories is not None and args.categories.suffix.lower() == ".csv":
         from grip.motion.catalog import load_clip_categories

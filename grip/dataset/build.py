@@ -59,7 +59,7 @@ _RESUME_HINT = "use another --out or the same options"
 SPLIT_MODES = ("person", "clip")
 """``split_by`` values: whole groups (performers, else the source's finest grouping) or whole
 clips per side."""
-SPLIT_SETTINGS = ("test_fraction", "split_seed", "split_by")
+SPLIT_SETTINGS = ("test_fraction", "split_seed", "split_by", "test_groups")
 PREDATED_SETTINGS: dict[str, object] = {"zmp_filter": False}
 """How a folder that predates a setting was built when that is not the setting's default now:
 a folder built before ``zmp_filter`` existed holds unfiltered motions, so resuming it needs
@@ -97,6 +97,9 @@ class BuildConfig:
             the feet where they alone carry the body (docs/insoles_zmp.md). On by default
             since the corpus was rebuilt with it; a folder that predates the setting was
             built without it (:data:`PREDATED_SETTINGS`).
+        test_groups: Groups put in the test split whatever the draw (``split_by="person"``:
+            e.g. ``cmu/14``, a performer whose clips have props; ``"clip"``: clip ids); the
+            draw picks the rest as usual.
     """
 
     noise_variants: int = 1
@@ -112,6 +115,7 @@ class BuildConfig:
     seed: int = 0
     split_by: str = "person"
     zmp_filter: bool = True
+    test_groups: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.split_by not in SPLIT_MODES:
@@ -305,7 +309,7 @@ def _load_done(out: Path) -> dict[str, ClipResult]:
 
 
 def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int,
-                  split_by: str = "person") -> dict:  # fmt: skip
+                  split_by: str = "person", test_groups: Sequence[str] = ()) -> dict:  # fmt: skip
     """Train/test split of the built sequences, whole groups at a time (PRISM statistics shape).
 
     All sequences of one clip (its noise variants and consecutive chunks) share a split, so a
@@ -340,7 +344,8 @@ def dataset_split(results: Sequence[ClipResult], test_fraction: float, seed: int
     if split_by == "person":
         strata = {clip_group[c]: clip_source[c] for c in clip_group}
     split = make_split(sorted(groups), test_fraction, seed, categories=cats,
-                       frames_per_chunk=frames, groups=groups, strata=strata)  # fmt: skip
+                       frames_per_chunk=frames, groups=groups, strata=strata,
+                       test_groups=test_groups)  # fmt: skip
     test_groups = set(split["groups"]["test"])
     members: dict[str, list[str]] = {}
     sources: dict[str, dict] = {}
@@ -489,6 +494,7 @@ def build_dataset(
     atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1))
     from prism_tools.chunking import save_split
 
-    split = dataset_split(ordered, cfg.test_fraction, cfg.split_seed, cfg.split_by)
+    split = dataset_split(ordered, cfg.test_fraction, cfg.split_seed, cfg.split_by,
+                          cfg.test_groups)  # fmt: skip
     save_split(split, out / SPLIT)
     return ordered

@@ -152,6 +152,17 @@ def test_a_finished_dataset_is_split_again_without_building_a_clip(
     assert _stamps(out) == before
     assert _build(out, corpus, "--seed", "1") == 2  # a setting that changes the clips: refused
     assert "different settings" in capsys.readouterr().err
+    # a group named on the command line goes to test whatever the draw, again without a build
+    train_groups = person["groups"]["train"]
+    pick = next(g for g in train_groups if g.startswith("cmu/"))
+    assert _build(out, corpus, "--test-group", pick) == 0
+    split = json.loads((out / "split.json").read_text())
+    assert pick in split["groups"]["test"] and pick not in split["groups"]["train"]
+    others = lambda sp: {g for g in sp["groups"]["test"] if not g.startswith("cmu/")}  # noqa: E731
+    assert others(split) == others(person)  # the other sources' draws are unchanged
+    assert _stamps(out) == before
+    assert _build(out, corpus, "--test-group", "cmu/none") == 2
+    assert "cmu/none" in capsys.readouterr().err
 
 
 def test_an_edited_category_map_relabels_the_recordings(

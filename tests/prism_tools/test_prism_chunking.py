@@ -199,3 +199,19 @@ def test_stratified_split_of_two_unequal_groups_picks_the_nearer_one() -> None:
         == sorted([*sizes, "u/alone"])  # fmt: skip
     with pytest.raises(ValueError, match="strata need groups"):
         make_split(["a"], strata={"a": "s"})
+
+
+def test_named_test_groups_go_to_test_and_count_toward_the_fraction() -> None:
+    ids = [f"c{i}" for i in range(20)]
+    groups = {c: f"g{int(c[1:]) // 2}" for c in ids}  # ten groups of two chunks
+    split = make_split(ids, 0.2, 0, groups=groups, test_groups=["g7"])
+    assert "g7" in split["groups"]["test"] and {"c14", "c15"} <= set(split["test"])
+    assert len(split["test"]) == 4  # g7 and one drawn group make the 20 %
+    strata = {f"g{k}": "a" if k < 5 else "b" for k in range(10)}
+    split = make_split(ids, 0.2, 0, groups=groups, strata=strata, test_groups=["g0"])
+    assert "g0" in split["groups"]["test"] and any(g in split["groups"]["test"]
+                                                   for g in ("g5", "g6", "g7", "g8", "g9"))
+    with pytest.raises(ValueError, match="not groups"):
+        make_split(ids, 0.2, 0, groups=groups, test_groups=["nope"])
+    with pytest.raises(ValueError, match="need groups"):
+        make_split(ids, 0.2, 0, test_groups=["g0"])
