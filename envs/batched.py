@@ -302,17 +302,11 @@ class BatchedTrackingEnv:
         n, cfg = self.num_envs, self.cfg
         pvw, rot = self._good_pvw, self._good_rot
         t = np.minimum(self._good_t + 1, self._n_frames - 1).tolist()
-        er = self._est_rows
         sensor = np.empty((n, self.observation_space["sensor"].shape[0]), np.float32)
         for i, e in enumerate(self.envs):
-            f, ti = e._est, t[i]
-            er[i] = f.obs_rows[ti]
-            sensor[i] = f.est.sensor[ti]
-        er[:, _ROOT] += self._root_offset
+            sensor[i] = e._est.est.sensor[t[i]]
         h = O.heading_matrices(rot[:, 0])
-        kin = np.empty((n, self.observation_space["kinematic"].shape[0]), np.float32)
-        self_vec = np.empty((n, self.observation_space["self"].shape[0]), np.float32)
-        O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er, kin, self_vec)
+        kin, self_vec = self._kinematic([e._est for e in self.envs], self._root_offset, t, h)
         z = pvw[:, 0, 0, 2]
         hm = np.repeat((-z)[:, None], self.observation_space["environment"].shape[0], axis=1)
         for i, e in enumerate(self.envs):
@@ -326,26 +320,31 @@ class BatchedTrackingEnv:
             "self": self_vec,
             "environment": hm.astype(np.float32),
         }
-        if cfg.teacher_obs:
-            self._teacher_obs(obs, t, h, pvw, rot)
+        if cfg.teacher_obs:  # a privileged teacher's inputs (TrackingEnvConfig.teacher_obs)
+            truth = [e._truth for e in self.envs]
+            obs["teacher_kinematic"] = self._kinematic(truth, self._root_offset_truth, t, h)[0]
+            shift = np.zeros((n, self._gain.shape[1]), np.float32)
+            if self._relative:
+                for i, (e, f) in enumerate(zip(self.envs, truth, strict=True)):
+                    shift[i] = (f.target[t[i]] - e._est.target[t[i]]) / self._gain[i]
+            obs["teacher_shift"] = shift
         return obs
 
-    def _teacher_obs(self, obs: dict, t: list, h, pvw, rot) -> None:
-        """A privileged teacher's inputs (:attr:`grip.task.config.TrackingEnvConfig.
-        teacher_obs`), as :meth:`GripTrackingEnv._observe` adds them."""
-        n = self.num_envs
+    def _kinematic(self, frames: list, offset: np.ndarray, t: list[int],
+                   h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """The kinematic and self observations of the last stable states against reference
+        frames ``t`` of ``frames`` (one :class:`grip.task.observations.EstimateFrames` per
+        environment; the root integrated from ``offset (N, 3)``)."""
         er = self._est_rows
-        shift = np.zeros((n, self._gain.shape[1]), np.float32)
-        for i, e in enumerate(self.envs):
-            ti = t[i]
-            er[i] = e._truth.obs_rows[ti]
-            if self._relative:
-                shift[i] = (e._truth.target[ti] - e._est.target[ti]) / self._gain[i]
-        er[:, _ROOT] += self._root_offset_truth
-        kin = np.empty_like(obs["kinematic"])
-        O.observation_rows(self.cfg.kinematic_obs, h, pvw, rot, er, kin,
-                           np.empty_like(obs["self"]))  # fmt: skip
-        obs["teacher_kinematic"], obs["teacher_shift"] = kin, shift
+        for i, f in enumerate(frames):
+            er[i] = f.obs_rows[t[i]]
+        er[:, _ROOT] += offset
+        n, space = self.num_envs, self.observation_space
+        kin = np.empty((n, space["kinematic"].shape[0]), np.float32)
+        self_vec = np.empty((n, space["self"].shape[0]), np.float32)
+        O.observation_rows(self.cfg.kinematic_obs, h, self._good_pvw, self._good_rot, er, kin,
+                           self_vec)  # fmt: skip
+        return kin, self_vec
 
     def close(self) -> None:
         if self._pool is not None:

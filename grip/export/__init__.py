@@ -111,11 +111,9 @@ def export_reconstruction(
 
                 written.append(write_amass(recon, out / f"{stem}_amass.npz", body))
             elif fmt == "html":
-                from grip.assets import ASSETS
-                from grip.export.html import load_web_assets, write_viewer
+                from grip.export.html import write_viewer
 
-                page = write_viewer(recon, out / f"{stem}.html", load_web_assets(ASSETS / "web"),
-                                    recording=recording, body=body)  # fmt: skip
+                page = write_viewer(recon, out / f"{stem}.html", recording=recording, body=body)
                 written.append(page.path)
             else:
                 from grip.export.summary import write_summary_png

@@ -524,7 +524,7 @@ class ViewerPage:
 def write_viewer(
     recon: Reconstruction,
     path: str | os.PathLike,
-    assets: WebAssets,
+    assets: WebAssets | None = None,
     *,
     recording=None,
     compare: Sequence[Reconstruction] = (),
@@ -532,13 +532,18 @@ def write_viewer(
     body: BodyParams | BodyModel | None = None,
     title: str | None = None,
 ) -> ViewerPage:
-    """Write the page (:func:`viewer_data` + :func:`viewer_html`) atomically.
+    """Write the page (:func:`viewer_data` + :func:`viewer_html`) atomically; ``assets``: the
+    three.js files (default: the shipped ones, ``grip/assets/web``).
 
     Raises:
         ExportError: As :func:`viewer_data`, or the file cannot be written (naming it).
     """
     data = viewer_data(recon, recording=recording, compare=compare,
                        compare_labels=compare_labels, body=body, title=title)  # fmt: skip
+    if assets is None:
+        from grip.assets import ASSETS
+
+        assets = load_web_assets(ASSETS / "web")
     page = viewer_html(data, assets).encode("utf-8")
     out = write_file(path, lambda f: f.write(page))
     return ViewerPage(out, len(page), int(data["frames"]),

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grip.core.body import CANONICAL_TO_WORLD
-from grip.core.rotations import geodesic_angle, rot_z, rotation_between
+from grip.core.rotations import geodesic_angle, orthonormalize, rot_z, rotation_between
 from prism_tools.streams import IMU_PARTS
 
 __all__ = [
@@ -108,9 +108,7 @@ def parse_mount(text: str) -> tuple[str, tuple[str, str, str]]:
 
 def mean_rotation(rot: np.ndarray) -> np.ndarray:
     """Chordal mean of ``(K, 3, 3)`` rotations (the rotation nearest their average)."""
-    u, _, vt = np.linalg.svd(np.asarray(rot, dtype=np.float64).mean(axis=0))
-    d = np.sign(np.linalg.det(u @ vt))
-    return u @ np.diag([1.0, 1.0, d]) @ vt
+    return orthonormalize(np.asarray(rot, dtype=np.float64).mean(axis=0))
 
 
 def still_runs(still: np.ndarray) -> list[tuple[int, int]]:

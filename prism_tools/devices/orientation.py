@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grip.core.rotations import rotation_between
+from grip.core.rotations import axis_angle_to_matrix, rotation_between
 from prism_tools.streams import GRAVITY
 
 __all__ = ["DEFAULT_GAIN", "DEFAULT_TAU_S", "gravity_filter"]
@@ -34,16 +34,6 @@ DEFAULT_TAU_S = 1.0
 accelerations average out over it (its velocity is bounded), gravity stays."""
 _ACC_BAND = 0.15 * GRAVITY  # correction fades to 0 this far from 1 g, m/s^2
 _UP = np.array([0.0, 0.0, 1.0])
-
-
-def _expm(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the rotation vector ``w`` (3,), rad."""
-    th = float(np.sqrt(w @ w))
-    if th < 1e-12:
-        return np.eye(3)
-    k = w / th
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(th) * kx + (1.0 - np.cos(th)) * (kx @ kx)
 
 
 def gravity_filter(
@@ -93,8 +83,8 @@ def gravity_filter(
             mag = float(np.sqrt(f_lp @ f_lp))
             weight = gain * max(0.0, 1.0 - abs(mag - GRAVITY) / _ACC_BAND)
             # Tilt the reference so that the low-passed specific force points up.
-            corr = _expm(weight * dt * np.cross(f_lp / max(mag, 1e-9), _UP))
-            r = corr @ r @ _expm(0.5 * (gyr[k] + gyr[j]) * step * dt)
+            corr = axis_angle_to_matrix(weight * dt * np.cross(f_lp / max(mag, 1e-9), _UP))
+            r = corr @ r @ axis_angle_to_matrix(0.5 * (gyr[k] + gyr[j]) * step * dt)
             f_lp = corr @ f_lp
             u, _, vt = np.linalg.svd(r)
             r = u @ vt

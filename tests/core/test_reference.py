@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -110,3 +112,15 @@ def test_merging_sets_keeps_every_clip_with_unique_names() -> None:
         merge_reference_sets([one(0), one(0, sites=tuple(reversed(cfg.sites)))])
     with pytest.raises(ValueError, match="at least one"):
         merge_reference_sets([])
+
+
+def test_a_clips_oracle_is_the_oracle_clip_of_its_recording() -> None:
+    """``ReferenceClip.oracle()`` (the teacher's view in grip policy distill) equals
+    ``oracle_reference_clip`` (the references a follow = "truth" run trains on)."""
+    rec = make_recording(80, seed=9)
+    est = oracle_reference_clip(rec)
+    noisy = dataclasses.replace(est, est_pos=est.est_pos + 0.05, est_vel=est.est_vel * 1.3)
+    got = noisy.oracle()
+    for key in ("est_pos", "est_rot", "est_vel", "est_angvel", "est_hinge", "est_hinge_vel",
+                "est_root_pos", "sensor", "gt_qpos"):  # fmt: skip
+        np.testing.assert_allclose(getattr(got, key), getattr(est, key), atol=1e-9, err_msg=key)

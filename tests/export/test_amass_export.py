@@ -166,3 +166,6 @@ def test_grip_export_writes_stem_amass_npz(sample_truth, tmp_path, capsys) -> No
     from grip.cli.export import DEFAULT_FORMATS, FORMATS
 
     assert "amass" in FORMATS and "amass" not in DEFAULT_FORMATS
+    import grip.export
+
+    assert FORMATS == grip.export.FORMATS  # (the CLI spells the library's list)
