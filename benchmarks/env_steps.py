@@ -4,7 +4,12 @@ Times GripTrackingEnv.step (observations, reward, termination; zero actions in t
 relative mode, reset when an episode ends) and, in the same run, raw mujoco.mj_step on the same
 compiled model from the same start state. The ratio env_steps_per_s x substeps /
 raw_mj_steps_per_s is the share of time left to physics (target >= 0.5: observation building
-and reward must not dominate).
+and reward must not dominate). The raw rate depends on the state (contacts, solver iterations),
+so one env also reports its own physics: the states it stepped, replayed in a tight loop of raw
+mj_step (``own_states_us_per_mj_step``), the same physics timed inside the env
+(``in_env_us_per_mj_step``: slower, as the env's work between the calls evicts MuJoCo's data
+from the caches) and the share of the env's time spent inside MuJoCo's step calls
+(``in_env_physics_time_share``).
 
     python benchmarks/env_steps.py [--steps 3000] [--reference REF.npz] [--json out.json]
     python benchmarks/env_steps.py --batch 16 --threads 1   # the batched env (envs/batched.py)
@@ -23,6 +28,69 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+
+import mujoco as _mj
+
+_STATE = (_mj.mjtState.mjSTATE_FULLPHYSICS | _mj.mjtState.mjSTATE_CTRL
+          | _mj.mjtState.mjSTATE_WARMSTART)  # fmt: skip
+
+
+def _env_states(env, action, steps: int) -> list:
+    """The full physics state (with controls and warm start) before each of the env's physics
+    steps over ``steps`` env steps of ``action`` (resets as in the timing)."""
+    import mujoco
+    import numpy as np
+
+    spec = _STATE
+    sim, states = env._sim, []
+    size = mujoco.mj_stateSize(sim.model, spec)
+
+    def recording_step() -> None:
+        m, d = sim.model, sim.data
+        for _ in range(sim.cfg.substeps):
+            s = np.empty(size)
+            mujoco.mj_getState(m, d, s, spec)
+            states.append(s)
+            mujoco.mj_step2(m, d)
+            mujoco.mj_step1(m, d)
+
+    sim.step = recording_step
+    try:
+        env.reset(seed=0)
+        for _ in range(steps):
+            _, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                env.reset()
+    finally:
+        del sim.step
+    return states
+
+
+def _physics_time_in_env(env, action, steps: int) -> tuple[float, float]:
+    """Seconds inside the humanoid's physics steps and seconds of the whole pass, over
+    ``steps`` env steps of ``action`` (a pass of its own: the timer costs ~1 us a call)."""
+    import time
+
+    sim, inside = env._sim, [0.0]
+    step = sim.step
+
+    def timed_step() -> None:
+        t0 = time.perf_counter()
+        step()
+        inside[0] += time.perf_counter() - t0
+
+    sim.step = timed_step
+    try:
+        env.reset(seed=0)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            _, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                env.reset()
+        total = time.perf_counter() - t0
+    finally:
+        del sim.step
+    return inside[0], total
 
 
 def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
@@ -93,11 +161,34 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
     raw_s = min(run_raw() for _ in range(repeats))
     env_sps = steps / env_s
     raw_sps = n_raw / raw_s
+    own = {}
+    if batch == 0:
+        states = _env_states(env, action, steps)
+        replay = mujoco.MjData(model)
+
+        def run_own() -> float:
+            t0 = time.perf_counter()
+            for s in states:
+                mujoco.mj_setState(model, replay, s, _STATE)
+                mujoco.mj_step(model, replay)
+            return time.perf_counter() - t0
+
+        own_sps = len(states) / min(run_own() for _ in range(repeats))
+        in_env_s, env_pass_s = _physics_time_in_env(env, action, steps)
+        own = {
+            # the same states in a tight loop of raw mj_step (a warm cache)
+            "own_states_us_per_mj_step": 1e6 / own_sps,
+            # the env's physics timed inside the env (its other work between the calls)
+            "in_env_us_per_mj_step": 1e6 * in_env_s / (steps * env.cfg.substeps),
+            # the share of the env's time spent inside MuJoCo's step calls
+            "in_env_physics_time_share": in_env_s / env_pass_s,
+        }
     return {
         "env_steps_per_s": env_sps,
         "raw_mj_steps_per_s": raw_sps,
         "substeps": env.cfg.substeps,
         "physics_share": env_sps * env.cfg.substeps / raw_sps,
+        **own,
         # (the share per physics thread: the batched env's target is >= 0.8 per core)
         "physics_share_per_thread": env_sps * env.cfg.substeps / raw_sps
         / (threads if batch > 0 else 1),

@@ -4,6 +4,7 @@ subjects switched in (the training task and the inference pipeline share it)."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import types
 
@@ -12,7 +13,7 @@ import mujoco
 from envs.heightfield import add_heightfield, rasterize, sample_heightmap
 from envs.terrain import make_scene
 from grip.core.body import BodyParams
-from grip.core.mjcf import MjcfConfig, build_mjcf
+from grip.core.mjcf import SIM_TEXTURE_PX, MjcfConfig, build_mjcf
 from grip.sim.humanoid import Humanoid, HumanoidConfig
 from grip.task.config import TrackingEnvConfig
 
@@ -57,7 +58,8 @@ class HumanoidScenes:
             scene = make_scene("objects", objects=objs)
         else:
             scene = make_scene(kind)
-        xml = build_mjcf(body, self.mjcf)
+        # (small textures: they are only drawn by an env's render(); the physics is the same)
+        xml = build_mjcf(body, dataclasses.replace(self.mjcf, texture_px=SIM_TEXTURE_PX))
         hf = None if scene.is_flat else rasterize(scene, self.cell_m)
         if hf is not None:
             xml = add_heightfield(xml, hf)

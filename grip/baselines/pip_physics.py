@@ -85,7 +85,7 @@ from grip.baselines.pip_config import (
 from grip.baselines.pip_dynamics import _skew, _solve_qp, foot_joint_height
 from grip.core import skeleton as sk
 from grip.core.body import BodyModel, BodyParams
-from grip.core.mjcf import MjcfConfig, as_body_model, build_mjcf
+from grip.core.mjcf import SIM_TEXTURE_PX, MjcfConfig, as_body_model, build_mjcf
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import pose_vector
 from grip.sim.model import HumanoidIndex, write_pose_vector
@@ -124,7 +124,8 @@ class PipPhysics:
         self.fallback_solver = fallback
 
         mjcf = MjcfConfig(armature=0.0, joint_damping=0.0, floor=False, self_collision=False,
-                          sole_pads=False, insole_sensors=False, imu_sensors=False)  # fmt: skip
+                          sole_pads=False, insole_sensors=False, imu_sensors=False,
+                          texture_px=SIM_TEXTURE_PX)  # fmt: skip
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.body, mjcf))
         off = mujoco.mjtDisableBit
         self.model.opt.disableflags |= int(

@@ -74,6 +74,10 @@ FOOT_SIDES: tuple[str, str] = ("L", "R")
 
 
 # Collision bits, see the module docstring.
+SIM_TEXTURE_PX = 64
+"""Texture size (:attr:`MjcfConfig.texture_px`) of the models that simulate without a video:
+a 64 px floor still shows its grid in an env's ``render()``, at 86 kB instead of 5.5 MB."""
+
 _BIT_FLOOR = 1
 _BIT_BODY = 2
 _BIT_PAD = 4
@@ -123,6 +127,10 @@ class MjcfConfig:
             sole pads are on, m.
         insole_site_half_height_m: Half height of the insole cell site boxes, m; the touch
             zone reaches this far below and above the sole.
+        texture_px: Width and height of the skybox and floor textures, px. Visual only: the
+            physics is the same for every value. 512 suits videos; the simulation scenes of
+            training and evaluation (:mod:`envs.scenes`) use :data:`SIM_TEXTURE_PX`, which
+            makes a model 5.4 MB smaller and its compile about 17 ms (of 19) shorter.
     """
 
     timestep_s: float = 0.005
@@ -144,8 +152,12 @@ class MjcfConfig:
     sole_pad_radius_m: float = 0.01
     foot_box_clearance_m: float = 0.004
     insole_site_half_height_m: float = 0.005
+    texture_px: int = 512
 
     def __post_init__(self) -> None:
+        if isinstance(self.texture_px, bool) or not isinstance(self.texture_px, int) \
+                or self.texture_px < 1:  # fmt: skip
+            raise ValueError(f"MjcfConfig.texture_px={self.texture_px!r} must be an int >= 1")
         positive = {
             "timestep_s": self.timestep_s,
             "gain_scale": self.gain_scale,
@@ -337,10 +349,11 @@ def _add_assets_and_defaults(root: ET.Element, cfg: MjcfConfig) -> None:
     _sub(vis, "global", offwidth="1280", offheight="720")
     _sub(vis, "headlight", ambient="0.35 0.35 0.35", diffuse="0.6 0.6 0.6")
     asset = _sub(root, "asset")
+    px = str(cfg.texture_px)
     _sub(asset, "texture", name="skybox", type="skybox", builtin="gradient",
-         rgb1="0.45 0.6 0.75", rgb2="0.05 0.08 0.12", width="512", height="512")  # fmt: skip
+         rgb1="0.45 0.6 0.75", rgb2="0.05 0.08 0.12", width=px, height=px)  # fmt: skip
     _sub(asset, "texture", name="grid", type="2d", builtin="checker", rgb1="0.22 0.3 0.38",
-         rgb2="0.14 0.2 0.26", width="512", height="512", mark="edge",
+         rgb2="0.14 0.2 0.26", width=px, height=px, mark="edge",
          markrgb="0.5 0.5 0.5")  # fmt: skip
     _sub(asset, "material", name="grid", texture="grid", texrepeat="1 1", texuniform="true",
          reflectance="0.1")  # fmt: skip

@@ -260,6 +260,7 @@ def test_reference_export_and_bench_env(built: Path, tmp_path: Path, capsys) -> 
                            "--amp-window", "0", "--json", str(js)]) == 0  # fmt: skip
     res = json.loads(js.read_text())
     assert res["substeps"] == 2 and res["env_steps_per_s"] > 0 and res["raw_mj_steps_per_s"] > 0
+    assert 0 < res["in_env_physics_time_share"] < 1 and res["own_states_us_per_mj_step"] > 0
     assert main(["data", "reference", "--out", str(ref)]) == 2  # neither files nor --data
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"garbage")

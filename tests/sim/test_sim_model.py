@@ -216,3 +216,34 @@ def test_cli_body_export_rejects_bad_height(tmp_path: Path, capsys, argv: list[s
     err = capsys.readouterr().err
     assert "error:" in err and "--height" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_texture_size_is_visual_only(body, model) -> None:
+    """The simulation scenes' small textures change the texture arrays and nothing that
+    steps: 200 steps under random PD targets are the same bit for bit."""
+    from envs.scenes import HumanoidScenes
+    from grip.core.mjcf import SIM_TEXTURE_PX
+    from grip.sim.humanoid import HumanoidConfig
+
+    small = load_model(body, MjcfConfig(texture_px=SIM_TEXTURE_PX))
+    assert small.tex_data.nbytes < model.tex_data.nbytes / 50
+    assert list(small.tex_width) == [SIM_TEXTURE_PX] * 2
+    rng = np.random.default_rng(3)
+    datas = [mujoco.MjData(m) for m in (model, small)]
+    for m, d in zip((model, small), datas, strict=True):
+        mujoco.mj_resetDataKeyframe(m, d, 0)
+    for _ in range(200):
+        ctrl = rng.uniform(-0.3, 0.3, model.nu)
+        for m, d in zip((model, small), datas, strict=True):
+            d.ctrl[:] = ctrl
+            mujoco.mj_step(m, d)
+    np.testing.assert_array_equal(datas[0].qpos, datas[1].qpos)
+    np.testing.assert_array_equal(datas[0].sensordata, datas[1].sensordata)
+    h = HumanoidScenes(HumanoidConfig(), MjcfConfig()).get(BodyParams(1.76, 74.0))
+    assert list(h.model.tex_width) == [SIM_TEXTURE_PX] * 2
+
+
+@pytest.mark.parametrize("px", [0, -3, 1.5, True])
+def test_texture_size_must_be_a_positive_int(px) -> None:
+    with pytest.raises(ValueError, match="texture_px"):
+        MjcfConfig(texture_px=px)
