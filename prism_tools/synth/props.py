@@ -27,8 +27,17 @@ Two kinds of evidence, both from the ground-truth motion alone:
 
 Patches of about the same height (:data:`MERGE_HEIGHT_M`) whose extents come within
 :data:`MERGE_GAP_M` of each other merge into one box (both feet on a step, repeated visits).
-A box may not cover a place where a sole is planted lower than its top: such a box is cut back
-from that side, keeping its own patches (the steps of a staircase stay separate boxes).
+A box may not cover a place where a sole is planted lower than its top, nor hold any part of the
+body: a sole (its outline and insole cells), or the lowest point of a limb or trunk shape
+(:func:`prism_tools.synth.insole.body_contact_points`) more than :data:`INSIDE_M` below its top
+over it, at any frame (standing thighs in front of a stool, a swinging foot in front of a
+step). Such a box is cut back from that side, keeping its own patches (the steps of a staircase
+stay separate boxes). Where the body was inside the patches themselves at other frames (a
+seat's resting thighs reach past the real seat's edge, where the thighs stand before sitting),
+the box becomes its largest rectangle that no body point enters, and is dropped when that is
+narrower than :data:`MIN_TOP_M`: the simulation would otherwise start the body inside its
+prop. A box cannot stand for a stool whose underside the feet tuck into, and such seats are
+dropped (CMU 13_01, 14_29).
 
 Every threshold is a module constant with its reason; none is a setting to tune.
 """
@@ -97,6 +106,15 @@ CUT_MARGIN_M = 0.02
 PAD_M = 0.01
 """A foot patch reaches this far beyond the planted sole's outline (heel, toe-base and toe-tip
 corners)."""
+INSIDE_M = 0.06
+"""A body point this far below a box's top, over it, is inside the box (the box is cut back from
+it). Points resting on a box lie up to :data:`MERGE_HEIGHT_M` below its top (the merged
+patches' heights spread that much; a hand resting on a seat lies at its top); a thigh standing
+in front of a stool lies 10-20 cm below it, a foot on the floor the whole height."""
+MIN_TOP_M = 0.1
+"""A box cut narrower than this (either side of its top) carries nothing and is dropped."""
+FREE_CELL_M = 0.01
+"""Grid of the search for the largest part of a box that no body point enters."""
 
 
 @dataclass(frozen=True)
@@ -251,6 +269,41 @@ def _cut(lo: np.ndarray, hi: np.ndarray, keep_lo: np.ndarray, keep_hi: np.ndarra
         lo, hi = best[1], best[2]
 
 
+def _largest_free(lo: np.ndarray, hi: np.ndarray,
+                  bad: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
+    """The largest rectangle inside ``[lo, hi]`` that stays :data:`CUT_MARGIN_M` from every
+    point of ``bad (N, 2)`` (on a grid of :data:`FREE_CELL_M`), or ``None`` when it would be
+    narrower than :data:`MIN_TOP_M`."""
+    from scipy.ndimage import binary_dilation
+
+    n = np.maximum(np.ceil((hi - lo) / FREE_CELL_M).astype(int), 1)
+    taken = np.zeros(n, dtype=bool)
+    ij = np.floor((bad - lo) / FREE_CELL_M).astype(int)
+    ij = ij[np.all((ij >= 0) & (ij < n), axis=1)]
+    taken[ij[:, 0], ij[:, 1]] = True
+    r = round(CUT_MARGIN_M / FREE_CELL_M)
+    taken = binary_dilation(taken, np.ones((2 * r + 1, 2 * r + 1), dtype=bool))
+    best, run = (0, 0, 0, 0, 0), np.zeros(n[0], dtype=int)  # (area, i0, i1, j0, j1)
+    for j in range(n[1]):  # the largest rectangle under the histogram of free runs
+        run = np.where(taken[:, j], 0, run + 1)
+        stack: list[int] = []
+        for i in range(n[0] + 1):
+            h = run[i] if i < n[0] else 0
+            while stack and run[stack[-1]] >= h:
+                top = stack.pop()
+                left = stack[-1] + 1 if stack else 0
+                area = run[top] * (i - left)
+                if area > best[0]:
+                    best = (area, left, i, j - run[top] + 1, j + 1)
+            stack.append(i)
+    _, i0, i1, j0, j1 = best
+    new_lo = lo + FREE_CELL_M * np.array([i0, j0])
+    new_hi = np.minimum(lo + FREE_CELL_M * np.array([i1, j1]), hi)
+    if np.any(new_hi - new_lo < MIN_TOP_M):
+        return None
+    return new_lo, new_hi
+
+
 def infer_props(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel,
                 fps: float) -> list[Prop]:  # fmt: skip
     """The boxes a motion stands or sits on (module docstring), lowest first.
@@ -285,11 +338,21 @@ def infer_props(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel,
     # planted soles, to keep every box off the places where a foot stands lower than its top
     soles_xy = cells[..., :2][planted]  # (N, 16, 2)
     soles_h = height[planted]  # (N,)
+    # and every point of the body at every frame, to keep the body out of every box
+    limbs = body_contact_points(global_rot, joint_pos, body)[0]
+    points = np.concatenate([limbs, soles.reshape(len(soles), -1, 3),
+                             cells.reshape(len(cells), -1, 3)], axis=1).reshape(-1, 3)  # fmt: skip
     props = []
     for g in _merge(patches):
         h = float(np.average(g["heights"], weights=g["frames"]))
-        bad = soles_xy[soles_h < h - MERGE_HEIGHT_M].reshape(-1, 2)
+        bad = np.concatenate([soles_xy[soles_h < h - MERGE_HEIGHT_M].reshape(-1, 2),
+                              points[points[:, 2] < h - INSIDE_M, :2]])  # fmt: skip
         lo, hi = _cut(*g["box"], *g["core"], bad) if len(bad) else g["box"]
+        if len(bad) and np.all((bad >= lo) & (bad <= hi), axis=1).any():
+            free = _largest_free(lo, hi, bad)  # (the body entered the patches)
+            if free is None:
+                continue
+            lo, hi = free
         kind = "seat" if "seat" in g["kinds"] else "step"
         props.append(Prop(lo, hi, h, kind, int(sum(g["frames"]))))
     return props

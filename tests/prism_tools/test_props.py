@@ -34,6 +34,22 @@ def _sitting(n: int) -> tuple[np.ndarray, np.ndarray]:
     return fk.forward_kinematics(rot, pos, BODY.offsets)
 
 
+def _in_front_of_the_seat() -> tuple[float, float]:
+    """Where :func:`_sitting`'s feet are: a body stands there before and after sitting (it
+    cannot stand where the seat is, and a box that would hold it is not inferred:
+    test_no_box_holds_the_body)."""
+    return 0.0, float(fk.sole_points(*_sitting(1), BODY)[0, :, :, 1].mean())
+
+
+def _moving(n: int, start, end) -> tuple[np.ndarray, np.ndarray]:
+    """The rest pose slid on the floor from ``start`` to ``end`` (x, y) over ``n`` frames."""
+    rot, pos = fk.rest_pose(n)
+    rot[:, 16], rot[:, 17] = rot_z(np.array(-1.3)), rot_z(np.array(1.3))
+    pos[:, :2] = np.linspace(start, end, n)
+    pos[:, 2] = BODY.pelvis_height
+    return fk.forward_kinematics(rot, pos, BODY.offsets)
+
+
 def _concat(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return tuple(np.concatenate(x) for x in zip(*parts, strict=True))  # type: ignore[return-value]
 
@@ -81,7 +97,8 @@ def test_two_steps_stay_two_boxes_off_the_floor_stance():
 
 
 def test_sitting_gives_a_seat_under_the_pelvis_and_thighs():
-    g, p = _concat(_standing(100), _sitting(150), _standing(100))
+    front = _in_front_of_the_seat()
+    g, p = _concat(_standing(100, at=front), _sitting(150), _standing(100, at=front))
     props = infer_props(g, p, BODY, FPS)
     assert [x.kind for x in props] == ["seat"]
     seat = props[0]
@@ -91,6 +108,30 @@ def test_sitting_gives_a_seat_under_the_pelvis_and_thighs():
     assert abs(seat.height_m - thigh_bottom) < 0.04
     # the feet stay off the seat
     assert not seat.contains(fk.sole_points(g[150], p[150], BODY)[..., :2]).any()
+
+
+def test_no_box_holds_the_body():
+    """The body passed, feet on the floor, over part of the place where it later stands on a
+    0.4 m box: the box keeps its height but not that part, and at no frame does a body point
+    lie inside it; where the body went over the whole of it, there is no box."""
+    from prism_tools.synth.insole import body_contact_points, insole_cell_positions
+    from prism_tools.synth.props import INSIDE_M
+
+    def inside(prop, g, p):
+        pts = np.concatenate([body_contact_points(g, p, BODY)[0],
+                              fk.sole_points(g, p, BODY).reshape(len(g), -1, 3),
+                              insole_cell_positions(g, p, BODY).reshape(len(g), -1, 3)], axis=1)
+        return (prop.contains(pts[..., :2]) & (pts[..., 2] < prop.height_m - INSIDE_M)).any()
+
+    g, p = _concat(_standing(60), _moving(400, (-1.0, 0.7), (3.0, 0.7)),
+                   _standing(150, at=(1.0, 0.5), raise_m=0.4), _standing(60, at=(1.0, -0.5)))
+    (prop,) = infer_props(g, p, BODY, FPS)
+    assert abs(prop.height_m - 0.4) < 0.02 and prop.contains(np.array([1.0, 0.5]))
+    assert prop.hi[1] < 0.7  # (the soles' outline passed down to y = 0.57)
+    assert not inside(prop, g, p)
+    g, p = _concat(_standing(60), _moving(400, (-1.0, 0.5), (3.0, 0.5)),
+                   _standing(150, at=(1.0, 0.5), raise_m=0.4), _standing(60, at=(1.0, -0.5)))
+    assert infer_props(g, p, BODY, FPS) == []
 
 
 @pytest.mark.parametrize("n", [1, 5])
@@ -128,7 +169,8 @@ def test_seated_the_seat_takes_its_share_and_the_insoles_feel_the_rest():
     from grip.core.body import GRAVITY
     from prism_tools.synth.insole import synthesize_insoles
 
-    g, p = _concat(_standing(100), _sitting(200), _standing(100))
+    front = _in_front_of_the_seat()
+    g, p = _concat(_standing(100, at=front), _sitting(200), _standing(100, at=front))
     props = infer_props(g, p, BODY, FPS)
     syn = synthesize_insoles(g, p, BODY, FPS, ground=lambda xy: support_height(props, xy))
     bw = BODY.total_mass * GRAVITY
