@@ -51,6 +51,9 @@ ALLOWED: dict[str, tuple[str, ...] | str] = {
     # and its observation and AMP layouts (the env computes them, the policies read them)
     "grip.task": ("numpy", "grip.core"),
     "envs": ("numpy", "mujoco", "gymnasium", "grip.core", "grip.config", "grip.sim", "grip.task"),
+    # the task on MuJoCo Warp: the env's definitions computed as torch tensors on a device
+    "envs.warp": ("numpy", "torch", "mujoco", "grip.core", "grip.config", "grip.sim", "grip.task",
+                  "envs"),
     "policies": ("numpy", "torch", "stable_baselines3", "gymnasium.spaces", "grip.core",
                  "grip.config", "grip.nn", "grip.task"),
     "grip.baselines": ("numpy", "mujoco", "grip.core", "grip.config", "grip.sim", "prism_tools"),

@@ -1,0 +1,571 @@
+"""``WarpTrackingEnv``: N tracking episodes on MuJoCo Warp, stepped together on one device.
+
+The task is :class:`envs.batched.BatchedTrackingEnv`'s (the same MJCF, PD actuation through
+MuJoCo's position actuators, observations, rewards, AMP windows, early termination and height
+map, from the same :class:`grip.task.config.TrackingEnvConfig`), but the state never leaves the
+device: MuJoCo Warp holds N worlds in warp arrays, the env reads them as torch tensors
+(``wp.to_torch``, no copy) and computes everything with :mod:`envs.warp.torch_task`.
+
+What differs from the CPU env, and why:
+
+* The physics runs in float32 (MuJoCo Warp's precision); the CPU env runs MuJoCo C in float64.
+  From the same state and controls the two agree to about 1e-6 m over 400 physics steps on flat
+  ground; on a height field they drift apart faster (MuJoCo Warp keeps at most 4 contacts per
+  geom-hfield pair where MuJoCo C keeps every prism's), see ``docs/gpu.md``.
+* Subjects: every clip's body is compiled once (:mod:`envs.scenes`); the model arrays that
+  differ between subjects (segment lengths, masses, gains) are batched per world and written
+  at each reset, so worlds of different subjects step together.
+* One scene for all worlds: the flat floor or one fixed terrain (``cfg.terrain`` =
+  ``"flat"``, ``"boxes"``, ``"stairs"``, ``"chair"``, or ``"auto"`` with clips without objects).
+  Clips with their own scene objects need one height field per world (not done yet).
+* Blow-ups: MuJoCo C resets a state it cannot integrate and warns; MuJoCo Warp does neither.
+  A world is a blow-up when its state is non-finite or beyond the ``blowup_*`` bounds
+  (:func:`grip.sim.humanoid.absurd_rows`' bounds, here in torch).
+* Sensors are off (``mjDSBL_SENSOR``): the task reads no simulated sensor; the observation's
+  ``"sensor"`` part is the clip's recorded KinematicsNet input, as on the CPU.
+* Worlds whose episode ended within a decision keep stepping until the decision's last frame
+  (all worlds step together); their rewards, AMP frames and observations stop at the end, as on
+  the CPU, and :meth:`reset` gives them a new episode.
+
+The API is :class:`envs.batched.BatchedTrackingEnv`'s, in tensors: :meth:`step` takes ``(N, 69)``
+actions and returns ``obs`` (dict of ``(N, ...)`` float32 tensors), ``reward``, ``terminated``,
+``truncated`` and one info dict of ``(N, ...)`` tensors; :meth:`reset` starts new episodes in
+the worlds of a mask. Nothing is reset automatically.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import mujoco
+import mujoco_warp as mjw
+import numpy as np
+import torch
+import warp as wp
+
+from envs import rewards as R
+from envs.heightfield import rasterize
+from envs.scenes import humanoid_scenes
+from envs.terrain import make_scene
+from envs.warp import torch_task as T
+from grip.core import skeleton as sk
+from grip.core.reference import ReferenceSource
+from grip.sim.model import HumanoidIndex
+from grip.task import amp as A
+from grip.task import observations as O
+from grip.task.config import TrackingEnvConfig
+
+_NJ = sk.N_JOINTS
+_N_TERMS = len(R.TERMS)
+_ROOT = O.OBS_ROW["est_root_pos"]
+
+UNBATCHED_OK = frozenset(("site_size", "key_qpos", "dof_length"))
+"""Model arrays that may differ between subjects and that MuJoCo Warp does not batch per world:
+none of them is read by a step with sensors off (site sizes are the insole touch zones, the
+keyframe is never loaded, dof_length only scales the sleeping and set_const heuristics)."""
+
+
+def _batchable_fields() -> dict[str, bool]:
+    """MuJoCo Warp's ``Model`` array fields: name -> whether they can hold one row per world."""
+    out = {}
+    for f in dataclasses.fields(mjw.Model):
+        shape = getattr(f.type, "shape", None)
+        if shape is not None:
+            out[f.name] = bool(shape) and shape[0] == "*"
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _Clips:
+    """Every clip's per-frame arrays, concatenated along frames (clip ``c`` starts at row
+    ``offset[c]``), float32 on the device unless said otherwise."""
+
+    offset: torch.Tensor  # (C,) int64
+    n_frames: torch.Tensor  # (C,) int64
+    subject: torch.Tensor  # (C,) int64: index into the subjects
+    gt_pvw: torch.Tensor  # (F, 3, J, 3) ground-truth positions, velocities, angular velocities
+    gt_rot: torch.Tensor  # (F, J, 3, 3)
+    qpos: torch.Tensor  # (F, nq) ground-truth pose in MuJoCo's qpos order
+    qvel: torch.Tensor  # (F, nv)
+    obs_rows: torch.Tensor  # (F, OBS_ROW_DIM) the estimate (EstimateFrames.obs_rows)
+    target: torch.Tensor  # (F, 69) PD target of a relative action of 0, rad
+    sensor: torch.Tensor  # (F, S) KinematicsNet inputs
+    est_root: torch.Tensor  # (F, 3) integrated estimated root, m
+    amp: torch.Tensor  # (F, FRAME_DIM) ground-truth AMP frames
+
+
+class WarpTrackingEnv:
+    """N tracking episodes on MuJoCo Warp.
+
+    Args:
+        cfg: Settings (those of :class:`envs.tracking_env.GripTrackingEnv`; ``pin_root`` and
+            ``teacher_obs`` are not supported, ``amp_window`` must be >= 1).
+        reference: The clips.
+        num_envs: N, the worlds.
+        device: A warp device name (``"cpu"``, ``"cuda"``, ``"cuda:0"``); torch tensors live on
+            the same device.
+        seed: Seed of the env's ``torch.Generator`` (clip and start draws).
+        nconmax: Contacts allocated per world (MuJoCo Warp allocates N x nconmax).
+        njmax: Constraint rows allocated per world.
+
+    Attributes:
+        num_envs: N.
+        model, data: The MuJoCo Warp model and data (read-only for callers).
+        clip_index, frame: ``(N,)`` each world's clip and the clip frame it is at.
+        subject_models: The compiled MuJoCo model of each subject (of the clips' bodies).
+    """
+
+    def __init__(self, cfg: TrackingEnvConfig, reference: ReferenceSource, num_envs: int,
+                 device: str = "cpu", seed: int = 0, nconmax: int = 64,
+                 njmax: int = 400) -> None:  # fmt: skip
+        if cfg.pin_root or cfg.teacher_obs:
+            raise ValueError("WarpTrackingEnv: pin_root and teacher_obs are CPU-only settings")
+        if cfg.amp_window < 1:
+            raise ValueError("WarpTrackingEnv needs amp_window >= 1 (the AMP reward)")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.cfg, self.reference, self.num_envs = cfg, reference, n = cfg, reference, num_envs
+        self.wp_device = wp.get_device(device)
+        self.device = torch.device(wp.device_to_torch(self.wp_device))
+        self.k = cfg.action_repeat
+        self._gen = torch.Generator(device=self.device)
+        self._gen.manual_seed(int(seed))
+        self._relative = cfg.action_mode == "relative"
+        self._hist_n = cfg.reward.root_vel_window_frames + 1
+        self._vel_s = cfg.reward.root_vel_window_frames * cfg.control_dt_s
+        self._w = torch.tensor([float(getattr(cfg.reward.weights, k)) for k in R.TERMS],
+                               device=self.device)  # fmt: skip
+        self._build_models(cfg, reference)
+        self._build_clips(reference)
+        self._alloc_sim(nconmax, njmax)
+        self._alloc_episodes()
+        self.reset(torch.ones(n, dtype=torch.bool, device=self.device))
+
+    # ------------------------------------------------------------------ construction
+    def _build_models(self, cfg: TrackingEnvConfig, reference: ReferenceSource) -> None:
+        """Compile each subject's humanoid in the scene; keep the first as the warp model and
+        the arrays that differ as per-subject tables."""
+        scenes = humanoid_scenes(cfg)
+        subjects: dict[tuple, int] = {}
+        models: list[mujoco.MjModel] = []
+        self._clip_subject = []
+        kd_over_kp = []
+        for i in range(len(reference)):
+            clip = reference.clip(i)
+            if clip.objects and cfg.terrain == "auto":
+                raise NotImplementedError(
+                    f"WarpTrackingEnv: clip {clip.name!r} has its own scene objects; one height "
+                    "field per world is not supported yet (set terrain to a fixed scene)"
+                )
+            key = (clip.body.height_m, clip.body.mass_kg)
+            if key not in subjects:
+                h = scenes.get(clip.body)
+                subjects[key] = len(models)
+                models.append(copy.copy(h.model))  # (a snapshot: switching changes h.model)
+                kd_over_kp.append(h.kd_over_kp.copy())
+                if len(models) == 1:
+                    self.index = HumanoidIndex.from_model(h.model)
+                    self._lo_np, self._hi_np = h.lo.copy(), h.hi.copy()
+                    self._z_range = h.z_range
+            self._clip_subject.append(subjects[key])
+        self._kd_over_kp = kd_over_kp
+        self.subject_models = models
+        self.mj_model = mjm = copy.copy(models[0])
+        mjm.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+        self._hf = None
+        if cfg.terrain not in ("auto", "flat"):
+            hf = rasterize(make_scene(cfg.terrain), cfg.heightfield_cell_m)
+            self._hf = T.TorchHeightField(hf, self.device)
+            self._z_range = (-cfg.blowup_depth_m, hf.max_height + cfg.blowup_height_m)
+        # the arrays that differ between subjects, per subject
+        batchable = _batchable_fields()
+        self._subject_fields: dict[str, torch.Tensor] = {}
+        for name, can_batch in batchable.items():
+            base = getattr(mjm, name, None)
+            if not isinstance(base, np.ndarray):
+                continue
+            rows = [getattr(m, name) for m in models]
+            if all(np.array_equal(r, base) for r in rows[1:]):
+                continue
+            if not can_batch:
+                if name in UNBATCHED_OK:
+                    continue
+                raise NotImplementedError(f"WarpTrackingEnv: subjects differ in {name}, which "
+                                          "MuJoCo Warp cannot hold per world")  # fmt: skip
+            self._subject_fields[name] = torch.as_tensor(np.stack(rows), device=self.device)
+
+    def _build_clips(self, reference: ReferenceSource) -> None:
+        """Concatenate every clip's per-frame arrays on the device (:class:`_Clips`)."""
+        cfg, ix, m = self.cfg, self.index, self.mj_model
+        parts: dict[str, list[np.ndarray]] = {
+            k: []
+            for k in (
+                "gt_pvw",
+                "gt_rot",
+                "qpos",
+                "qvel",
+                "obs_rows",
+                "target",
+                "sensor",
+                "est_root",
+                "amp",
+            )
+        }
+        lengths = []
+        for i in range(len(reference)):
+            clip = reference.clip(i)
+            t = clip.n_frames
+            lengths.append(t)
+            est = O.EstimateFrames()
+            est.update(clip, self._kd_over_kp[self._clip_subject[i]], cfg.velocity_feedforward)
+            parts["gt_pvw"].append(np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1))
+            parts["gt_rot"].append(clip.gt_rot)
+            q = np.tile(m.qpos0, (t, 1))
+            r = ix.root_qpos_adr
+            q[:, r : r + 7] = clip.gt_qpos[:, :7]
+            q[:, ix.hinge_qpos_adr] = clip.gt_qpos[:, 7:]
+            v = np.zeros((t, m.nv))
+            rv = ix.root_dof_adr
+            v[:, rv : rv + 6] = clip.gt_qvel[:, :6]
+            v[:, ix.hinge_dof_adr] = clip.gt_qvel[:, 6:]
+            parts["qpos"].append(q)
+            parts["qvel"].append(v)
+            parts["obs_rows"].append(est.obs_rows[:t])
+            parts["target"].append(est.target[:t])
+            parts["sensor"].append(clip.sensor[:t])
+            parts["est_root"].append(clip.est_root_pos[:t])
+            parts["amp"].append(A.reference_amp_features(clip))
+        dev = self.device
+
+        def cat(k: str) -> torch.Tensor:
+            return torch.as_tensor(np.concatenate(parts[k]), dtype=torch.float32, device=dev)
+
+        lengths_t = torch.as_tensor(lengths, dtype=torch.int64, device=dev)
+        self.clips = _Clips(
+            offset=torch.cumsum(lengths_t, 0) - lengths_t, n_frames=lengths_t,
+            subject=torch.as_tensor(self._clip_subject, dtype=torch.int64, device=dev),
+            **{k: cat(k) for k in parts})  # fmt: skip
+        self._clip_p = lengths_t.to(torch.float64) / lengths_t.sum()
+        f32 = dict(dtype=torch.float32, device=dev)
+        self._lo = torch.as_tensor(self._lo_np, **f32)
+        self._hi = torch.as_tensor(self._hi_np, **f32)
+        half = 0.5 * (self._hi_np - self._lo_np)
+        self._half = torch.as_tensor(half, **f32)
+        self._gain = torch.as_tensor(cfg.action_scale * half, **f32)
+        self._grid = torch.as_tensor(O.heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m),
+                                     **f32)  # fmt: skip
+
+    def _alloc_sim(self, nconmax: int, njmax: int) -> None:
+        """The warp model (subject arrays batched per world), data, and torch views of it."""
+        n, ix = self.num_envs, self.index
+        with wp.ScopedDevice(self.wp_device):
+            self.model = mjw.put_model(
+                self.mj_model, batch_sizes=dict.fromkeys(self._subject_fields, n)
+            )
+            self.data = mjw.make_data(self.mj_model, nworld=n, nconmax=nconmax, njmax=njmax)
+        m, d = self.model, self.data
+        self._model_views = {k: wp.to_torch(getattr(m, k)) for k in self._subject_fields}
+        tt = wp.to_torch
+        self._qpos, self._qvel, self._ctrl = tt(d.qpos), tt(d.qvel), tt(d.ctrl)
+        self._xpos, self._xmat, self._cvel = tt(d.xpos), tt(d.xmat), tt(d.cvel)
+        self._subtree_com, self._act_force = tt(d.subtree_com), tt(d.actuator_force)
+        self._clear = [tt(getattr(d, k)) for k in ("qacc_warmstart", "act", "qfrc_applied",
+                                                   "xfrc_applied", "time")]  # fmt: skip
+        dev = self.device
+        self._body = torch.as_tensor(ix.body_ids, device=dev)
+        self._pelvis = int(ix.body_ids[0])
+        self._act = torch.as_tensor(ix.actuator_ids, device=dev)
+        self._hinge_q = torch.as_tensor(ix.hinge_qpos_adr, device=dev)
+        self._hinge_qd = torch.as_tensor(ix.hinge_dof_adr, device=dev)
+        rv = ix.root_dof_adr
+        self._root_lin = slice(rv, rv + 3)
+        ang = np.setdiff1d(np.arange(self.mj_model.nv), np.arange(rv, rv + 3))
+        self._ang = torch.as_tensor(ang, device=dev)
+        self._root_z = ix.root_qpos_adr + 2
+
+    def _alloc_episodes(self) -> None:
+        n, dev, cfg = self.num_envs, self.device, self.cfg
+        i64 = dict(dtype=torch.int64, device=dev)
+        f32 = dict(dtype=torch.float32, device=dev)
+        self.clip_index = torch.zeros(n, **i64)
+        self.frame = torch.zeros(n, **i64)
+        self._steps = torch.zeros(n, **i64)
+        self._root_offset = torch.zeros(n, 3, **f32)
+        self._hist = torch.zeros(n, self._hist_n, 2, **f32)
+        self._hist_pos = torch.zeros(n, **i64)
+        self._hist_len = torch.zeros(n, **i64)
+        self._amp = torch.zeros(n, cfg.amp_window, A.FRAME_DIM, **f32)
+        self._good_pvw = torch.zeros(n, 3, _NJ, 3, **f32)
+        self._good_rot = torch.zeros(n, _NJ, 3, 3, **f32)
+        self._good_t = torch.zeros(n, **i64)
+        self.termination_dist_m = torch.full((n,), cfg.termination_dist_m, **f32)
+        self.blowups = 0
+
+    # ------------------------------------------------------------------ state
+    def _physics(self, fn) -> None:
+        """Run a MuJoCo Warp call on the env's device, ordered with torch's work there."""
+        with wp.ScopedDevice(self.wp_device):
+            if self.wp_device.is_cuda:
+                with wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device))):
+                    fn(self.model, self.data)
+            else:
+                fn(self.model, self.data)
+
+    @property
+    def qpos(self) -> torch.Tensor:
+        """``(N, nq)`` MuJoCo's ``qpos`` of every world (a view of the warp array)."""
+        return self._qpos
+
+    def body_state(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``pvw (N, 3, J, 3)`` and ``rot (N, J, 3, 3)`` of every world, SMPL order (the
+        numbers of :func:`grip.sim.humanoid.body_state`; body-origin velocities from ``cvel``,
+        which MuJoCo gives at the pelvis subtree's centre of mass)."""
+        b = self._body
+        pos = self._xpos[:, b]
+        cvel = self._cvel[:, b]
+        w = cvel[..., :3]
+        r = pos - self._subtree_com[:, self._pelvis, None]
+        vel = cvel[..., 3:] + torch.linalg.cross(w, r)
+        return torch.stack([pos, vel, w], dim=1), self._xmat[:, b]
+
+    def _blown(self) -> torch.Tensor:
+        """``(N,)`` bool: the state is non-finite or beyond the ``blowup_*`` bounds."""
+        cfg, q, v = self.cfg, self._qpos, self._qvel
+        lin = v[:, self._root_lin]
+        ok = (lin * lin).sum(dim=1) <= cfg.blowup_lin_vel_mps**2
+        ok &= v[:, self._ang].abs().amax(dim=1) <= cfg.blowup_ang_vel_radps
+        z = q[:, self._root_z]
+        ok &= (z >= self._z_range[0]) & (z <= self._z_range[1])
+        ok &= torch.isfinite(q).all(dim=1)
+        return ~ok
+
+    # ------------------------------------------------------------------ episodes
+    def reset(self, mask: torch.Tensor, clip: torch.Tensor | None = None,
+              start: torch.Tensor | None = None) -> None:  # fmt: skip
+        """Start new episodes in the worlds of ``mask (N,)`` (bool).
+
+        Args:
+            mask: The worlds to reset.
+            clip, start: ``(M,)`` int64 clip and start frame of each of the M masked worlds
+                (as ``GripTrackingEnv.reset(options={"clip", "start"})``); drawn as
+                ``GripTrackingEnv`` draws random starts (clips by length) when ``None``.
+        """
+        cfg, c = self.cfg, self.clips
+        idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
+        m = idx.numel()
+        if m == 0:
+            return
+        if clip is None:
+            if cfg.clip_index >= 0:
+                clip = torch.full((m,), cfg.clip_index, dtype=torch.int64, device=self.device)
+            else:
+                clip = torch.multinomial(self._clip_p, m, replacement=True, generator=self._gen)
+        clip = clip.to(self.device, torch.int64)
+        if start is None:
+            last = (c.n_frames[clip] - 1 - cfg.min_episode_frames).clamp(min=0)
+            if cfg.random_start:
+                u = torch.rand(m, generator=self._gen, device=self.device, dtype=torch.float64)
+                start = (u * (last + 1)).long().minimum(last)
+            else:
+                start = torch.zeros(m, dtype=torch.int64, device=self.device)
+        start = start.to(self.device, torch.int64)
+        row = c.offset[clip] + start
+        # the world's subject and state (Humanoid.reset: fresh data, PD targets at the pose)
+        subj = c.subject[clip]
+        for name, view in self._model_views.items():
+            view[idx] = self._subject_fields[name][subj].to(view.dtype).reshape(m, *view.shape[1:])
+        for a in self._clear:
+            a[idx] = 0
+        self._qpos[idx] = c.qpos[row]
+        self._qvel[idx] = c.qvel[row]
+        ctrl = self._ctrl[idx]
+        ctrl[:, self._act] = torch.minimum(torch.maximum(c.qpos[row][:, self._hinge_q], self._lo),
+                                           self._hi)  # fmt: skip
+        self._ctrl[idx] = ctrl
+        # positions and velocities of the new states (of all worlds: recomputing the others'
+        # changes nothing, MuJoCo Warp has no per-world call)
+        self._physics(mjw.step1)
+        self.clip_index[idx], self.frame[idx], self._good_t[idx] = clip, start, start
+        self._steps[idx] = 0
+        self._root_offset[idx] = c.qpos[row][:, :3] - c.est_root[row]
+        pvw, rot = self.body_state()
+        self._good_pvw[idx], self._good_rot[idx] = pvw[idx], rot[idx]
+        self._hist[idx, 0] = pvw[idx, 0, 0, :2]
+        self._hist_len[idx] = 1
+        self._hist_pos[idx] = 1 % self._hist_n
+        # AMP window: the ground truth of the frames before the start, the oldest repeated
+        w = cfg.amp_window
+        back = (start[:, None] + torch.arange(-w + 1, 1, device=self.device)).clamp(min=0)
+        self._amp[idx] = c.amp[c.offset[clip][:, None] + back]
+
+    def set_termination_dist(self, dist_m: float) -> None:
+        """Early-termination distance of every world from the next step on (m, 0 = off)."""
+        if not dist_m >= 0:
+            raise ValueError(f"termination distance must be >= 0 m, got {dist_m}")
+        self.termination_dist_m.fill_(float(dist_m))
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, actions: torch.Tensor):
+        """One decision of every world: ``actions (N, 69)`` held for up to ``action_repeat``
+        frames (fewer where an episode ends).
+
+        Returns:
+            ``obs`` (dict of ``(N, ...)`` float32 tensors), ``reward (N,)`` (mean over the
+            frames played), ``terminated (N,)``, ``truncated (N,)`` (bool) and an info dict of
+            ``(N, ...)`` tensors: ``reward/<term>`` (means), ``max_joint_err_m``, ``mpjpe_m``,
+            ``sim_unstable``, ``root_height_m``, ``frame``, ``clip_index``, ``frames`` and
+            ``amp_obs (N, amp_window * FRAME_DIM)``.
+        """
+        n, dev = self.num_envs, self.device
+        a = torch.as_tensor(actions, dtype=torch.float32, device=dev).reshape(n, -1)
+        if a.shape[1] != A.N_HINGES or not torch.isfinite(a).all():
+            raise ValueError(f"actions must be ({n}, {A.N_HINGES}) finite values, got shape "
+                             f"{tuple(actions.shape)}")  # fmt: skip
+        a = a.clamp(-1.0, 1.0)
+        f32 = dict(dtype=torch.float32, device=dev)
+        active = torch.ones(n, dtype=torch.bool, device=dev)
+        frames = torch.zeros(n, dtype=torch.int64, device=dev)
+        sums = torch.zeros(n, _N_TERMS, **f32)
+        total = torch.zeros(n, **f32)
+        term = torch.zeros(n, dtype=torch.bool, device=dev)
+        trunc, unstable = torch.zeros_like(term), torch.zeros_like(term)
+        err, mpjpe, height = torch.zeros(n, **f32), torch.zeros(n, **f32), torch.zeros(n, **f32)
+        for _ in range(self.k):
+            frames += active
+            self._frame(active, a, sums, total, term, trunc, unstable, err, mpjpe, height)
+            active &= ~(term | trunc)
+            if self.k > 1 and not bool(active.any()):
+                break
+        trunc &= ~term
+        obs = self._observe()
+        fr = frames.clamp(min=1).to(torch.float32)
+        info = {f"reward/{k}": sums[:, i] / fr for i, k in enumerate(R.TERMS)}
+        info.update(max_joint_err_m=err, mpjpe_m=mpjpe, sim_unstable=unstable,
+                    root_height_m=height, frame=self.frame.clone(),
+                    clip_index=self.clip_index.clone(), frames=frames,
+                    amp_obs=self._amp.reshape(n, -1).clone())  # fmt: skip
+        return obs, total / fr, term, trunc, info
+
+    def _frame(self, active, a, sums, total, term, trunc, unstable, err, mpjpe, height) -> None:
+        """Advance every world one frame; accumulate the rewards and info values of the
+        ``active`` ones (those whose episode has not ended in this decision)."""
+        cfg, c = self.cfg, self.clips
+        tn = self.frame + 1
+        # (worlds whose episode has ended may be at the clip's last frame: their rows are read
+        # clamped and their results dropped)
+        tn_c = torch.minimum(tn, c.n_frames[self.clip_index] - 1)
+        row = c.offset[self.clip_index] + tn_c
+        if self._relative:
+            tgt = c.target[row] + a * self._gain
+        else:
+            tgt = self._lo + (a + 1.0) * self._half
+        self._ctrl[:, self._act] = torch.minimum(torch.maximum(tgt, self._lo), self._hi)
+        for _ in range(cfg.substeps):
+            # (step2 then step1, as grip.sim.humanoid.Humanoid.step: the derived quantities of
+            # the new state are ready when the step returns)
+            self._physics(mjw.step2)
+            self._physics(mjw.step1)
+        self.frame = torch.where(active, tn, self.frame)
+        self._steps += active
+        blown = self._blown() & active
+        if bool(blown.any()):
+            self.blowups += int(blown.sum())
+            term |= blown
+            unstable |= blown
+            err[blown] = mpjpe[blown] = float("inf")
+            height[blown] = 0.0
+        ok = active & ~blown
+        pvw, rot = self.body_state()
+        pos = pvw[:, 0]
+        # pelvis xy window (a ring, newest at _hist_pos - 1)
+        hn = self._hist_n
+        p = self._hist_pos
+        ar = torch.arange(self.num_envs, device=self.device)
+        h_len = torch.minimum(self._hist_len + 1, torch.full_like(p, hn))
+        ring = self._hist.clone()
+        ring[ar, p] = pos[:, 0, :2]
+        oldest = ring[ar, (p + 1 - h_len) % hn]
+        back = c.offset[self.clip_index] + tn_c - (h_len - 1)
+        ref_disp = c.gt_pvw[row, 0, 0, :2] - c.gt_pvw[back, 0, 0, :2]
+        terms5, sq = T.tracking_terms(pvw, rot, c.gt_pvw[row], c.gt_rot[row], cfg.reward,
+                                      cfg.align_root_xy, pos[:, 0, :2] - oldest, ref_disp,
+                                      self._vel_s)  # fmt: skip
+        tau = self._act_force[:, self._act]
+        qd = self._qvel[:, self._hinge_qd]
+        energy = torch.where(self._steps > cfg.reward.energy_skip_frames,
+                             (tau * qd).abs().sum(dim=1), torch.zeros_like(tau[:, 0]))  # fmt: skip
+        terms = torch.cat([terms5, energy[:, None], torch.zeros_like(energy[:, None])], dim=1)
+        reward = terms @ self._w
+        dist = torch.sqrt(sq[:, 0])
+        e_max = dist.amax(dim=1)
+        z = pos[:, 0, 2]
+        tau_d = self.termination_dist_m
+        te = ((tau_d > 0) & (e_max > tau_d)) | (z < cfg.fall_height_m)
+        tr = tn >= c.n_frames[self.clip_index] - 1
+        if cfg.max_episode_frames > 0:
+            tr |= self._steps >= cfg.max_episode_frames
+        okf = ok[:, None]
+        self._hist = torch.where(okf[:, :, None], ring, self._hist)
+        self._hist_pos = torch.where(ok, (p + 1) % hn, p)
+        self._hist_len = torch.where(ok, h_len, self._hist_len)
+        term |= ok & te
+        trunc |= ok & tr
+        sums += torch.where(okf, terms, torch.zeros_like(terms))
+        total += torch.where(ok, reward, torch.zeros_like(reward))
+        err.copy_(torch.where(ok, e_max, err))
+        mpjpe.copy_(torch.where(ok, dist.sum(dim=1) / dist.shape[1], mpjpe))
+        height.copy_(torch.where(ok, z, height))
+        # AMP window and the last stable state
+        h = T.heading_matrices(rot[:, 0])
+        hinges = torch.cat([self._qpos[:, self._hinge_q], self._qvel[:, self._hinge_qd]], dim=1)
+        frame = T.amp_frames(pvw, rot, hinges, h)
+        shifted = torch.cat([self._amp[:, 1:], frame[:, None]], dim=1)
+        self._amp = torch.where(okf[:, :, None], shifted, self._amp)
+        self._good_pvw = torch.where(ok[:, None, None, None], pvw, self._good_pvw)
+        self._good_rot = torch.where(ok[:, None, None, None], rot, self._good_rot)
+        self._good_t = torch.where(ok, tn, self._good_t)
+
+    def _observe(self) -> dict[str, torch.Tensor]:
+        """Observations of every world's last stable state against the estimate of the frame
+        after it (:meth:`envs.batched.BatchedTrackingEnv._observe`)."""
+        c, cfg = self.clips, self.cfg
+        pvw, rot = self._good_pvw, self._good_rot
+        ci = self.clip_index
+        row = c.offset[ci] + torch.minimum(self._good_t + 1, c.n_frames[ci] - 1)
+        h = T.heading_matrices(rot[:, 0])
+        est = c.obs_rows[row].clone()
+        est[:, _ROOT] += self._root_offset
+        kin, self_vec = T.observation_parts(cfg.kinematic_obs, h, pvw, rot, est)
+        root = pvw[:, 0, 0]
+        if self._hf is None:
+            hm = (-root[:, 2:3]).expand(-1, self._grid.shape[0])
+        else:
+            hm = self._hf.around(root[:, :2], h, self._grid) - root[:, 2:3]
+        return {"sensor": c.sensor[row], "kinematic": kin, "self": self_vec,
+                "environment": hm.contiguous()}  # fmt: skip
+
+    def observe(self) -> dict[str, torch.Tensor]:
+        """The observations of the current states (after :meth:`reset`, before a step)."""
+        return self._observe()
+
+    def contact_depths(self) -> list[dict[tuple[int, int], float]]:
+        """Per world, each contacting geom pair's smallest signed distance, m (host copies)."""
+        d = self.data
+        k = int(d.nacon.numpy()[0])
+        geom, world = d.contact.geom.numpy()[:k], d.contact.worldid.numpy()[:k]
+        dist = d.contact.dist.numpy()[:k]
+        out: list[dict[tuple[int, int], float]] = [{} for _ in range(self.num_envs)]
+        for g, w, dd in zip(geom.tolist(), world.tolist(), dist.tolist(), strict=True):
+            key = (min(g), max(g))
+            out[w][key] = min(out[w].get(key, np.inf), dd)
+        return out
+
+    def overflowed(self) -> bool:
+        """Whether a world ran out of allocated contacts or constraint rows (then contacts are
+        lost: raise ``nconmax`` / ``njmax``)."""
+        d = self.data
+        return int(d.nacon.numpy()[0]) > d.naconmax or int(d.nefc.numpy().max()) > d.njmax
+
+    def close(self) -> None:
+        """Release nothing (warp frees its arrays with the env); kept for the env API."""

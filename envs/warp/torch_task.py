@@ -1,0 +1,186 @@
+"""The tracking task's per-step math as torch functions on batches (the device twins of the
+numpy row kernels that :class:`envs.batched.BatchedTrackingEnv` uses).
+
+Each function here equals a numpy function of :mod:`grip.task.observations`,
+:mod:`grip.task.amp`, :mod:`envs.rewards` or :mod:`envs.heightfield` to float rounding, whatever
+the dtype and device of its inputs (``tests/warp/test_torch_task.py`` checks each pair in
+float64). They exist so that :class:`envs.warp.env.WarpTrackingEnv` computes observations,
+rewards and AMP frames where the simulation state lives, without a copy to the host.
+
+Shapes: B batch, J = 24 joints. ``pvw (B, 3, J, 3)`` = world positions (m), linear (m/s) and
+angular (rad/s) velocities of the bodies; ``rot (B, J, 3, 3)`` their world rotations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from envs.heightfield import HeightField
+from grip.core import skeleton as sk
+from grip.task import amp as A
+from grip.task import observations as O
+from grip.task.config import RewardConfig
+
+_IMU = list(O.IMU_JOINTS)
+_VEL = list(sk.VELOCITY_JOINTS)
+_N_IMU = len(_IMU)
+_N_SELF_VEC = (sk.N_JOINTS - 1) + 2 * sk.N_JOINTS
+_KEY = list(A.KEY_JOINTS)
+
+
+def heading_matrices(root_rot: torch.Tensor) -> torch.Tensor:
+    """:func:`grip.task.observations.heading_matrices`: ``(..., 3, 3)`` yaw rotations whose x
+    axis is the pelvis' facing direction on the floor (identity where it faces straight up or
+    down)."""
+    fx, fy = root_rot[..., 0, 2], root_rot[..., 1, 2]
+    n = torch.hypot(fx, fy)
+    ok = n > 1e-9
+    safe = torch.where(ok, n, torch.ones_like(n))
+    c = torch.where(ok, fx / safe, torch.ones_like(n))
+    s = torch.where(ok, fy / safe, torch.zeros_like(n))
+    z, one = torch.zeros_like(n), torch.ones_like(n)
+    return torch.stack([c, -s, z, s, c, z, z, z, one], dim=-1).reshape(*n.shape, 3, 3)
+
+
+def observation_parts(variant: str, h: torch.Tensor, sim_pvw: torch.Tensor,
+                      sim_rot: torch.Tensor, est_rows: torch.Tensor
+                      ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """:func:`grip.task.observations.observation_rows`: O^kin and O^self of B states.
+
+    Args:
+        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4).
+        h: ``(B, 3, 3)`` heading matrices of the simulated pelvis.
+        sim_pvw, sim_rot: The simulated states.
+        est_rows: ``(B, OBS_ROW_DIM)`` estimate rows (:data:`grip.task.observations.OBS_ROW`;
+            the root already offset to the episode's start).
+
+    Returns:
+        ``kinematic (B, kinematic_dim(variant))`` and ``self (B, SELF_DIM)``, in the dtype of
+        the inputs.
+    """
+    b, r, nj = est_rows.shape[0], O.OBS_ROW, sk.N_JOINTS
+    est_pos = est_rows[:, r["est_pos"]].reshape(b, nj, 3)
+    e_leaf = est_rows[:, r["leaf_rot"]].reshape(b, _N_IMU, 3, 3)
+    est_vel = est_rows[:, r["est_vel"]].reshape(b, -1, 3)
+    est_leaf_angvel = est_rows[:, r["leaf_angvel"]].reshape(b, _N_IMU, 3)
+    pos, vel, w = sim_pvw[:, 0], sim_pvw[:, 1], sim_pvw[:, 2]
+    rel = pos - pos[:, :1]
+    rows = [rel[:, 1:], vel, w, est_leaf_angvel - w[:, _IMU]]
+    if variant != "OA":
+        rows.append(est_vel - vel[:, _VEL])
+    if variant == "OAV_Jrel":
+        rows += [est_pos - rel, est_pos]
+    elif variant == "OAV_Jglo":
+        rows += [(est_rows[:, None, r["est_root_pos"]] + est_pos) - pos, est_pos]
+    vecs = torch.cat(rows, dim=1) @ h
+    d_rot = e_leaf @ sim_rot[:, _IMU].transpose(-1, -2)
+    cols = torch.cat([sim_rot[..., :2], e_leaf[..., :2], d_rot @ h[:, None, :, :2]], dim=1)
+    six = (cols.transpose(-1, -2).reshape(b, -1, 3) @ h).reshape(b, -1, 6)
+    self_vec = torch.cat([pos[:, 0, 2:3], vecs[:, :_N_SELF_VEC].reshape(b, -1),
+                          six[:, :nj].reshape(b, -1)], dim=1)  # fmt: skip
+    kin = torch.cat([six[:, nj + _N_IMU :].reshape(b, -1), six[:, nj : nj + _N_IMU].reshape(b, -1),
+                     vecs[:, _N_SELF_VEC:].reshape(b, -1)], dim=1)  # fmt: skip
+    return kin, self_vec
+
+
+def tracking_terms(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, ref_pvw: torch.Tensor,
+                   ref_rot: torch.Tensor, cfg: RewardConfig, align_root_xy: bool,
+                   sim_disp: torch.Tensor, ref_disp: torch.Tensor, seconds: float
+                   ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """:func:`envs.rewards.tracking_terms_rows`: the imitation terms and ``root_vel`` of B
+    states.
+
+    Args:
+        sim_pvw, sim_rot: The simulated states.
+        ref_pvw, ref_rot: The ground truth of the same frames, same shapes.
+        cfg: Kernel coefficients and form.
+        align_root_xy: Compare positions with the simulated pelvis moved over the reference's
+            horizontally.
+        sim_disp, ref_disp: ``(B, 2)`` horizontal pelvis displacements over ``seconds``, m.
+        seconds: Length of the root-velocity window, s.
+
+    Returns:
+        ``(B, 5)`` terms in :data:`envs.rewards.TERMS` order (``imit_pos, imit_rot, imit_vel,
+        imit_angvel, root_vel``) and ``(B, 3, J)`` per-joint squared position (aligned as
+        asked), velocity and angular-velocity errors.
+    """
+    e = sim_pvw - ref_pvw
+    if align_root_xy:
+        # every joint's xy error minus the pelvis' (heights and velocities as they are)
+        shift = torch.cat([e[:, :1, :1, :2], torch.zeros_like(e[:, :1, :1, :1])], dim=-1)
+        e = torch.cat([e[:, :1] - shift, e[:, 1:]], dim=1)
+    sq = (e * e).sum(dim=-1)  # (B, 3, J)
+    tot = sq.sum(dim=-1)  # pos, vel, angvel
+    tr = (sim_rot * ref_rot).sum(dim=(-1, -2))
+    ang = torch.arccos(((tr - 1.0) * 0.5).clamp(-1.0, 1.0))
+    x = torch.stack([tot[:, 0], (ang * ang).sum(dim=1), tot[:, 1], tot[:, 2]], dim=1)
+    j = sim_rot.shape[1]
+    x = x * (1.0 / j) if cfg.form == "mean_sq" else torch.sqrt(x)
+    d = (sim_disp - ref_disp) / seconds
+    k = torch.tensor([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel], dtype=x.dtype,
+                     device=x.device)  # fmt: skip
+    terms = torch.cat([torch.exp(-k * x), torch.exp(-cfg.k_root_vel * (d * d).sum(dim=1))[:, None]],
+                      dim=1)  # fmt: skip
+    return terms, sq
+
+
+def amp_frames(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, hinges: torch.Tensor,
+               h: torch.Tensor) -> torch.Tensor:  # fmt: skip
+    """:func:`grip.task.amp.amp_frames`: ``(B, FRAME_DIM)`` AMP frames of B simulated states.
+
+    Args:
+        sim_pvw, sim_rot: The simulated states.
+        hinges: ``(B, 138)`` hinge angles (rad) then hinge rates (rad/s), SMPL order.
+        h: ``(B, 3, 3)`` heading matrices of the pelvis.
+    """
+    b = sim_pvw.shape[0]
+    pos = sim_pvw[:, 0]
+    v = torch.cat([sim_rot[:, 0, :, :2].transpose(1, 2), sim_pvw[:, 1:, 0],
+                   pos[:, _KEY] - pos[:, :1]], dim=1) @ h  # fmt: skip
+    return torch.cat([pos[:, 0, 2:3], v[:, :4].reshape(b, 12), hinges, v[:, 4:].reshape(b, 12)],
+                     dim=1)  # fmt: skip
+
+
+class TorchHeightField:
+    """:meth:`envs.heightfield.HeightField.sample` on a device: bilinear terrain heights,
+    0 outside the grid.
+
+    Args:
+        hf: The height field.
+        device, dtype: Where and how its coefficients are kept.
+    """
+
+    def __init__(self, hf: HeightField, device: torch.device | str,
+                 dtype: torch.dtype = torch.float32) -> None:  # fmt: skip
+        h = np.asarray(hf.heights, dtype=np.float64)
+        ny, nx = h.shape
+        a = h[:-1, :-1]
+        coef = np.stack([a, h[:-1, 1:] - a, h[1:, :-1] - a,
+                         h[1:, 1:] - h[1:, :-1] - h[:-1, 1:] + a], axis=-1)  # fmt: skip
+        self.coef = torch.as_tensor(coef.reshape(-1, 4), dtype=dtype, device=device)
+        self.origin = torch.tensor(np.array(hf.origin_xy), dtype=dtype, device=device)
+        self.inv = 1.0 / float(hf.cell_m)
+        self.nx, self.ny = nx, ny
+        self.max_height = float(h.max())
+
+    def sample(self, xy: torch.Tensor) -> torch.Tensor:
+        """Heights ``(...)`` at world points ``xy (..., 2)``, m."""
+        uv = (xy - self.origin) * self.inv
+        u, v = uv[..., 0], uv[..., 1]
+        # (a non-finite point reads cell 0 and comes out 0: it is outside the grid)
+        iu = torch.nan_to_num(torch.floor(u)).clamp(0.0, self.nx - 2)
+        iv = torch.nan_to_num(torch.floor(v)).clamp(0.0, self.ny - 2)
+        fu, fv = u - iu, v - iv
+        k = (iv * (self.nx - 1) + iu).long()
+        c = self.coef[k]  # (..., 4)
+        r = c[..., 0] + c[..., 1] * fu + (c[..., 2] + c[..., 3] * fu) * fv
+        inside = (u >= 0.0) & (u <= self.nx - 1) & (v >= 0.0) & (v <= self.ny - 1)
+        return torch.where(inside, r, torch.zeros_like(r))
+
+    def around(self, center_xy: torch.Tensor, h: torch.Tensor,
+               grid: torch.Tensor) -> torch.Tensor:  # fmt: skip
+        """:func:`envs.heightfield.sample_heightmap` of B frames: heights ``(B, N)`` at
+        ``center_xy (B, 2) + grid (N, 2) @ rot2.T`` with ``rot2 = h[:, :2, :2]``."""
+        pts = center_xy[:, None, :] + grid[None] @ h[:, :2, :2].transpose(1, 2)
+        return self.sample(pts)
