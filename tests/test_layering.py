@@ -27,7 +27,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES: tuple[str, ...] = ("grip", "envs", "policies", "prism_tools")
-CHECKED_EXTERNAL: tuple[str, ...] = ("numpy", "torch", "mujoco", "gymnasium", "stable_baselines3")
+CHECKED_EXTERNAL: tuple[str, ...] = ("numpy", "torch", "mujoco", "gymnasium", "stable_baselines3",
+                                     "ray")
 EDGE = "*"  # a row that may import anything
 
 # STYLE.md's layer table, with the layers added since (grip.nn, grip.sim, grip.motion, ...).
@@ -64,6 +65,8 @@ ALLOWED: dict[str, tuple[str, ...] | str] = {
                     "grip.task"),
     "grip.pipeline": ("numpy", "torch", "grip.core", "grip.config", "grip.sim", "grip.kinematics",
                       "grip.task", "grip.player", "envs.scenes"),
+    # the commands' units of work as Ray tasks and Tune sweeps (Ray imported only when used)
+    "grip.cluster": ("ray", "grip.core"),
     "grip.eval": EDGE,
     "grip.cli": EDGE,
 }

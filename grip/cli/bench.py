@@ -80,6 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "TransPose's root, PIP's learned initialisation and its physics' first "
                       "state)", "; a folder resumes only with the --init it was written "
                       "with")  # fmt: skip
+    from grip.cli.cluster import add_ray_argument
+
+    add_ray_argument(p, "units of work (a method on a segment, or on --batch N of them)")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_bench)
 
@@ -87,6 +90,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, skip_file, split_paths
     from grip.eval.bench import write_outputs
@@ -96,6 +100,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from grip.eval.segments import BenchError, list_segments, select_segments
 
     limits_from_args(args)
+    ray_args(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.batch < 1:
@@ -133,13 +138,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for f, why in unreadable:
         skip_file(skipped, f, why)
     labels = [r.label for r in runs]
-    print(f"{len(segs)} segment(s) x {len(runs)} method(s) ({', '.join(labels)}), "
-          f"{args.workers} worker(s) -> {args.out}")  # fmt: skip
+    where = (f"{args.workers} worker(s)" if args.ray is None
+             else f"Ray ({args.ray or 'started on this machine'})")  # fmt: skip
+    print(f"{len(segs)} segment(s) x {len(runs)} method(s) ({', '.join(labels)}), {where} -> "
+          f"{args.out}")  # fmt: skip
     t0 = time.perf_counter()
     failed = 0
     stored = sum((args.out / "segments" / r.label / f"{s.id}.json").is_file()
                  for r in runs for s in segs)  # fmt: skip
-    with tqdm(total=len(segs) * len(runs), initial=stored, unit="seg", desc="bench") as bar:
+    with ray_pool(args) as pool, tqdm(total=len(segs) * len(runs), initial=stored, unit="seg",
+                                      desc="bench") as bar:  # fmt: skip
 
         def progress(row: dict) -> None:
             nonlocal failed
@@ -151,7 +159,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             rows = run_bench(runs, segs, args.out, workers=args.workers,
                              save_recons=args.save_recons, retry_failed=args.retry_failed,
                              built=built, progress=progress, log=bar.write,
-                             batch=args.batch)  # fmt: skip
+                             batch=args.batch, pool=pool)  # fmt: skip
         except BenchError as e:
             raise CliError(str(e)) from e
     title = f"Benchmark on {args.data} ({args.split} split, --init {args.init})"

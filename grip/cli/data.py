@@ -106,6 +106,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(columns 'clip' or 'file', and 'category'; the default map translates "
                    "them) for one's own clips; without either, a clip without a label takes "
                    "its folder's name")  # fmt: skip
+    from grip.cli.cluster import add_ray_argument
+
+    add_ray_argument(b, "clips")
     add_limit_arguments(b)
     b.set_defaults(func=cmd_build)
 
@@ -247,12 +250,14 @@ def scan_motions(roots: list[Path], limit: int | None, categories=None, table=No
 def cmd_build(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
     from grip.cli.paths import default_motions_dir
     from grip.dataset.build import BuildConfig, build_dataset
     from grip.dataset.info import dataset_summary, format_summary
 
     limits_from_args(args)
+    ray_args(args)
     roots = args.motions
     if roots is None:
         d = default_motions_dir()
@@ -290,11 +295,11 @@ def cmd_build(args: argparse.Namespace) -> int:
     clips, skipped = scan_motions(roots, args.limit, cmap, table)
     counts: dict[str, int] = {}
     t0 = time.perf_counter()
-    with tqdm(total=len(clips), desc="clips", unit="clip") as bar:
+    with ray_pool(args) as pool, tqdm(total=len(clips), desc="clips", unit="clip") as bar:
         try:
             results = build_dataset(clips, args.out, cfg, workers=args.workers,
                                     progress=bar.update, skipped_files=skipped,
-                                    counts=counts)  # fmt: skip
+                                    counts=counts, pool=pool)  # fmt: skip
         except (ValueError, OSError) as e:
             raise CliError(str(e)) from e
     dt = time.perf_counter() - t0

@@ -46,6 +46,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--config configs/kinematics/sweep.toml\n"
         "         grip kin train --data data/prism_synth --out runs/kin_ft "
         "--init runs/kin/last.pt --config configs/kinematics/finetune.toml\n"
+        "         grip kin train --data data/prism_synth --out runs/kin_lr --tune space.toml "
+        "[--ray HEAD:6379]   (docs/cluster.md)\n"
         "         grip kin train --baseline transpose --data data/prism_synth --out runs/tp4\n"
         "         grip kin train --baseline pip --insoles --data data/prism_synth --out runs/pip4i",
     )
@@ -73,6 +75,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--imus", default="2,3,4,6", metavar="N,N,...",
                    help="IMU counts of --sweep (feet, +left wrist, +right wrist, +pelvis, +head; "
                    "default 2,3,4,6)")  # fmt: skip
+    from grip.cli.cluster import add_tune_arguments
+
+    add_tune_arguments(p)
     p.set_defaults(func=cmd_train)
     add_eval_parser(ksub)
     x = ksub.add_parser(
@@ -142,6 +147,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from grip.cli.paths import load_run_config
     from grip.kinematics.config import KinematicsRunConfig
 
+    if args.tune is not None or args.ray is not None:
+        return _tune(args)
     if args.baseline is not None:
         for flag, given in (("--init", args.init is not None), ("--sweep", args.sweep)):
             if given:
@@ -176,21 +183,50 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_train_baseline(args: argparse.Namespace) -> int:
-    """Train the kinematics nets of baseline ``args.baseline`` (resumes ``args.out``)."""
-    import torch
-
+def _tune(args: argparse.Namespace) -> int:
+    """``--tune SPACE.toml``: a sweep of runs (:func:`grip.cli.cluster.tune_train`), each trial
+    one run of KinematicsNet (or of ``--baseline``), the table sorted by ``val/total``."""
+    from grip.cli.cluster import kin_metrics, tune_train
     from grip.cli.errors import CliError
+    from grip.cli.paths import load_run_config
+    from grip.kinematics.config import KinematicsRunConfig
+
+    if args.sweep:
+        raise CliError("--tune sweeps --set values; it does not combine with --sweep (the "
+                       "sensor sweep)")  # fmt: skip
+
+    def check(sets: list[str]) -> None:
+        if args.baseline is not None:
+            _baseline_config(args, sets)
+        else:
+            load_run_config(args.config, "kinematics", KinematicsRunConfig(), [*args.set, *sets])
+
+    return tune_train(args, check, kin_metrics, "val/total", "min")
+
+
+def _baseline_config(args: argparse.Namespace, extra: list[str] | None = None):
+    """The settings of ``--baseline``'s run: its TOML (default ``configs/baselines/NAME.toml``),
+    ``--set`` and ``extra`` overrides, ``--insoles``."""
     from grip.cli.paths import REPO_ROOT, load_run_config
-    from grip.kinematics.baseline_config import default_run_config, n_inputs
-    from grip.kinematics.baseline_train import BaselineTrainer, load_baseline_sequences
+    from grip.kinematics.baseline_config import default_run_config
 
     config = args.config
     if config is None:
         candidate = REPO_ROOT / "configs" / "baselines" / f"{args.baseline}.toml"
         config = candidate if candidate.is_file() else None
-    overrides = [*args.set, *(["net.insoles=true"] if args.insoles else [])]
-    cfg = load_run_config(config, "baselines", default_run_config(args.baseline), overrides)
+    overrides = [*args.set, *(extra or []), *(["net.insoles=true"] if args.insoles else [])]
+    return load_run_config(config, "baselines", default_run_config(args.baseline), overrides)
+
+
+def cmd_train_baseline(args: argparse.Namespace) -> int:
+    """Train the kinematics nets of baseline ``args.baseline`` (resumes ``args.out``)."""
+    import torch
+
+    from grip.cli.errors import CliError
+    from grip.kinematics.baseline_config import n_inputs
+    from grip.kinematics.baseline_train import BaselineTrainer, load_baseline_sequences
+
+    cfg = _baseline_config(args)
     if args.threads:
         torch.set_num_threads(args.threads)
     t0 = time.perf_counter()
@@ -347,6 +383,12 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
         help="evaluate every run of a sensor sweep folder ('grip kin train --sweep') "
         "and print a table like GRIP Table 3 instead",
     )
+    p.add_argument("--workers", type=int, default=1, metavar="K",
+                   help="processes scoring runs of consecutive segments, one thread each "
+                   "(default 1: in this process)")  # fmt: skip
+    from grip.cli.cluster import add_ray_argument
+
+    add_ray_argument(p, "runs of segments")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_eval)
 
@@ -356,14 +398,18 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from grip.cli.cluster import command_pool, ray_args
     from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint
     from grip.core.atomic import atomic_write_text
-    from grip.eval.kinematics import aggregate, evaluate_segments, markdown_table
+    from grip.eval.kinematics import aggregate, markdown_table
     from grip.eval.plots import plot_categories
     from grip.kinematics.inference import KinematicsEstimator
 
     limits_from_args(args)
+    ray_args(args)
+    if args.workers < 1:
+        raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.sweep is not None:
         if args.model is not None:
             raise CliError("give --model or --sweep, not both")
@@ -375,9 +421,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     errors: list[tuple[str, str]] = []
     segs = _split_segments(args, errors)
-    with tqdm(total=len(segs), unit="segment", desc="evaluating") as bar:
-        rows = evaluate_segments(est, segs, progress=bar.update, joints=args.joints,
-                                 init=args.init)  # fmt: skip
+    with command_pool(args, args.workers) as pool, tqdm(total=len(segs), unit="segment",
+                                                         desc="evaluating") as bar:  # fmt: skip
+        rows = _evaluate(est, model, segs, pool, progress=bar.update, joints=args.joints,
+                         init=args.init, tta=args.tta)  # fmt: skip
     sources = _segment_sources(args.data, segs)
     for r in rows:
         r["source"] = sources[r["segment"]]
@@ -406,6 +453,22 @@ def cmd_eval(args: argparse.Namespace) -> int:
         plot_categories(agg, args.out / "categories.png")
         print(f"wrote {args.out / 'table.md'} and {args.out / 'categories.png'}")
     return _exit_status(errors)
+
+
+def _evaluate(est, model: Path, segs: list, pool, **kw) -> list[dict]:
+    """The rows of ``est`` (loaded from ``model``) on ``segs``: in this process without a pool,
+    else in its workers (a worker process that died: a :class:`CliError`)."""
+    from grip.cli.errors import CliError
+    from grip.eval.kinematics import evaluate_in_pool, evaluate_segments
+    from grip.eval.segments import BenchError
+
+    tta = kw.pop("tta", "none")
+    if pool is None:
+        return evaluate_segments(est, segs, **kw)
+    try:
+        return evaluate_in_pool(str(Path(model).resolve()), segs, pool, tta=tta, **kw)
+    except BenchError as e:
+        raise CliError(str(e)) from e
 
 
 def _segment_sources(data: Path, segs: list) -> dict[str, str]:
@@ -453,9 +516,10 @@ def _eval_sweep(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from grip.cli.cluster import command_pool
     from grip.cli.errors import CliError
     from grip.core.atomic import atomic_write_text
-    from grip.eval.kinematics import aggregate, evaluate_segments
+    from grip.eval.kinematics import aggregate
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.sweep import find_runs, sweep_table
 
@@ -466,16 +530,17 @@ def _eval_sweep(args: argparse.Namespace) -> int:
     errors: list[tuple[str, str]] = []
     segs = _split_segments(args, errors)
     results = []
-    for s, ck in tqdm(runs, unit="config", desc="sweep"):
-        try:
-            est = KinematicsEstimator.from_checkpoint(ck)
-        except ValueError as e:
-            raise CliError(str(e)) from e
-        if tuple(est.cfg.features.sites) != s.sites or est.cfg.features.insoles != s.insoles:
-            raise CliError(f"{ck}: trained on {est.cfg.features.sites} "
-                           f"(insoles={est.cfg.features.insoles}), not the {s.name} "
-                           "configuration its folder names")  # fmt: skip
-        results.append((s, aggregate(evaluate_segments(est, segs, joints=args.joints))))
+    with command_pool(args, args.workers) as pool:
+        for s, ck in tqdm(runs, unit="config", desc="sweep"):
+            try:
+                est = KinematicsEstimator.from_checkpoint(ck)
+            except ValueError as e:
+                raise CliError(str(e)) from e
+            if tuple(est.cfg.features.sites) != s.sites or est.cfg.features.insoles != s.insoles:
+                raise CliError(f"{ck}: trained on {est.cfg.features.sites} "
+                               f"(insoles={est.cfg.features.insoles}), not the {s.name} "
+                               "configuration its folder names")  # fmt: skip
+            results.append((s, aggregate(_evaluate(est, ck, segs, pool, joints=args.joints))))
     table = sweep_table([(s, a["overall"]) for s, a in results])
     print(table)
     if args.json:

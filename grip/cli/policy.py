@@ -69,6 +69,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with an ensemble file as --init: start from its member K (0 = the "
                    "first, in the order 'grip policy combine' joined them; training prints "
                    "the member's name); later members take the file's discriminator")  # fmt: skip
+    from grip.cli.cluster import add_ray_argument, add_tune_arguments
+
+    add_tune_arguments(p)
     p.set_defaults(func=cmd_train)
 
     e = psub.add_parser(
@@ -143,6 +146,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
+    add_ray_argument(e, "batches of --batch N segments")
     add_limit_arguments(e)
     e.set_defaults(func=cmd_eval)
 
@@ -232,6 +236,13 @@ def cmd_train(args: argparse.Namespace) -> int:
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer
 
+    if args.tune is not None or args.ray is not None:
+        from grip.cli.cluster import policy_metrics, tune_train
+
+        def check(sets: list[str]) -> None:
+            load_run_config(args.config, "policy", PolicyRunConfig(), [*args.set, *sets])
+
+        return tune_train(args, check, policy_metrics, "reward/imit_pos", "max")
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
     if args.init is not None and not args.init.is_file():
         raise CliError(f"{args.init}: no such policy file")
@@ -355,6 +366,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from grip.assets import SHIPPED_POLICY
+    from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
     from grip.cli.recordings import exit_status, kin_checkpoint, skip_file
     from grip.eval.policy import (
@@ -367,6 +379,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from grip.eval.segments import BenchError, list_segments, split_files
 
     limits_from_args(args)
+    ray_args(args)
     pols = args.policy or [SHIPPED_POLICY]
     for p in pols:
         if not Path(p).is_file():
@@ -417,13 +430,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
     finally:
         for f, why in unreadable:
             skip_file(skipped, f, why)
-    with tqdm(total=len(segs) * args.repeats, unit="seg", desc="episodes") as bar:
+    with ray_pool(args) as pool, tqdm(total=len(segs) * args.repeats, unit="seg",
+                                      desc="episodes") as bar:  # fmt: skip
         try:
             got = evaluate_batches(setup, segs, args.batch, args.workers,
                                    reference=args.reference, init=args.init,
                                    action_noise=args.action_noise,
                                    seeds=[args.seed + i for i in range(args.repeats)],
-                                   progress=bar.update, built=(runner, est))  # fmt: skip
+                                   progress=bar.update, built=(runner, est),
+                                   pool=pool)  # fmt: skip
         except BenchError as e:  # (a worker process died)
             raise CliError(str(e)) from e
     passes = got if args.repeats == 1 else [[dict(r, replay=i) for r in p]

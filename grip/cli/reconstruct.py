@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -66,9 +67,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "summary.json; longer ones fail the recording (default 10 = 0.1 s; 0: "
                         "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
+    from grip.cli.cluster import add_ray_argument
     from grip.cli.recordings import add_init_argument, add_limit_arguments
 
     add_init_argument(p, "KinematicsNet and the humanoid")
+    add_ray_argument(p, "shares of the recordings (--batch N each)")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
 
@@ -235,11 +238,9 @@ def _exports(recon, rec, out: Path, formats: list[str],
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     if "mp4" in args.formats:  # MuJoCo picks its OpenGL backend at import; EGL works headless
         os.environ.setdefault("MUJOCO_GL", "egl")
-    from concurrent.futures import ProcessPoolExecutor
-    from multiprocessing import get_context
-
     from tqdm import tqdm
 
+    from grip.cli.cluster import command_pool, ray_args
     from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint, limits_from_args
     from grip.core.atomic import atomic_write_text
@@ -252,6 +253,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from grip.pipeline import RecoveryConfig
 
     limits_from_args(args)  # also for the worker processes ($GRIP_LIMITS)
+    ray_args(args)
     formats = [f.strip() for f in args.formats.split(",") if f.strip()]
     from grip.export import FORMATS
 
@@ -309,51 +311,59 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     print(f"{len(inputs)} recording(s), {len(inputs) - len(todo)} already done")
 
     errors: dict[str, str] = {}
+    rank = {str(f): i for i, f in enumerate(inputs)}  # (rows in input order, whatever finishes)
 
     def save() -> None:
-        rows = list(done.values())
+        rows = [r for _, r in sorted(done.items(), key=lambda kv: rank.get(kv[0], -1))]
         meta = {"policy": str(policy), "kin": str(kin), "recovery": recovery.enabled,
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
                 "max_frames": args.max_frames, "settings": settings,
                 "falls": sum(len(r["falls"]) for r in rows),
                 "blowups": sum(int(r.get("blowups", 0)) for r in rows)}  # fmt: skip
+        failed = dict(sorted(errors.items(),
+                             key=lambda kv: rank.get(str(Path(kv[0]).resolve()), -1)))  # fmt: skip
         atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
-                                                    "errors": errors}, indent=1))  # fmt: skip
+                                                    "errors": failed}, indent=1))  # fmt: skip
 
     from grip.pipeline import usable_cores
 
-    parallel = args.workers > 1 and len(todo) > 1
-    workers = args.workers if parallel else 1
-    # --batch recordings side by side per job (fewer when a worker would wait for work)
-    size = max(1, min(args.batch, -(-len(todo) // workers)))
-    threads = max(1, usable_cores() // workers)
-    jobs = [([(given[f], stems[f]) for f in todo[i : i + size]], str(args.out), str(policy),
-             str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch, threads,
-             args.init)
-            for i in range(0, len(todo), size)]  # fmt: skip
-    with tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
-        if not parallel:
-            results = map(_work, jobs)
-        else:
-            ctx = get_context("forkserver" if os.name == "posix" else "spawn")
-            pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx,
-                                       initializer=exit_with_parent)  # fmt: skip
-            results = pool.map(_work, jobs)
+    pooled = (command_pool(args, args.workers if len(todo) > 1 else 1, exit_with_parent)
+              if todo else contextlib.nullcontext())  # fmt: skip
+    with pooled as pool, tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:
+        workers = pool.workers if pool is not None else 1
+        # --batch recordings side by side per job (fewer when a worker would wait for work)
+        size = max(1, min(args.batch, -(-len(todo) // workers)))
+        threads = max(1, usable_cores() // workers)
+        jobs = [([(given[f], stems[f]) for f in todo[i : i + size]], str(args.out), str(policy),
+                 str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch,
+                 threads, args.init)
+                for i in range(0, len(todo), size)]  # fmt: skip
+
+        def collect(k: int, rows) -> None:
+            if isinstance(rows, BaseException):
+                raise rows
+            for r in rows:
+                if "error" in r:
+                    errors[r["file"]] = r["error"]
+                    continue
+                done[str(Path(r["file"]).resolve())] = r
+                bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
+            save()
+            bar.update(len(rows))
+
         try:
-            for rows in results:
-                for r in rows:
-                    if "error" in r:
-                        errors[r["file"]] = r["error"]
-                        continue
-                    done[str(Path(r["file"]).resolve())] = r
-                    bar.set_postfix(falls=len(r["falls"]), ms_per_frame=f"{r['ms_per_frame']:.1f}")
-                save()
-                bar.update(len(rows))
+            if pool is None:
+                for k, job in enumerate(jobs):
+                    collect(k, _work(job))
+            else:
+                for k in pool.run([(_work, (job,)) for job in jobs], collect):
+                    for f, _ in jobs[k][0]:
+                        errors[f] = ("the worker process died while reconstructing it (a crash "
+                                     "or out of memory); run the command again to retry")
+                    save()
+                    bar.update(len(jobs[k][0]))
         except (OSError, ValueError) as e:
             raise CliError(str(e)) from e
-        finally:
-            if parallel:
-                pool.shutdown(cancel_futures=True)
     rows = [done[str(f)] for f in inputs if str(f) in done]
     falls = sum(len(r["falls"]) for r in rows)
     blowups = sum(int(r.get("blowups", 0)) for r in rows)

@@ -7,7 +7,7 @@ what every run folder records (:func:`git_hash`, :func:`history_wall_s`).
 outputs were made with and refuses to go on with other ones, except those it lets change
 (:func:`changed_settings`, :func:`require_same_settings`, :func:`record_settings`), so a folder
 never mixes outputs of two settings. Worker pools start every worker with
-:func:`exit_with_parent`.
+:func:`exit_with_parent`, and every pool of calls offers :class:`CallPool`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from grip.core.atomic import atomic_write_text
 
@@ -34,6 +34,26 @@ PARENT_POLL_S = 0.5
 _PR_SET_PDEATHSIG = 1
 #: Temporary files of :func:`grip.core.atomic.atomic_write`: ``.<name>.<8 random chars>.tmp``.
 _TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+class CallPool(Protocol):
+    """What the commands need of a pool that runs their units of work elsewhere: worker
+    processes of this machine (:class:`grip.eval.pool.WorkerPool`) or Ray tasks on a cluster
+    (:class:`grip.cluster.RayPool`).
+
+    Attributes:
+        workers: How many calls run at once (what units of work are sized by).
+    """
+
+    workers: int
+
+    def run(self, calls: Sequence[tuple[Callable, tuple]],
+            done: Callable[[int, object], object]) -> list[int]:  # fmt: skip
+        """Run ``fn(*args)`` of each call; ``done(index, result)`` here as each finishes (the
+        result is the exception the call raised where it raised; if ``done`` raises, the calls
+        not started are cancelled and the exception propagates). Returns the indices of the
+        calls lost because the process running them died."""
+        ...
 
 
 def git_hash() -> str:

@@ -45,6 +45,7 @@ import numpy as np
 
 from grip.core.atomic import atomic_write_text
 from grip.core.runs import (
+    CallPool,
     exit_with_parent,
     record_settings,
     remove_stale_temps,
@@ -297,6 +298,14 @@ def _error_text(clip_path: str, e: BaseException) -> str:
     return msg if clip_path in msg else f"{clip_path}: {msg}"
 
 
+def _unfinished(spec: ClipSpec, why: str) -> ClipResult:
+    """The result of a clip whose worker gave none (it died, or its call failed outside
+    :func:`process_clip`'s guard)."""
+    return ClipResult(spec.clip_id, "failed", spec.category, spec.path,
+                      error=f"{spec.path}: {why}; run the build again to retry the clips it "
+                      "did not finish", label=spec.label, group=spec.group)  # fmt: skip
+
+
 def _load_done(out: Path) -> dict[str, ClipResult]:
     done: dict[str, ClipResult] = {}
     for p in sorted((out / "done").glob("*.json")):
@@ -401,6 +410,7 @@ def build_dataset(
     progress: Callable[[int], object] | None = None,
     skipped_files: Sequence[tuple[str, str]] = (),
     counts: dict[str, int] | None = None,
+    pool: CallPool | None = None,
 ) -> list[ClipResult]:
     """Build (or resume, relabel or split again) a dataset.
 
@@ -423,6 +433,9 @@ def build_dataset(
             the manifest as ``skipped_files``.
         counts: Optional dict that receives how many clips were ``"built"`` (or tried) in this
             run, ``"resumed"`` (finished before) and, of those, ``"relabelled"``.
+        pool: Runs the clips instead of ``workers`` local processes (a
+            :class:`grip.cluster.RayPool`: ``grip data build --ray``; its workers write into
+            ``out_dir``, so on several machines it must be a shared folder).
 
     Returns:
         One :class:`ClipResult` per clip (resumed clips come back as ``done``).
@@ -463,7 +476,23 @@ def build_dataset(
     if counts is not None:
         counts.update(built=len(todo), resumed=len(results), relabelled=relabelled)
     n_workers = workers or os.cpu_count() or 1
-    if todo:
+    if todo and pool is not None:
+        calls = [(process_clip, (spec, str(out.absolute()), cfg)) for spec in todo]
+
+        def finished(k: int, res: object) -> None:
+            spec = todo[k]
+            if isinstance(res, BaseException):
+                res = _unfinished(spec, f"its task failed ({type(res).__name__}: {res})")
+            results[spec.clip_id] = res
+            if progress is not None:
+                progress(1)
+
+        for k in pool.run(calls, finished):
+            results[todo[k].clip_id] = _unfinished(todo[k], "its worker process died (a crash "
+                                                   "or out of memory)")  # fmt: skip
+            if progress is not None:
+                progress(1)
+    elif todo:
         if n_workers == 1:
             for spec in todo:
                 results[spec.clip_id] = process_clip(spec, str(out), cfg)
@@ -477,11 +506,8 @@ def build_dataset(
                     try:
                         results[spec.clip_id] = fut.result()
                     except (BrokenProcessPool, OSError, MemoryError) as e:  # a worker died
-                        results[spec.clip_id] = ClipResult(
-                            spec.clip_id, "failed", spec.category, spec.path,
-                            error=f"{spec.path}: worker process died ({type(e).__name__}: {e}); "
-                            "run the build again to retry the clips it did not finish",
-                            label=spec.label, group=spec.group)  # fmt: skip
+                        results[spec.clip_id] = _unfinished(
+                            spec, f"worker process died ({type(e).__name__}: {e})")
                     if progress is not None:
                         progress(1)
     ordered = [results[c.clip_id] for c in specs]

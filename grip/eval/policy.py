@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from grip.core import metrics as M
+from grip.core.runs import CallPool
 from grip.eval.pool import WorkerPool, one_torch_thread
 from grip.eval.report import category_summary, csv_text, weighted_means
 from grip.eval.report import markdown_table as table
@@ -215,7 +216,7 @@ def evaluate_batches(
     reference: str = "estimate", init: str = "truth", action_noise: float = 0.0,
     seeds: Sequence[int] = (0,), progress: Callable[[int], object] | None = None,
     threads: int = 0, built: tuple[Controller, KinematicsEstimator] | None = None,
-    pool: WorkerPool | None = None,
+    pool: CallPool | None = None,
 ) -> list[list[dict]]:  # fmt: skip
     """``grip policy eval``: :func:`evaluate_segments` batch by batch, in ``workers`` processes.
 
@@ -239,8 +240,8 @@ def evaluate_batches(
             shared out over the processes).
         built: ``(controller, KinematicsNet)`` of ``setup``, already built here.
         pool: Worker processes to use (kept by the caller across calls; ``workers`` is then
-            ignored). None: a pool of ``workers`` for this call when there is more than one
-            batch to play.
+            ignored), or Ray tasks (:class:`grip.cluster.RayPool`, ``--ray``). None: a pool
+            of ``workers`` for this call when there is more than one batch to play.
 
     Returns:
         One list of rows per seed, each in segment order (:func:`evaluate_segments`).

@@ -28,6 +28,7 @@ import numpy as np
 
 from grip.core.atomic import atomic_write_text
 from grip.core.reconstruction import Reconstruction
+from grip.core.runs import CallPool
 from grip.eval.methods import METHODS, Method, MethodFactory, MethodOptions, make_method
 from grip.eval.pool import one_torch_thread, run_pool
 from grip.eval.report import jsonable, nan_floats
@@ -296,10 +297,19 @@ _WORKER_STATE: _State | None = None
 
 def _init_worker() -> None:
     """Worker process set-up (the BLAS thread count comes from
-    :func:`grip.eval.pool.run_pool`'s environment: a worker has imported numpy before its
-    initializer runs)."""
+    :func:`grip.eval.pool.run_pool`'s environment, or from Ray's for a Ray worker: a worker has
+    imported numpy before its first task)."""
     global _WORKER_STATE
     _WORKER_STATE = _State(one_thread=True)
+
+
+def _worker_task(run: MethodRun, segs: Sequence[Segment], out_dir: Path, saves: Sequence[bool],
+                 threads: int) -> list[dict]:  # fmt: skip
+    """:func:`_run_task` in a worker process (a local one or Ray's), whose state (the methods
+    it built) is made on its first call and kept."""
+    if _WORKER_STATE is None:
+        _init_worker()
+    return _run_task(run, segs, out_dir, saves, _WORKER_STATE, threads)
 
 
 def _run_task(run: MethodRun, segs: Sequence[Segment], out_dir: Path, saves: Sequence[bool],
@@ -371,6 +381,7 @@ def run_bench(
     progress: Callable[[dict], object] | None = None,
     log: Callable[[str], object] = print,
     batch: int = 1,
+    pool: CallPool | None = None,
 ) -> list[dict]:
     """Run every method on every segment, keeping what a previous run finished.
 
@@ -389,6 +400,9 @@ def run_bench(
         batch: Segments a method that can (``reconstruct_many``, method ``grip``) plays side
             by side, in each worker (fewer when that leaves a worker idle); its humanoids are
             stepped by the cores a worker has to itself. 1: one segment at a time.
+        pool: Runs the units of work instead of ``workers`` local processes (a
+            :class:`grip.cluster.RayPool`: ``grip bench --ray``); a unit lost with its worker
+            is handled as a local worker's death is.
 
     Returns:
         One row per (run, segment), in segment-major order.
@@ -438,16 +452,17 @@ def run_bench(
     from grip.pipeline import usable_cores
 
     state = _State(built)
-    units = _units(tasks, batch, workers, lambda run: _batchable(state.method(run)))
-    threads = max(1, usable_cores() // max(workers, 1))
-    if workers <= 1:
+    n = pool.workers if pool is not None else workers
+    units = _units(tasks, batch, n, lambda run: _batchable(state.method(run)))
+    threads = max(1, usable_cores() // max(n, 1))
+    if pool is None and workers <= 1:
         with one_torch_thread():  # as in a worker process, so that runtimes compare
             for run, segs in units:
                 for row in _run_task(run, segs, out_dir, [save(s) for s in segs], state,
                                      threads):  # fmt: skip
                     done(row)
     elif units:
-        _run_pool(units, out_dir, save, workers, done, threads)
+        _run_pool(units, out_dir, save, workers, done, threads, pool)
     return [rows[(r.label, s.id)] for s in segments for r in runs if (r.label, s.id) in rows]
 
 
@@ -470,9 +485,10 @@ def _units(tasks: Sequence[tuple[MethodRun, Segment]], batch: int, workers: int,
     return units
 
 
-def _pool_round(units, out_dir: Path, save, workers: int, done, threads: int) -> list:
-    """Run ``units`` in one pool (:func:`grip.eval.pool.run_pool`); returns the units lost when
-    a worker process died."""
+def _pool_round(units, out_dir: Path, save, workers: int, done, threads: int,
+                pool: CallPool | None = None) -> list:  # fmt: skip
+    """Run ``units`` in ``pool``, or else in a pool of ``workers`` processes of their own
+    (:func:`grip.eval.pool.run_pool`); returns the units lost when a worker process died."""
 
     def finished(k: int, rows) -> None:
         run, segs = units[k]
@@ -482,22 +498,25 @@ def _pool_round(units, out_dir: Path, save, workers: int, done, threads: int) ->
         for row in rows:
             done(row)
 
-    calls = [(_run_task, (run, segs, out_dir, [save(s) for s in segs], None, threads))
+    calls = [(_worker_task, (run, segs, out_dir, [save(s) for s in segs], threads))
              for run, segs in units]  # fmt: skip
-    return [units[k] for k in run_pool(calls, workers, finished, _init_worker)]
+    lost = pool.run(calls, finished) if pool is not None else run_pool(calls, workers, finished)
+    return [units[k] for k in lost]
 
 
-def _run_pool(units, out_dir: Path, save, workers: int, done, threads: int = 1) -> None:
-    """Run units of work in worker processes, surviving workers that die.
+def _run_pool(units, out_dir: Path, save, workers: int, done, threads: int = 1,
+              pool: CallPool | None = None) -> None:  # fmt: skip
+    """Run units of work in worker processes (or in ``pool``), surviving workers that die.
 
-    When a worker dies the pool breaks and every unfinished unit is lost. The segments that
-    were running (their ``.running`` marker exists) are suspects: each runs again alone in a
-    one-worker pool, and one that kills its worker there too is recorded as an error. The
-    others go back into a fresh pool.
+    When a local worker dies the pool breaks and every unfinished unit is lost (with Ray, the
+    unit it ran). The segments that were running (their ``.running`` marker exists) are
+    suspects: each runs again alone (in a one-worker pool, or as the only task of ``pool``),
+    and one that kills its worker there too is recorded as an error. The others go back into a
+    fresh pool.
     """
     pending = list(units)
     while pending:
-        lost = _pool_round(pending, out_dir, save, workers, done, threads)
+        lost = _pool_round(pending, out_dir, save, workers, done, threads, pool)
         suspects, pending = [], []
         for run, segs in lost:
             for seg in segs:
@@ -508,7 +527,7 @@ def _run_pool(units, out_dir: Path, save, workers: int, done, threads: int = 1) 
             raise BenchError("worker processes died before running any segment; run with "
                              "--workers 1 to see the error")  # fmt: skip
         for run, segs in suspects:
-            if _pool_round([(run, segs)], out_dir, save, 1, done, threads):
+            if _pool_round([(run, segs)], out_dir, save, 1, done, threads, pool):
                 (seg,) = segs
                 _marker(out_dir, run.label, seg.id).unlink(missing_ok=True)
                 row = error_row(run.label, seg, "the worker process died while running this "
