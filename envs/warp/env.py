@@ -156,7 +156,8 @@ class WarpTrackingEnv:
             if clip.objects and cfg.terrain == "auto":
                 raise NotImplementedError(
                     f"WarpTrackingEnv: clip {clip.name!r} has its own scene objects; one height "
-                    "field per world is not supported yet (set terrain to a fixed scene)"
+                    "field per world is not supported yet (set env.terrain to a fixed scene: "
+                    "flat, boxes, stairs or chair)"
                 )
             key = (clip.body.height_m, clip.body.mass_kg)
             if key not in subjects:

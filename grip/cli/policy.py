@@ -69,6 +69,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with an ensemble file as --init: start from its member K (0 = the "
                    "first, in the order 'grip policy combine' joined them; training prints "
                    "the member's name); later members take the file's discriminator")  # fmt: skip
+    p.add_argument("--backend", choices=("cpu", "warp"), default="cpu",
+                   help="cpu: MuJoCo C in ppo.n_envs environments, SB3's PPO (default); warp: "
+                   "MuJoCo Warp with ppo.n_envs worlds on --device, observations, rewards, "
+                   "rollout buffer, PPO and AMP updates as device tensors (pip install -e "
+                   ".[gpu]; docs/gpu.md); the same run folder and policy file")  # fmt: skip
+    p.add_argument("--device", choices=("cuda", "cpu", "auto"), default=None,
+                   help="with --backend warp: the device of the worlds and the learner (sets "
+                   "ppo.device; default auto: cuda where there is one)")  # fmt: skip
     from grip.cli.cluster import add_ray_argument, add_tune_arguments
 
     add_tune_arguments(p)
@@ -236,6 +244,13 @@ def cmd_train(args: argparse.Namespace) -> int:
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer
 
+    warp = args.backend == "warp"
+    if args.device is not None and not warp:
+        raise CliError("--device is the warp backend's: give --backend warp (the CPU trainer's "
+                       "learner device is --set ppo.device=...)")  # fmt: skip
+    if warp and (args.tune is not None or args.ray is not None):
+        raise CliError("--backend warp trains on one device: --tune and --ray are not supported "
+                       "with it")  # fmt: skip
     if args.tune is not None or args.ray is not None:
         from grip.cli.cluster import policy_metrics, tune_train
 
@@ -244,6 +259,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         return tune_train(args, check, policy_metrics, "reward/imit_pos", "max")
     cfg = load_run_config(args.config, "policy", PolicyRunConfig(), args.set)
+    if warp:
+        cfg = _warp_settings(cfg, args.device or "auto")
     if args.init is not None and not args.init.is_file():
         raise CliError(f"{args.init}: no such policy file")
     if args.init_member and args.init is None:
@@ -256,10 +273,23 @@ def cmd_train(args: argparse.Namespace) -> int:
     build_training_reference(ref_path, args.data, files, kins, mirror=cfg.mirror_references,
                              follow=cfg.follow)  # fmt: skip
     resuming = RunDir(out).has_checkpoint()
+    if resuming:
+        was = (RunDir(out).read_config() or {}).get("backend", "cpu")
+        if was != args.backend:
+            raise CliError(f"{out} was trained with --backend {was}: resume it with --backend "
+                           f"{was} (or use another --out)")  # fmt: skip
     init = None if resuming else args.init
     try:  # (refuses to resume with settings other than RESUMABLE changed)
-        trainer = PolicyTrainer(cfg, out, ref_path, make_tracking_env, progress=tqdm, init=init,
-                                init_member=args.init_member)  # fmt: skip
+        if warp:
+            from envs.warp.factory import make_warp_tracking_env
+            from policies.warp.train import WarpPolicyTrainer
+
+            trainer = WarpPolicyTrainer(cfg, out, ref_path, make_warp_tracking_env,
+                                        progress=tqdm, init=init,
+                                        init_member=args.init_member)  # fmt: skip
+        else:
+            trainer = PolicyTrainer(cfg, out, ref_path, make_tracking_env, progress=tqdm,
+                                    init=init, init_member=args.init_member)  # fmt: skip
         # what the run started from: this call's --init, or on resume what config.json recorded
         began = (trainer.rundir.read_config() or {}) if resuming else {}
     except ValueError as e:
@@ -274,12 +304,16 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"--init {init}: an ensemble of {trainer.init_members} policies; training starts "
               f"from its member {args.init_member}, {trainer.init_name} (ensemble files keep no "
               "value network: a fresh critic warms up first, ppo.critic_warmup_steps)")  # fmt: skip
+    if warp:
+        recorded["backend"] = "warp"
     trainer.rundir.write_config(cfg, data=str(args.data.resolve()), kin=kin, **recorded)
     t0 = time.perf_counter()
     try:
         trainer.train()
-    except (ValueError, FileNotFoundError) as e:  # a warm-start file that does not fit the
-        raise CliError(str(e)) from e  # run's settings, or a refused or missing checkpoint file
+    except (ValueError, FileNotFoundError, NotImplementedError) as e:  # a warm-start file that
+        # does not fit the run's settings, a refused or missing checkpoint file, or (warp)
+        # settings MuJoCo Warp does not support yet
+        raise CliError(str(e)) from e
     dt = time.perf_counter() - t0
     print(f"trained to {trainer.total_done()} steps ({trainer.wall_s():.0f} s of training in all; "
           f"this call {dt:.0f} s)")  # fmt: skip
@@ -291,6 +325,34 @@ def cmd_train(args: argparse.Namespace) -> int:
     size = export_policy(out, out / "policy.pt", info=info)
     print(f"wrote {out / 'policy.pt'} ({size / 1e6:.1f} MB) and {out / 'curves.png'}")
     return 0
+
+
+def _warp_settings(cfg, device: str):
+    """``cfg`` for ``--backend warp``: ``ppo.device`` = ``device``, refused where MuJoCo Warp
+    or the device is missing."""
+    import dataclasses
+
+    from envs.warp import warp_available
+    from grip.cli.errors import CliError
+
+    if not warp_available():
+        raise CliError("--backend warp needs mujoco-warp and warp-lang: pip install -e .[gpu]")
+    import warp as wp
+
+    # (no banner and no line per kernel module loaded: the progress bar stays readable)
+    wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING
+    if device != "cpu":
+        import torch
+
+        if not torch.cuda.is_available():
+            if device == "cuda":
+                raise CliError("--device cuda: torch sees no CUDA device here (--device cpu "
+                               "runs MuJoCo Warp on the CPU, for checks, not speed)")  # fmt: skip
+            device = "cpu"
+        else:
+            device = "cuda"
+    return dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, device=device))
 
 
 def cmd_export(args: argparse.Namespace) -> int:

@@ -1,0 +1,146 @@
+"""The AMP discriminator's training on a torch device: :class:`policies.amp.AmpTrainer`'s update
+(the same :class:`policies.amp.Discriminator`, losses, gradient penalty, logit regulariser and
+Adam settings) with the real windows, the replay buffer of policy windows and the random draws
+as device tensors, so that a rollout of thousands of environments never leaves the device.
+"""
+
+from __future__ import annotations
+
+import json
+
+import torch
+from torch import nn
+
+from policies.amp import AmpTrainer, Discriminator
+from policies.config import AmpConfig
+
+
+def style_reward(score: torch.Tensor, loss: str) -> torch.Tensor:
+    """:meth:`policies.amp.Discriminator.reward` of raw scores ``(B,)``: ``max(0, 1 - (D - 1)^2
+    / 4)`` for ``"lsgan"``, ``-log(max(1 - sigmoid(D), 1e-4))`` for ``"bce"``."""
+    if loss == "lsgan":
+        return torch.clamp(1.0 - 0.25 * (score - 1.0) ** 2, min=0.0)
+    return -torch.log(torch.clamp(1.0 - torch.sigmoid(score), min=1e-4))
+
+
+class DeviceAmpTrainer:
+    """Discriminator, optimiser, real windows and replay buffer on ``device``.
+
+    Built from the CPU trainer's :class:`policies.amp.AmpTrainer` of the run (:meth:`from_cpu`),
+    so the initial discriminator and its input normaliser are the CPU path's for the same seed.
+
+    Args:
+        cfg: The AMP settings.
+        disc: The discriminator (moved to ``device``).
+        real_frames: ``(F, FRAME_DIM)`` every clip's ground-truth AMP frames, concatenated.
+        clip_start: ``(F,)`` int, the first row of each frame's clip (windows never cross clips).
+        device: The torch device.
+        seed: Seed of the device generator (real and replay draws).
+    """
+
+    def __init__(self, cfg: AmpConfig, disc: Discriminator, real_frames: torch.Tensor,
+                 clip_start: torch.Tensor, device: torch.device,
+                 seed: int = 0) -> None:  # fmt: skip
+        self.cfg, self.device = cfg, device
+        self.disc = disc.to(device)
+        self.opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr,
+                                    weight_decay=cfg.weight_decay)  # fmt: skip
+        self.frames = real_frames.to(device, torch.float32)
+        self.clip_start = clip_start.to(device, torch.int64)
+        self._back = torch.arange(-cfg.window + 1, 1, device=device)
+        dim = disc.in_dim
+        self.replay = torch.zeros(cfg.replay_size, dim, dtype=torch.float32, device=device)
+        self.replay_n = 0
+        self.replay_pos = 0
+        self.gen = torch.Generator(device=device)
+        self.gen.manual_seed(int(seed))
+
+    @classmethod
+    def from_cpu(cls, amp: AmpTrainer, device: torch.device, seed: int = 0) -> DeviceAmpTrainer:
+        """The device trainer of a freshly built :class:`policies.amp.AmpTrainer` (its
+        discriminator, normaliser included, and its real windows)."""
+        return cls(amp.cfg, amp.disc, torch.as_tensor(amp.real.frames),
+                   torch.as_tensor(amp.real.clip_start), device, seed)  # fmt: skip
+
+    # ------------------------------------------------------------------ samples
+    def sample_real(self, n: int) -> torch.Tensor:
+        """``(n, window * FRAME_DIM)`` random windows of the ground truth (as
+        :meth:`policies.amp.RealSampler.sample`)."""
+        t = torch.randint(0, len(self.frames), (n,), generator=self.gen, device=self.device)
+        idx = torch.maximum(t[:, None] + self._back, self.clip_start[t][:, None])
+        return self.frames[idx].reshape(n, -1)
+
+    def add_fake(self, x: torch.Tensor) -> None:
+        """Put policy windows ``(B, dim)`` in the replay ring (oldest replaced first)."""
+        size = len(self.replay)
+        x = x[-size:]
+        k = len(x)
+        idx = (self.replay_pos + torch.arange(k, device=self.device)) % size
+        self.replay[idx] = x
+        self.replay_pos = (self.replay_pos + k) % size
+        self.replay_n = min(self.replay_n + k, size)
+
+    def sample_fake(self, n: int) -> torch.Tensor:
+        i = torch.randint(0, self.replay_n, (n,), generator=self.gen, device=self.device)
+        return self.replay[i]
+
+    # ------------------------------------------------------------------ reward, update
+    @torch.no_grad()
+    def reward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B,)`` ``reward_scale`` x the style reward of raw windows ``(B, dim)``."""
+        return self.cfg.reward_scale * style_reward(self.disc(x), self.cfg.loss)
+
+    def _loss(self, d_real: torch.Tensor, d_fake: torch.Tensor) -> torch.Tensor:
+        if self.cfg.loss == "lsgan":
+            return ((d_real - 1.0) ** 2).mean() + ((d_fake + 1.0) ** 2).mean()
+        bce = nn.functional.binary_cross_entropy_with_logits
+        return bce(d_real, torch.ones_like(d_real)) + bce(d_fake, torch.zeros_like(d_fake))
+
+    def update(self, fake: torch.Tensor) -> dict[str, float]:
+        """Add a rollout's policy windows ``(B, dim)`` and train the discriminator
+        (:meth:`policies.amp.AmpTrainer.update`; the same statistics, one host copy)."""
+        cfg = self.cfg
+        if len(fake):
+            self.add_fake(fake)
+            self.disc.norm.update(fake)
+        keys = ("loss", "grad_penalty", "acc_real", "acc_fake", "score_real", "score_fake")
+        if self.replay_n == 0:
+            return dict.fromkeys(keys, 0.0)
+        n = cfg.updates_per_rollout
+        acc = torch.zeros(len(keys), dtype=torch.float64, device=self.device)
+        for _ in range(n):
+            real = self.sample_real(cfg.batch_size).requires_grad_(True)
+            fk = self.sample_fake(cfg.batch_size)
+            d_real, d_fake = self.disc(real), self.disc(fk)
+            loss = self._loss(d_real, d_fake)
+            (grad,) = torch.autograd.grad(d_real.sum(), real, create_graph=True)
+            gp = grad.pow(2).sum(-1).mean()
+            total = loss + 0.5 * cfg.grad_penalty * gp
+            if cfg.logit_reg > 0:
+                total = total + cfg.logit_reg * self.disc.head.weight.pow(2).sum()
+            self.opt.zero_grad(set_to_none=True)
+            total.backward()
+            self.opt.step()
+            with torch.no_grad():
+                acc += torch.stack([loss, gp, (d_real > 0).float().mean(),
+                                    (d_fake < 0).float().mean(), d_real.mean(),
+                                    d_fake.mean()]).to(torch.float64)  # fmt: skip
+        return dict(zip(keys, (acc / n).tolist(), strict=True))
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        """Discriminator (CPU tensors: ``export_policy`` reads it), optimiser and generator
+        state (a list of bytes, JSON-encoded by the trainer's checkpoint)."""
+        return {"disc": {k: v.detach().cpu() for k, v in self.disc.state_dict().items()},
+                "opt": self.opt.state_dict(), "rng": self.gen.get_state().tolist()}  # fmt: skip
+
+    def load_state_dict(self, state: dict) -> None:
+        self.disc.load_state_dict(state["disc"])
+        self.opt.load_state_dict(state["opt"])
+        rng = state["rng"]
+        if isinstance(rng, str):
+            rng = json.loads(rng)
+        if not isinstance(rng, list):
+            raise ValueError("discriminator checkpoint: its generator state is not a device "
+                             "trainer's (a CPU run's checkpoint?)")  # fmt: skip
+        self.gen.set_state(torch.tensor(rng, dtype=torch.uint8))

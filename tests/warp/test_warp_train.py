@@ -1,0 +1,218 @@
+"""PPO + AMP on the device (:class:`policies.warp.train.WarpPolicyTrainer`) end to end on MuJoCo
+Warp's CPU device, on the bundled sample: both stages, the checkpoint resumes, the exported file
+plays in the CPU player, and a CPU policy warm-starts a device run with the same actions.
+
+``slow``: MuJoCo Warp compiles its kernels on first use (about a minute on a cold cache); they
+skip where the ``gpu`` extra is absent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from envs.warp import warp_available
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not warp_available(), reason="needs mujoco-warp (pip install -e .[gpu])"),
+]
+
+
+def _tiny():
+    from policies.config import AmpConfig, PolicyRunConfig, PPOConfig, StageConfig
+
+    return PolicyRunConfig(
+        ppo=PPOConfig(n_envs=4, n_steps=8, batch_size=16, n_epochs=2, net_arch=(16,)),
+        amp=AmpConfig(window=2, hidden=(16,), batch_size=16, updates_per_rollout=1,
+                      replay_size=256),
+        stage1=StageConfig(timesteps=64, max_episode_frames=40, termination_start_m=0.6,
+                           termination_anneal_steps=32),
+        stage2=StageConfig(timesteps=32, termination_dist_m=0.0, fall_height_m=0.3,
+                           max_episode_frames=50),
+        checkpoint_every=1,
+    )  # fmt: skip
+
+
+def _trainer(cfg, run, **kw):
+    import warp as wp
+
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from envs.warp.factory import make_warp_tracking_env
+    from policies.warp.train import WarpPolicyTrainer
+
+    wp.config.quiet = True
+    return WarpPolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_warp_tracking_env, **kw)
+
+
+def _write_config(run, cfg, **extra) -> None:
+    from grip.core.rundir import RunDir
+    from policies.warp.train import BACKEND
+
+    RunDir(run).write_config(cfg, **{"backend": BACKEND, **extra})
+
+
+@pytest.fixture(scope="module")
+def warp_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("warp_run")
+    cfg = _tiny()
+    _write_config(run, cfg)
+    tr = _trainer(cfg, run)
+    tr.train()
+    return run, tr
+
+
+def test_both_stages_train_on_the_device(warp_run):
+    run, tr = warp_run
+    assert tr.total_done() == 96
+    stages = [h["stage"] for h in tr.history]
+    assert stages == ["stage1", "stage1", "stage2"]
+    for key in ("reward/imit_pos", "reward/amp", "reward/energy", "amp/acc_real", "amp/loss"):
+        assert all(np.isfinite(h[key]) for h in tr.history), key
+    assert [h["termination_m"] for h in tr.history] == pytest.approx([0.6, 0.25, 0.0])
+    assert all(0.0 < h["reward/amp"] <= 1.0 for h in tr.history)
+    state = json.loads((run / "checkpoint" / "state.json").read_text())
+    assert state["stage_index"] == 1 and state["stage_done"] == 32
+    assert tr.model.num_timesteps == 96
+    assert tr.model._n_updates == 3 * 2  # three PPO updates of two epochs each
+    assert (run / "tb" / "warp").is_dir()
+
+
+def test_checkpoint_resumes(warp_run, tmp_path):
+    from policies.runner import load_weights
+
+    run, tr = warp_run
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    cfg = dataclasses.replace(tr.cfg, stage2=dataclasses.replace(tr.cfg.stage2, timesteps=64))
+    saved = load_weights(copy / "checkpoint" / "amp.pt", "amp")
+    again = _trainer(cfg, copy)
+    again.train()
+    assert [h["timesteps"] for h in again.history] == [32, 64, 96, 128]
+    assert again.history[:3] == json.loads(json.dumps(tr.history))
+    assert again.model.num_timesteps == 128 and again.model._n_updates == 8
+    state = json.loads((copy / "checkpoint" / "state.json").read_text())
+    assert state["stage_index"] == 1 and state["stage_done"] == 64
+    assert not all(np.array_equal(saved["disc"][k], v.cpu())
+                   for k, v in again.amp.disc.state_dict().items())  # (it trained on)  # fmt: skip
+
+
+def test_a_cpu_run_folder_is_not_resumed_by_the_device_trainer(warp_run, tmp_path):
+    run, tr = warp_run
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    data = json.loads((copy / "config.json").read_text())
+    del data["backend"]
+    (copy / "config.json").write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="backend"):
+        _trainer(tr.cfg, copy)
+
+
+def test_exported_policy_plays_in_the_cpu_env(warp_run, tmp_path):
+    import torch
+
+    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+    from grip.core.reference import ReferenceSet
+    from policies.runner import PolicyRunner, export_policy
+
+    run, tr = warp_run
+    out = tmp_path / "policy.pt"
+    export_policy(run, out, half=False)
+    runner = PolicyRunner.load(out)
+    env = GripTrackingEnv(runner.env_cfg, ReferenceSet.load(SAMPLE_REFERENCE))
+    obs, _ = env.reset(seed=0)
+    for _ in range(5):
+        a = runner.act(obs)
+        assert a.shape == env.action_space.shape and np.all(np.abs(a) <= 1.0)
+        obs, r, term, trunc, _ = env.step(a)
+        assert np.isfinite(r) and all(np.all(np.isfinite(v)) for v in obs.values())
+        if term or trunc:
+            obs, _ = env.reset()
+    # the same network and normaliser as the trainer's model (exported at full precision)
+    o = {k: torch.as_tensor(np.asarray(v)[None], dtype=torch.float32) for k, v in obs.items()}
+    np.testing.assert_allclose(runner.act(obs), tr.act(o)[0].numpy(), atol=1e-5)
+
+
+def test_cpu_policy_warm_starts_a_device_run(tiny_policy_run, tmp_path):
+    """A policy file of the CPU trainer starts a device run: the same actions for the same
+    observations, the same normaliser and discriminator."""
+    import torch
+
+    from policies.config import policy_config_from_dict
+    from policies.runner import PolicyRunner
+    from policies.vec_env import vecnorm_state
+
+    _, cpu_run = tiny_policy_run
+    policy = cpu_run / "policy.pt"
+    recorded = json.loads((cpu_run / "config.json").read_text())["config"]
+    cfg = policy_config_from_dict(recorded, "cpu run", training=True)
+    cfg = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, n_envs=3, device="cpu"))
+    tr = _trainer(cfg, tmp_path / "run", init=policy)
+    tr.prepare_stage(cfg.stage1)
+    runner = PolicyRunner.load(policy)
+    obs = tr.env.observe()
+    want = runner.act({k: v.numpy() for k, v in obs.items()})
+    np.testing.assert_allclose(tr.act(obs).numpy(), want, atol=1e-5)
+    norm = vecnorm_state(tr.venv)
+    for k in runner.obs_keys:
+        np.testing.assert_allclose(norm[f"obs/{k}/mean"], runner.obs_mean[k])
+    x = torch.as_tensor(np.random.default_rng(0).normal(size=(4, tr.amp.disc.in_dim)),
+                        dtype=torch.float32)  # fmt: skip
+    np.testing.assert_allclose(tr.amp.disc(x).detach().numpy(),
+                               runner.disc(x).detach().numpy(), atol=1e-6)  # fmt: skip
+    tr.env.close()
+
+
+def test_cli_backend_warp_trains_and_policy_eval_plays_it(tiny_policy_settings, walk_takes,
+                                                          tmp_path):  # fmt: skip
+    """``grip policy train --backend warp --device cpu`` end to end, its file evaluated by
+    ``grip policy eval`` unchanged; resuming it with the other backend is refused."""
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from grip.cli.main import main
+
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "split.json").write_text(json.dumps({"train": ["s0"], "test": []}))
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(SAMPLE_REFERENCE, run / "reference_train.npz")  # (no KinematicsNet pass)
+    sets = [*tiny_policy_settings, "--set", "ppo.n_envs=4", "--set", "ppo.n_steps=8",
+            "--set", "ppo.batch_size=16", "--set", "stage1.timesteps=32",
+            "--set", "stage2.timesteps=32"]  # fmt: skip
+    train = ["policy", "train", "--data", str(data), "--out", str(run), *sets]
+    assert main([*train, "--backend", "warp", "--device", "cpu"]) == 0
+    assert json.loads((run / "config.json").read_text())["backend"] == "warp"
+    assert main(["policy", "eval", "--policy", str(run / "policy.pt"), "--data",
+                 str(walk_takes), "--segment-frames", "60", "--segments", "2",
+                 "--json", str(tmp_path / "eval.json")]) == 0  # fmt: skip
+    assert json.loads((tmp_path / "eval.json").read_text())["segments"] == 2
+    assert main(train) == 2  # the CPU backend does not resume a warp run
+    assert main([*train, "--device", "cpu"]) == 2  # --device without --backend warp
+
+
+def test_clips_with_their_own_props_are_refused_naming_the_setting(tmp_path):
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from grip.core.reference import ReferenceSet
+
+    ref = ReferenceSet.load(SAMPLE_REFERENCE)
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.3]])
+    f = np.array([[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]])
+    clips = [dataclasses.replace(ref.clip(0), objects={"box": (v, f)}), *ref.clips[1:]]
+    path = tmp_path / "props.npz"
+    ReferenceSet(clips, ref.sensor_sites, ref.insoles).save(path)
+    cfg = _tiny()
+    run = tmp_path / "run"
+    _write_config(run, cfg)
+    import warp as wp
+
+    from envs.warp.factory import make_warp_tracking_env
+    from policies.warp.train import WarpPolicyTrainer
+
+    wp.config.quiet = True
+    tr = WarpPolicyTrainer(cfg, run, path, make_warp_tracking_env)
+    with pytest.raises(NotImplementedError, match=r"own scene objects.*env\.terrain"):
+        tr.train()
