@@ -56,14 +56,24 @@ def _env_states(env, action, steps: int) -> list:
 
     sim.step = recording_step
     try:
-        env.reset(seed=0)
-        for _ in range(steps):
-            _, _, term, trunc, _ = env.step(action)
-            if term or trunc:
-                env.reset()
+        _play(env, action, steps)
     finally:
         del sim.step
     return states
+
+
+def _play(env, action, steps: int) -> float:
+    """Seconds of ``steps`` env steps of ``action`` from a seeded reset, resetting where an
+    episode ends."""
+    import time
+
+    env.reset(seed=0)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        _, _, term, trunc, _ = env.step(action)
+        if term or trunc:
+            env.reset()
+    return time.perf_counter() - t0
 
 
 def _physics_time_in_env(env, action, steps: int) -> tuple[float, float]:
@@ -81,13 +91,7 @@ def _physics_time_in_env(env, action, steps: int) -> tuple[float, float]:
 
     sim.step = timed_step
     try:
-        env.reset(seed=0)
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            _, _, term, trunc, _ = env.step(action)
-            if term or trunc:
-                env.reset()
-        total = time.perf_counter() - t0
+        total = _play(env, action, steps)
     finally:
         del sim.step
     return inside[0], total
@@ -110,13 +114,7 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
     action = np.zeros(env.action_space.shape, dtype=np.float32)
 
     def run_env() -> float:
-        env.reset(seed=0)
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            _, _, term, trunc, _ = env.step(action)
-            if term or trunc:
-                env.reset()
-        return time.perf_counter() - t0
+        return _play(env, action, steps)
 
     if batch > 0:
         from envs.batched import BatchedTrackingEnv

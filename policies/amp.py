@@ -162,6 +162,34 @@ class ReplayBuffer:
         return self.data[rng.integers(0, self.n, n)]
 
 
+def discriminator_step(disc: Discriminator, opt: torch.optim.Optimizer, cfg: AmpConfig,
+                       real: torch.Tensor, fake: torch.Tensor):  # fmt: skip
+    """One gradient step of ``disc`` on a batch of reference windows ``real`` and policy windows
+    ``fake`` (raw, ``(B, dim)``): ``cfg.loss`` (least squares or BCE), AMP's gradient penalty on
+    the real windows (``cfg.grad_penalty``) and the optional logit regularisation. The CPU and
+    the device trainers (:mod:`policies.warp.amp`) share it.
+
+    Returns:
+        ``(loss, gradient penalty, d_real, d_fake)``, detached.
+    """
+    real.requires_grad_(True)
+    d_real, d_fake = disc(real), disc(fake)
+    if cfg.loss == "lsgan":
+        loss = ((d_real - 1.0) ** 2).mean() + ((d_fake + 1.0) ** 2).mean()
+    else:
+        bce = nn.functional.binary_cross_entropy_with_logits
+        loss = bce(d_real, torch.ones_like(d_real)) + bce(d_fake, torch.zeros_like(d_fake))
+    (grad,) = torch.autograd.grad(d_real.sum(), real, create_graph=True)
+    gp = grad.pow(2).sum(-1).mean()
+    total = loss + 0.5 * cfg.grad_penalty * gp
+    if cfg.logit_reg > 0:
+        total = total + cfg.logit_reg * disc.head.weight.pow(2).sum()
+    opt.zero_grad(set_to_none=True)
+    total.backward()
+    opt.step()
+    return loss.detach(), gp.detach(), d_real.detach(), d_fake.detach()
+
+
 class AmpTrainer:
     """Discriminator, optimiser, real sampler and replay buffer; one :meth:`update` per rollout."""
 
@@ -180,12 +208,6 @@ class AmpTrainer:
 
     def reward(self, x: np.ndarray) -> np.ndarray:
         return self.cfg.reward_scale * self.disc.reward(x)
-
-    def _loss(self, d_real: torch.Tensor, d_fake: torch.Tensor) -> torch.Tensor:
-        if self.cfg.loss == "lsgan":
-            return ((d_real - 1.0) ** 2).mean() + ((d_fake + 1.0) ** 2).mean()
-        bce = nn.functional.binary_cross_entropy_with_logits
-        return bce(d_real, torch.ones_like(d_real)) + bce(d_fake, torch.zeros_like(d_fake))
 
     def update(self, fake: np.ndarray) -> dict[str, float]:
         """Add the rollout's policy windows to the replay buffer and train the discriminator.
@@ -206,17 +228,7 @@ class AmpTrainer:
         for _ in range(n):
             real = torch.as_tensor(self.real.sample(cfg.batch_size, self.rng))
             fk = torch.as_tensor(self.replay.sample(cfg.batch_size, self.rng))
-            real.requires_grad_(True)
-            d_real, d_fake = self.disc(real), self.disc(fk)
-            loss = self._loss(d_real, d_fake)
-            (grad,) = torch.autograd.grad(d_real.sum(), real, create_graph=True)
-            gp = grad.pow(2).sum(-1).mean()
-            total = loss + 0.5 * cfg.grad_penalty * gp
-            if cfg.logit_reg > 0:
-                total = total + cfg.logit_reg * self.disc.head.weight.pow(2).sum()
-            self.opt.zero_grad(set_to_none=True)
-            total.backward()
-            self.opt.step()
+            loss, gp, d_real, d_fake = discriminator_step(self.disc, self.opt, cfg, real, fk)
             with torch.no_grad():
                 stats["loss"] += float(loss) / n
                 stats["grad_penalty"] += float(gp) / n

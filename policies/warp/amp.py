@@ -9,9 +9,8 @@ from __future__ import annotations
 import json
 
 import torch
-from torch import nn
 
-from policies.amp import AmpTrainer, Discriminator
+from policies.amp import AmpTrainer, Discriminator, discriminator_step
 from policies.config import AmpConfig
 
 
@@ -90,12 +89,6 @@ class DeviceAmpTrainer:
         """``(B,)`` ``reward_scale`` x the style reward of raw windows ``(B, dim)``."""
         return self.cfg.reward_scale * style_reward(self.disc(x), self.cfg.loss)
 
-    def _loss(self, d_real: torch.Tensor, d_fake: torch.Tensor) -> torch.Tensor:
-        if self.cfg.loss == "lsgan":
-            return ((d_real - 1.0) ** 2).mean() + ((d_fake + 1.0) ** 2).mean()
-        bce = nn.functional.binary_cross_entropy_with_logits
-        return bce(d_real, torch.ones_like(d_real)) + bce(d_fake, torch.zeros_like(d_fake))
-
     def update(self, fake: torch.Tensor) -> dict[str, float]:
         """Add a rollout's policy windows ``(B, dim)`` and train the discriminator
         (:meth:`policies.amp.AmpTrainer.update`; the same statistics, one host copy)."""
@@ -109,18 +102,9 @@ class DeviceAmpTrainer:
         n = cfg.updates_per_rollout
         acc = torch.zeros(len(keys), dtype=torch.float64, device=self.device)
         for _ in range(n):
-            real = self.sample_real(cfg.batch_size).requires_grad_(True)
-            fk = self.sample_fake(cfg.batch_size)
-            d_real, d_fake = self.disc(real), self.disc(fk)
-            loss = self._loss(d_real, d_fake)
-            (grad,) = torch.autograd.grad(d_real.sum(), real, create_graph=True)
-            gp = grad.pow(2).sum(-1).mean()
-            total = loss + 0.5 * cfg.grad_penalty * gp
-            if cfg.logit_reg > 0:
-                total = total + cfg.logit_reg * self.disc.head.weight.pow(2).sum()
-            self.opt.zero_grad(set_to_none=True)
-            total.backward()
-            self.opt.step()
+            loss, gp, d_real, d_fake = discriminator_step(
+                self.disc, self.opt, cfg, self.sample_real(cfg.batch_size),
+                self.sample_fake(cfg.batch_size))
             with torch.no_grad():
                 acc += torch.stack([loss, gp, (d_real > 0).float().mean(),
                                     (d_fake < 0).float().mean(), d_real.mean(),
