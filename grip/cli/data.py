@@ -171,6 +171,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_limit_arguments(r)
     r.set_defaults(func=cmd_reference)
 
+    c = dsub.add_parser(
+        "cut",
+        help="cut a time window out of one recording",
+        description="Write frames [--start, --end) (seconds) of one PRISM-format recording "
+        "(.pkl or .npz) as a new recording: every per-frame stream is cut, the scene's objects, "
+        "the subject and the extras are kept. The demo's bundled recordings were cut this way "
+        "(grip/assets/__init__.py names the commands).",
+        epilog="example: grip data cut data/prism_synth/sequences/cmu__14_21_v0_seq000.npz "
+        "--start 0.5 --end 6.5 --out stairs.npz",
+    )
+    c.add_argument("file", type=Path, help="recording (.pkl or .npz)")
+    c.add_argument("--start", type=float, default=0.0, help="first second (default 0)")
+    c.add_argument("--end", type=float, default=None,
+                   help="end in seconds, exclusive (default: the recording's end)")  # fmt: skip
+    c.add_argument("--out", required=True, type=Path, help="output recording (.pkl or .npz)")
+    add_limit_arguments(c)
+    c.set_defaults(func=cmd_cut)
+
     add_import_parser(dsub)  # grip data import (grip/cli/devices.py)
 
 
@@ -367,6 +385,33 @@ def cmd_plot(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     out = plot_recording(rec, args.out)
     print(f"wrote {out}")
+    return 0
+
+
+def cmd_cut(args: argparse.Namespace) -> int:
+    from grip.cli.errors import CliError
+    from prism_tools.io import load_recording, save_recording
+
+    limits_from_args(args)
+    try:
+        rec = load_recording(args.file)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+    n, fps = rec.n_frames, rec.fps
+    start = round(args.start * fps)
+    stop = n if args.end is None else round(args.end * fps)
+    if not 0 <= start < stop <= n:
+        raise CliError(f"{args.file}: --start {args.start:g} s / --end "
+                       f"{'end' if args.end is None else f'{args.end:g} s'} give frames "
+                       f"[{start}, {stop}), outside the recording's {n} frames "
+                       f"({n / fps:g} s at {fps:g} Hz)")  # fmt: skip
+    cut = rec.slice_frames(start, stop)
+    try:
+        save_recording(cut, args.out)
+    except (OSError, ValueError) as e:
+        raise CliError(str(e)) from e
+    print(f"wrote {args.out}: frames [{start}, {stop}) of {args.file} ({stop - start} frames, "
+          f"{(stop - start) / fps:g} s, objects: {', '.join(cut.objects or {}) or 'none'})")
     return 0
 
 

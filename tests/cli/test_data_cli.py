@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from grip.assets import SHIPPED_KIN
@@ -380,9 +381,17 @@ def test_train_policy_eval_policy_and_export(built: Path, tmp_path: Path, capsys
     assert main(["demo", "--out", str(demo), "--policy", str(exported), "--no-video"]) == 0
     table = (demo / "metrics.md").read_text()
     assert all(f"| {m} |" in table for m in ("grip", "kinematics", "kin+pip", "transpose", "pip"))
-    assert "frames pushed" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "frames pushed" in out
     assert len(list(demo.glob("*.npz"))) == 5 and len(list(demo.glob("*.png"))) == 1
     assert len(list(demo.glob("*.bvh"))) == 1 and len(list(demo.glob("*.glb"))) == 1
+    # then the held-out clip with props: the steps in the scene and in the viewer
+    assert "3 object(s) in the scene: prop_00 top 0.23 m" in out
+    table = (demo / "props" / "metrics.md").read_text()
+    assert all(f"| {m} |" in table for m in ("grip", "kinematics", "kin+pip"))
+    assert "transpose" not in table and len(list((demo / "props").glob("*.npz"))) == 3
+    html = next((demo / "props").glob("*.html")).read_text()
+    assert "prop_02" in html
 
 
 def test_policy_holdout_clips_are_kept_out_of_training_and_evaluated(
@@ -647,3 +656,26 @@ def test_a_teacher_run_follows_the_ground_truth(built: Path, tmp_path: Path, cap
                  str(plain / "policy.pt"), "--data", str(built), "--out",
                  str(tmp_path / "mixed"), *TINY_DISTILL]) == 2  # fmt: skip
     assert "follow different references" in capsys.readouterr().err
+
+
+def test_cut_writes_a_window_with_the_objects(tmp_path: Path, capsys) -> None:
+    """``grip data cut``: the window's frames, the scene's objects kept; a window outside the
+    recording is an error naming the file, and nothing is written."""
+    from grip.assets import SAMPLE_PROPS_RECORDING
+    from prism_tools.io import load_recording
+
+    src = load_recording(SAMPLE_PROPS_RECORDING)
+    out = tmp_path / "cut.npz"
+    assert main(["data", "cut", str(SAMPLE_PROPS_RECORDING), "--start", "1", "--end", "2.5",
+                 "--out", str(out)]) == 0  # fmt: skip
+    assert "frames [100, 250)" in capsys.readouterr().out
+    cut = load_recording(out)
+    assert cut.n_frames == 150 and sorted(cut.objects) == sorted(src.objects)
+    np.testing.assert_array_equal(cut.objects["prop_01"].vertices, src.objects["prop_01"].vertices)
+    np.testing.assert_array_equal(cut.smpl_params.trans, src.smpl_params.trans[100:250])
+    bad = tmp_path / "bad.npz"
+    assert main(["data", "cut", str(SAMPLE_PROPS_RECORDING), "--start", "5", "--end", "9",
+                 "--out", str(bad)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "sample_props_recording.npz" in err and "outside the recording's 600 frames" in err
+    assert not bad.exists()
