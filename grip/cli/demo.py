@@ -12,9 +12,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
         help="run the end-to-end demo on the bundled sample recording",
-        description="Reconstruct the bundled sample recording (a 5 s walk of the shipped models' per-clip test split, "
-        "4 IMUs + insoles, grip/assets/sample_recording.npz) with the shipped KinematicsNet and "
-        "policy: physics simulation with fall recovery, then npz/BVH/GLB/PNG (and MP4 where "
+        description="Reconstruct the bundled sample recording (a 5 s walk of the shipped "
+        "models' per-clip test split, 4 IMUs + insoles, grip/assets/sample_recording.npz) "
+        "with the shipped KinematicsNet and policy: physics simulation with fall recovery, "
+        "then npz/BVH/GLB/PNG (and MP4 where "
         "OpenGL works) exports, and a metrics table of GRIP, kinematics only and PIP's physics "
         "optimiser on the KinematicsNet estimate against the recording's ground truth. "
         "Then a held-out clip with props (6 s of a person in no training split climbing three "
