@@ -16,7 +16,36 @@ import random
 import sys
 from pathlib import Path
 
+import numpy as np
+
 SOURCES = ("bandai_namco/dataset-1", "bandai_namco/dataset-2", "cmu", "deepmimic", "hdm05")
+
+
+def body_points(g, p, body):
+    """``(T, K, 3)`` the points the props rule keeps out of every prop: limb and trunk shapes'
+    lowest points, the soles' outlines and the insole cells."""
+    import numpy as np
+
+    from grip.core.fk import sole_points
+    from prism_tools.synth.insole import body_contact_points, insole_cell_positions
+
+    t = len(g)
+    return np.concatenate([body_contact_points(g, p, body)[0],
+                           sole_points(g, p, body).reshape(t, -1, 3),
+                           insole_cell_positions(g, p, body).reshape(t, -1, 3)],
+                          axis=1)  # fmt: skip
+
+
+def inside_share(prop, pts) -> float:
+    """Share of frames where some body point lies inside ``prop``: over its top, more than
+    ``INSIDE_M`` below the top and, for a slab, with its shape reaching the slab (above its
+    underside less ``REACH_M``)."""
+    from prism_tools.synth.props import INSIDE_M, REACH_M
+
+    z = pts[..., 2]
+    floor = prop.bottom_m - REACH_M if prop.bottom_m > 0 else -np.inf
+    inside = prop.contains(pts[..., :2]) & (z < prop.height_m - INSIDE_M) & (z > floor)
+    return float(inside.any(axis=1).mean())
 
 
 def scan(motions: Path, sources: list[str], per_source: int, seed: int) -> dict:
@@ -42,15 +71,23 @@ def scan(motions: Path, sources: list[str], per_source: int, seed: int) -> dict:
             body = motion.body_model()
             g, p = motion.fk(body)
             props = infer_props(g, p, body, motion.fps)
+            pts = body_points(g, p, body)
             rows = [{"kind": q.kind, "height_m": round(q.height_m, 3),
-                     "extent_m": np.round(q.hi - q.lo, 2).tolist(), "frames": q.frames}
+                     "bottom_m": round(q.bottom_m, 3), "lo": np.round(q.lo, 2).tolist(),
+                     "hi": np.round(q.hi, 2).tolist(),
+                     "extent_m": np.round(q.hi - q.lo, 2).tolist(), "frames": q.frames,
+                     "inside_share": round(inside_share(q, pts), 4)}
                     for q in props]  # fmt: skip
             out["clips"].append({"clip": ref.clip_id, "source": source, "props": rows})
             summary["clips"] += 1
             summary["with_props"] += bool(rows)
             summary["steps"] += sum(r["kind"] == "step" for r in rows)
             summary["seats"] += sum(r["kind"] == "seat" for r in rows)
-            text = ", ".join(f"{r['kind']} {r['height_m']:.2f} m" for r in rows) or "-"
+            text = ", ".join(
+                f"{r['kind']} {r['height_m']:.2f} m"
+                + (f" (slab from {r['bottom_m']:.2f} m)" if r["bottom_m"] > 0 else "")
+                + f" [{100 * r['inside_share']:.1f} % of frames with the body inside]"
+                for r in rows) or "-"
             print(f"{ref.clip_id}: {text}", flush=True)
         out["sources"][source] = summary
     return out

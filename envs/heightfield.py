@@ -23,6 +23,7 @@ from envs.terrain import Scene
 __all__ = [
     "HeightField",
     "add_heightfield",
+    "add_static_meshes",
     "rasterize",
     "sample_heightmap",
 ]
@@ -338,17 +339,7 @@ def add_heightfield(
     """
     if base_m <= 0.0:
         raise ValueError(f"base_m must be positive, got {base_m}")
-    root = ET.fromstring(mjcf_xml)
-    world = root.find("worldbody")
-    if world is None:
-        raise ValueError("the MJCF has no <worldbody>")
-    for el in root.iter():
-        if el.tag in ("hfield", "geom") and el.get("name") == name:
-            raise ValueError(f"the MJCF already has a <{el.tag}> named {name!r}")
-    asset = root.find("asset")
-    if asset is None:
-        asset = ET.Element("asset")
-        root.insert(list(root).index(world), asset)
+    root, world, asset = _world_and_asset(mjcf_xml, ("hfield", "geom"), (name,))
 
     h = hf.heights
     ny, nx = h.shape
@@ -367,12 +358,63 @@ def add_heightfield(
     cy = float(hf.origin_xy[1]) + ry
     attrs = {"name": name, "type": "hfield", "hfield": name,
              "pos": f"{_fmt(cx)} {_fmt(cy)} {_fmt(h_min)}"}  # fmt: skip
+    _add_static_geom(world, attrs, rgba)
+    return ET.tostring(root, encoding="unicode")
+
+
+def add_static_meshes(mjcf_xml: str, meshes, prefix: str = "overhang", *,
+                      rgba: str = "0.55 0.45 0.35 1") -> str:  # fmt: skip
+    """Add meshes as static MuJoCo geoms (the overhangs of :func:`envs.terrain.split_overhangs`:
+    a stool's seat slab), with the floor's collision bits and contact parameters as
+    :func:`add_heightfield` gives its field. MuJoCo collides with each mesh's convex hull.
+
+    Args:
+        mjcf_xml: A complete ``<mujoco>`` document with a ``<worldbody>``.
+        meshes: Triangle meshes (``.vertices (V, 3)``, ``.faces (F, 3)``), world frame, m.
+        prefix: Their mesh assets and geoms are named ``<prefix>_<k>`` (must be unused).
+        rgba: Their colour.
+
+    Returns:
+        The modified document as a string.
+
+    Raises:
+        ValueError: No worldbody, or a name already in use.
+    """
+    names = [f"{prefix}_{k}" for k in range(len(meshes))]
+    root, world, asset = _world_and_asset(mjcf_xml, ("mesh", "geom"), names)
+    for name, m in zip(names, meshes, strict=True):
+        ET.SubElement(asset, "mesh", name=name,
+                      vertex=" ".join(_fmt(x) for x in np.asarray(m.vertices).reshape(-1)),
+                      face=" ".join(str(int(i)) for i in np.asarray(m.faces).reshape(-1)))
+        _add_static_geom(world, {"name": name, "type": "mesh", "mesh": name}, rgba)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _world_and_asset(mjcf_xml: str, tags: tuple[str, ...], names) -> tuple:
+    """The parsed document, its ``<worldbody>`` and its ``<asset>`` (created if missing);
+    ``ValueError`` when there is no worldbody or an element of ``tags`` has one of ``names``."""
+    root = ET.fromstring(mjcf_xml)
+    world = root.find("worldbody")
+    if world is None:
+        raise ValueError("the MJCF has no <worldbody>")
+    taken = set(names)
+    for el in root.iter():
+        if el.tag in tags and el.get("name") in taken:
+            raise ValueError(f"the MJCF already has a <{el.tag}> named {el.get('name')!r}")
+    asset = root.find("asset")
+    if asset is None:
+        asset = ET.Element("asset")
+        root.insert(list(root).index(world), asset)
+    return root, world, asset
+
+
+def _add_static_geom(world: ET.Element, attrs: dict, rgba: str) -> None:
+    """A static world geom with the floor's collision bits ``contype="1" conaffinity="0"`` (the
+    humanoid's geoms have conaffinity bit 1) and the contact parameters of the worldbody's first
+    plane geom (the floor), right after the floor so that the static geoms stay together."""
     floor = next((g for g in world.findall("geom") if g.get("type") == "plane"), None)
     if floor is not None:
         attrs.update({k: floor.get(k) for k in _FLOOR_CONTACT_ATTRS if floor.get(k) is not None})
     attrs.update(contype="1", conaffinity="0", rgba=rgba)
-    geom = ET.Element("geom", attrs)
-    # Right after the floor (or first) so the static world geoms stay together.
     idx = list(world).index(floor) + 1 if floor is not None else 0
-    world.insert(idx, geom)
-    return ET.tostring(root, encoding="unicode")
+    world.insert(idx, ET.Element("geom", attrs))

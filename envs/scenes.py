@@ -10,8 +10,8 @@ import types
 
 import mujoco
 
-from envs.heightfield import add_heightfield, rasterize, sample_heightmap
-from envs.terrain import make_scene
+from envs.heightfield import add_heightfield, add_static_meshes, rasterize, sample_heightmap
+from envs.terrain import make_scene, split_overhangs
 from grip.core.body import BodyParams
 from grip.core.mjcf import SIM_TEXTURE_PX, MjcfConfig, build_mjcf
 from grip.sim.humanoid import Humanoid, HumanoidConfig
@@ -60,9 +60,14 @@ class HumanoidScenes:
             scene = make_scene(kind)
         # (small textures: they are only drawn by an env's render(); the physics is the same)
         xml = build_mjcf(body, dataclasses.replace(self.mjcf, texture_px=SIM_TEXTURE_PX))
-        hf = None if scene.is_flat else rasterize(scene, self.cell_m)
+        # what rests on the floor becomes the height field (physics and height map); what does
+        # not (a stool's seat slab) static geoms, which the height map does not show
+        resting, overhangs = split_overhangs(scene)
+        hf = None if resting.is_flat else rasterize(resting, self.cell_m)
         if hf is not None:
             xml = add_heightfield(xml, hf)
+        if overhangs:
+            xml = add_static_meshes(xml, overhangs)
         return mujoco.MjModel.from_xml_string(xml), hf
 
     def _compiled_model(self, body: BodyParams, objects: SceneObjects | None, skey: tuple,

@@ -33,10 +33,17 @@ so stairs would become a ramp-shaped solid and a chair a solid blob with the spa
 seat filled in; decomposing every object into convex parts is a whole pipeline of its own. A
 height field is exact for everything that is a function z = h(x, y).
 
-Caveats: a height field cannot represent overhangs: the space under a chair seat or a table top
-is filled down to the floor (walking under a table is not possible; sitting on a chair is).
-Vertical walls become slopes one cell wide (2 cm with the default ``cell_m``), and features
-thinner than a cell can be missed or widened by up to one cell.
+Overhangs: a height field cannot represent the space under a stool's seat or a table top. A
+mesh that does not reach the floor (its lowest vertex more than :data:`OVERHANG_MIN_M` above it:
+the open-underside seats of :mod:`prism_tools.synth.props`) is therefore not rasterised but given
+to MuJoCo as a static mesh geom (:func:`split_overhangs`, :func:`~envs.heightfield.
+add_static_meshes`): MuJoCo collides with its convex hull, exact for a slab or box. The height-map
+observation does not show such overhangs (only what the height field holds). A mesh that rests on
+the floor is rasterised whole: the space under a chair seat given as one mesh with its legs is
+filled down to the floor (sitting on it works, putting the feet under it does not).
+
+Caveats: vertical walls become slopes one cell wide (2 cm with the default ``cell_m``), and
+features thinner than a cell can be missed or widened by up to one cell.
 
 Grid convention: see :mod:`envs.heightfield`.
 """
@@ -59,11 +66,16 @@ __all__ = [
     "flat_scene",
     "make_scene",
     "scene_from_objects",
+    "split_overhangs",
     "stairs_scene",
 ]
 
 SCENE_NAMES: tuple[str, ...] = ("flat", "boxes", "stairs", "chair", "objects")
 """Names accepted by :func:`make_scene`."""
+
+OVERHANG_MIN_M = 0.01
+"""A mesh whose lowest vertex lies more than this above the floor is an overhang (a geom, not
+part of the height field)."""
 
 DEFAULT_BOXES: tuple[tuple[float, float, float, float, float], ...] = (
     # (centre x, centre y, size x, size y, height), metres. The humanoid starts at the origin
@@ -294,6 +306,14 @@ def scene_from_objects(objects: Mapping[str, Any]) -> Scene:
                              f"got [{faces.min()}, {faces.max()}]")  # fmt: skip
         meshes.append(trimesh.Trimesh(vertices=vertices, faces=faces, process=False))
     return Scene("objects", tuple(meshes))
+
+
+def split_overhangs(scene: Scene) -> tuple[Scene, tuple[trimesh.Trimesh, ...]]:
+    """The scene's meshes that rest on the floor (a scene of the same name, for the height
+    field) and those that do not (overhangs: static geoms)."""
+    resting = tuple(m for m in scene.meshes if float(m.vertices[:, 2].min()) <= OVERHANG_MIN_M)
+    over = tuple(m for m in scene.meshes if float(m.vertices[:, 2].min()) > OVERHANG_MIN_M)
+    return Scene(scene.name, resting), over
 
 
 _BUILDERS: dict[str, Callable[[], Scene]] = {

@@ -143,7 +143,9 @@ def props_summary(clips: list[dict]) -> dict:
             e["seats" if p.get("kind") == "seat" else "steps"] += 1
         if len(examples) < 12:
             examples.append((c.get("clip_id"), ", ".join(
-                f"{p.get('kind')} {float(p.get('height_m', 0.0)):.2f} m" for p in props)))
+                f"{p.get('kind')} {float(p.get('height_m', 0.0)):.2f} m"
+                + (" (open underneath)" if float(p.get("bottom_m", 0.0)) > 0 else "")
+                for p in props)))
     return {"clips": with_props, "props": n_props, "by_source": dict(sorted(by_source.items())),
             "examples": examples}  # fmt: skip
 

@@ -338,7 +338,8 @@ def zmp_filter(
     if ground is not None:
         sup = before.support.reshape(t, -1)
         tot = sup.sum(axis=1)
-        plane = np.where(tot > 0, np.sum(sup * ground(cells), axis=1) / np.maximum(tot, 1e-12),
+        under = ground(before.cell_pos_world.reshape(t, -1, 3))
+        plane = np.where(tot > 0, np.sum(sup * under, axis=1) / np.maximum(tot, 1e-12),
                          0.0)  # fmt: skip
     # Frames weigh by their vertical force squared (the residual moment is F_z times the ZMP
     # distance), capped at one body weight; a push-off at 0.2 body weights counts little.

@@ -377,8 +377,9 @@ def synthesize_insoles(
         body: Body model.
         fps: Frame rate, Hz.
         cfg: Insole synthesis configuration.
-        ground: Height of the ground under points ``(..., 2)`` (the props a motion stands on,
-            :func:`prism_tools.synth.props.support_height`); ``None``: the flat floor. Cells
+        ground: Height of the ground under points ``(..., 3)`` (the props a motion stands on,
+            :func:`prism_tools.synth.props.support_height`: a point under a seat's slab stands
+            on the floor); ``None``: the flat floor. Cells
             carry load near the ground under them, and the ZMP is taken on the plane of the
             supported cells' mean ground height (``p_h = p_0 + h F_xy / F_z``).
 
@@ -393,7 +394,7 @@ def synthesize_insoles(
     others = body_contact_points(global_rot, joint_pos, body)[0]  # (T, K, 3)
     points = np.concatenate([cells.reshape(t, -1, 3), others], axis=1)
     flat_xy = points[..., :2]
-    ground_z = None if ground is None else ground(flat_xy)
+    ground_z = None if ground is None else ground(points)
     support, level = cell_support_weights(points, fps, cfg, ground_z)
     zmp = wrench.zmp_world
     if ground_z is not None:

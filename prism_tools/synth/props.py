@@ -32,12 +32,19 @@ body: a sole (its outline and insole cells), or the lowest point of a limb or tr
 (:func:`prism_tools.synth.insole.body_contact_points`) more than :data:`INSIDE_M` below its top
 over it, at any frame (standing thighs in front of a stool, a swinging foot in front of a
 step). Such a box is cut back from that side, keeping its own patches (the steps of a staircase
-stay separate boxes). Where the body was inside the patches themselves at other frames (a
-seat's resting thighs reach past the real seat's edge, where the thighs stand before sitting),
+stay separate boxes). Where the body was inside a step's patches themselves at other frames,
 the box becomes its largest rectangle that no body point enters, and is dropped when that is
 narrower than :data:`MIN_TOP_M`: the simulation would otherwise start the body inside its
-prop. A box cannot stand for a stool whose underside the feet tuck into, and such seats are
-dropped (CMU 13_01, 14_29).
+prop.
+
+A seat that the body reaches under (a high stool: the legs stand in front of it before sitting,
+the feet tuck under it onto its rungs) is a slab instead: :data:`SLAB_M` thick, open underneath
+(``Prop.bottom_m`` > 0). Only body shapes that reach the slab's height cut it back: lowest
+points between :data:`UNDER_M` + :data:`REACH_M` under its bottom and :data:`INSIDE_M` under its
+top; everything lower passes under it. The simulation collides with it as a static geom (it
+needs no legs), and points under it stand on the floor (:func:`support_height` with heights).
+Seats within :data:`SEAT_MERGE_HEIGHT_M` of each other are one seat (two postures on one
+stool).
 
 Every threshold is a module constant with its reason; none is a setting to tune.
 """
@@ -99,6 +106,10 @@ SEAT_MARGIN_M = 0.05
 MERGE_HEIGHT_M = 0.05
 """Patches whose heights differ by less than this are the same surface (a seat's lowest point
 varies by a few centimetres with the posture; steps of a staircase differ by 15-20 cm)."""
+SEAT_MERGE_HEIGHT_M = 0.08
+"""Seats whose heights differ by less than this are one seat: the pelvis' lowest point sits up
+to 6 cm lower upright than perched on the same stool (CMU 13_01: 0.56 and 0.62 m); two slabs
+would stack, and the lower posture would sit inside the upper one."""
 MERGE_GAP_M = 0.3
 """... when their extents come closer than this (both feet on a step, a second visit)."""
 CUT_MARGIN_M = 0.02
@@ -115,11 +126,23 @@ MIN_TOP_M = 0.1
 """A box cut narrower than this (either side of its top) carries nothing and is dropped."""
 FREE_CELL_M = 0.01
 """Grid of the search for the largest part of a box that no body point enters."""
+SLAB_M = 0.05
+"""Thickness of an open-underside seat (a stool's top, 3-5 cm, and the body's resting points
+spread a few centimetres below the merged top: :data:`INSIDE_M`)."""
+UNDER_M = 0.03
+"""Body shapes pass under a slab with this clearance."""
+REACH_M = 0.06
+"""A limb or trunk shape whose lowest point lies this far under a slab's clearance still reaches
+into the slab (about a thigh capsule's radius on a 1.7 m body: its axis is at the slab's
+underside): a thigh standing in front of a stool, the pelvis of a lower sitting posture. A
+foot on a rung 30-40 cm below passes under it. (Twice this, a whole thigh's thickness, cuts CMU
+14_27's seat below :data:`MIN_TOP_M`, and with this value no shape's lowest point lies within
+twice this under any inferred slab on more than 0.2 % of a clip's frames.)"""
 
 
 @dataclass(frozen=True)
 class Prop:
-    """A box resting on the floor.
+    """A box resting on the floor, or a slab open underneath (a stool's seat).
 
     Attributes:
         lo: ``(2,)`` minimum x, y of its top, m (world frame, z up).
@@ -128,6 +151,8 @@ class Prop:
         kind: ``"step"`` (feet stood on it) or ``"seat"`` (the pelvis rested on it; a seat
             that feet also stood on stays a seat).
         frames: Frames supported by it.
+        bottom_m: Its underside above the floor, m: 0 for a box, ``height_m - SLAB_M`` for a
+            seat the body reaches under.
     """
 
     lo: np.ndarray
@@ -135,6 +160,7 @@ class Prop:
     height_m: float
     kind: str
     frames: int
+    bottom_m: float = 0.0
 
     def contains(self, xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """Whether points ``(..., 2)`` lie over the top (grown by ``margin``)."""
@@ -224,7 +250,9 @@ def _merge(patches: list[tuple]) -> list[dict]:
         for g in groups:
             glo, ghi = g["box"]
             near = np.all(lo <= ghi + MERGE_GAP_M) and np.all(hi >= glo - MERGE_GAP_M)
-            if near and abs(np.average(g["heights"], weights=g["frames"]) - h) < MERGE_HEIGHT_M:
+            seats = kind == "seat" and "seat" in g["kinds"]
+            tol = SEAT_MERGE_HEIGHT_M if seats else MERGE_HEIGHT_M
+            if near and abs(np.average(g["heights"], weights=g["frames"]) - h) < tol:
                 g["core"] = (np.minimum(g["core"][0], lo), np.maximum(g["core"][1], hi))
                 g["box"] = (np.minimum(glo, lo - margin), np.maximum(ghi, hi + margin))
                 g["heights"].append(h), g["kinds"].append(kind), g["frames"].append(n)
@@ -347,35 +375,68 @@ def infer_props(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel,
         h = float(np.average(g["heights"], weights=g["frames"]))
         bad = np.concatenate([soles_xy[soles_h < h - MERGE_HEIGHT_M].reshape(-1, 2),
                               points[points[:, 2] < h - INSIDE_M, :2]])  # fmt: skip
-        lo, hi = _cut(*g["box"], *g["core"], bad) if len(bad) else g["box"]
-        if len(bad) and np.all((bad >= lo) & (bad <= hi), axis=1).any():
-            free = _largest_free(lo, hi, bad)  # (the body entered the patches)
-            if free is None:
-                continue
-            lo, hi = free
         kind = "seat" if "seat" in g["kinds"] else "step"
-        props.append(Prop(lo, hi, h, kind, int(sum(g["frames"]))))
+        bottom = 0.0
+        if kind == "seat" and _entered(g["core"], bad):
+            # the body reached under the seat: a slab, which only points at its height cut
+            bottom = h - SLAB_M
+            z = points[:, 2]
+            bad = points[(z > bottom - UNDER_M - REACH_M) & (z < h - INSIDE_M), :2]
+        box = _free_box(g, bad)
+        if box is not None:
+            props.append(Prop(*box, h, kind, int(sum(g["frames"])), bottom))
     return props
 
 
-def support_height(props: list[Prop], xy: np.ndarray) -> np.ndarray:
-    """Height of the ground under points ``(..., 2)``: the highest prop top over each, else the
-    floor (0), m."""
+def _entered(core: tuple[np.ndarray, np.ndarray], bad: np.ndarray) -> bool:
+    """Whether a point of ``bad (N, 2)`` lies over a surface's own patches ``core``."""
+    return bool(len(bad)) and bool(np.all((bad >= core[0]) & (bad <= core[1]), axis=1).any())
+
+
+def _free_box(group: dict, bad: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """A merged surface's box cut back from the points ``bad (N, 2)`` (:func:`_cut`), or its
+    largest free rectangle where they entered its own patches; ``None`` when too small."""
+    if not len(bad):
+        return group["box"]
+    lo, hi = _cut(*group["box"], *group["core"], bad)
+    if np.all((bad >= lo) & (bad <= hi), axis=1).any():
+        return _largest_free(lo, hi, bad)  # (the body entered the patches)
+    return lo, hi
+
+
+def support_height(props: list[Prop], points: np.ndarray) -> np.ndarray:
+    """Height of the ground under points: the highest prop top under each, else the floor (0),
+    m.
+
+    Args:
+        props: The props.
+        points: ``(..., 2)`` x, y, or ``(..., 3)`` x, y, z: with heights, a slab (a prop with
+            ``bottom_m`` > 0) is under a point only when the point is not below its underside
+            (a foot under a stool stands on the floor).
+
+    Returns:
+        ``(...)`` heights, m.
+    """
+    xy = points[..., :2]
+    z = points[..., 2] if points.shape[-1] == 3 else None
     out = np.zeros(xy.shape[:-1])
     for p in props:
-        out = np.where(p.contains(xy), np.maximum(out, p.height_m), out)
+        over = p.contains(xy)
+        if z is not None and p.bottom_m > 0.0:
+            over &= z >= p.bottom_m
+        out = np.where(over, np.maximum(out, p.height_m), out)
     return out
 
 
 def props_as_objects(props: list[Prop]) -> dict[str, SceneObject] | None:
-    """PRISM ``objects`` of the props (``prop_00``, ``prop_01``, ...; boxes from the floor to
-    their tops), ``None`` without props."""
+    """PRISM ``objects`` of the props (``prop_00``, ``prop_01``, ...; boxes from their
+    undersides, the floor or a slab's bottom, to their tops), ``None`` without props."""
     if not props:
         return None
     out = {}
     for i, p in enumerate(props):
-        centre = np.array([*(0.5 * (p.lo + p.hi)), 0.5 * p.height_m])
-        extents = np.array([*(p.hi - p.lo), p.height_m])
+        centre = np.array([*(0.5 * (p.lo + p.hi)), 0.5 * (p.bottom_m + p.height_m)])
+        extents = np.array([*(p.hi - p.lo), p.height_m - p.bottom_m])
         out[f"prop_{i:02d}"] = box_object(centre, extents)
     return out
 

@@ -185,7 +185,7 @@ def recording_from_motion(
     (``insole_zmp_outside_frames`` counted above ``insole_zmp_outside_threshold_m``;
     ``insole_other_support_frames``: frames where body parts other than the feet carry more than
     5 % of the body weight), and
-    ``props`` (JSON: kind, top height, top extent and frames of each prop).
+    ``props`` (JSON: kind, top height, top extent, frames and underside height of each prop).
 
     Args:
         motion: The motion.
@@ -250,7 +250,8 @@ def recording_from_motion(
             ins.other_support_force_n > 0.05 * syn.body.total_mass * GRAVITY)),
         "props": json.dumps([{"kind": p.kind, "height_m": round(p.height_m, 4),
                               "lo": p.lo.round(4).tolist(), "hi": p.hi.round(4).tolist(),
-                              "frames": p.frames} for p in syn.props]),
+                              "frames": p.frames, "bottom_m": round(p.bottom_m, 4)}
+                             for p in syn.props]),
     }
     rec = Recording.from_streams(subject, data_info, imu, insole, combined, extras,
                                  smpl_params=smpl, imu_gt=imu_gt,

@@ -400,3 +400,43 @@ def test_make_scene_names():
         make_scene("lava")
     with pytest.raises(ValueError, match="objects"):
         make_scene("objects")
+
+
+def test_an_overhang_is_a_geom_the_body_passes_under():
+    """A slab 0.50-0.55 m above the floor (a stool's seat, prism_tools.synth.props) is not
+    rasterised (the field would fill it down to the floor) but added as a static geom: a ball
+    dropped on it rests on its top, one under it rests on the floor; the box beside it stays in
+    the height field. The scenes of the tracking env compile it so."""
+    from envs.heightfield import add_static_meshes
+    from envs.scenes import HumanoidScenes
+    from envs.terrain import scene_from_objects, split_overhangs
+    from grip.core.body import BodyParams
+    from grip.core.mjcf import MjcfConfig
+    from grip.sim.humanoid import HumanoidConfig
+    from prism_tools.streams import box_object
+
+    objects = {"step": box_object(np.array([1.0, 0.0, 0.15]), np.array([0.4, 0.4, 0.3])),
+               "seat": box_object(np.array([0.0, 0.0, 0.525]), np.array([0.4, 0.4, 0.05]))}
+    resting, over = split_overhangs(scene_from_objects(objects))
+    assert len(resting.meshes) == 1 and len(over) == 1
+    hf = rasterize(resting)
+    np.testing.assert_allclose(hf.sample(np.array([[0.0, 0.0], [1.0, 0.0]])), [0.0, 0.3])
+    xy = np.array([[0.0, 0.0], [1.0, 0.0]])
+    xml = add_static_meshes(add_heightfield(_balls_mjcf([[0.0, 0.0, 0.7], [0.1, 0.0, 0.2],
+                                                         [1.0, 0.0, 0.6]]), hf), over)  # fmt: skip
+    model = mujoco.MjModel.from_xml_string(xml)
+    gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "overhang_0")
+    assert model.geom_contype[gid] == 1 and model.geom_conaffinity[gid] == 0
+    assert model.geom_friction[gid][0] == pytest.approx(0.9)  # copied from the floor
+    data = mujoco.MjData(model)
+    for _ in range(500):
+        mujoco.mj_step(model, data)
+    z = data.qpos.reshape(-1, 7)[:, 2]  # on the slab, under it on the floor, on the box
+    np.testing.assert_allclose(z, [0.55 + RADIUS, RADIUS, 0.3 + RADIUS], atol=0.01)
+    with pytest.raises(ValueError, match="overhang_0"):
+        add_static_meshes(xml, over)
+    scene = {n: (o.vertices, o.faces) for n, o in objects.items()}
+    h = HumanoidScenes(HumanoidConfig(), MjcfConfig()).get(BodyParams(), scene, tag="stool")
+    names = {mujoco.mj_id2name(h.model, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(h.model.ngeom)}
+    assert {"terrain", "overhang_0"} <= names
+    np.testing.assert_allclose(h.heights_around(np.zeros(2), np.eye(2), xy), [0.0, 0.3])

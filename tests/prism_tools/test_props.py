@@ -182,3 +182,38 @@ def test_seated_the_seat_takes_its_share_and_the_insoles_feel_the_rest():
     np.testing.assert_allclose(feet[20:80], 1.0, atol=0.02)  # standing: the feet carry it all
     assert np.all(other[20:80] < 1e-9)
     assert np.all(syn.zmp_error_m[seated] < 0.01)  # the seat and feet together hold the ZMP
+
+
+def _perched(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """On a high seat (pelvis at 0.75 m, thighs level), the feet off the floor: the left shank
+    hanging with the foot pointed, the right leg tucked under the seat (knee bent to 115 deg,
+    foot pointed): neither foot is flat, so neither stands on anything."""
+    rot, pos = fk.rest_pose(n)
+    for hip, knee, bend in ((1, 4, np.pi / 2), (2, 5, 2.0)):
+        rot[:, hip], rot[:, knee] = rot_x(np.array(-np.pi / 2)), rot_x(np.array(bend))
+    rot[:, 7], rot[:, 8] = rot_x(np.array(np.pi / 2 - 0.6)), rot_x(np.array(2.0 - 0.8))
+    pos[:, 2] = 0.75
+    return fk.forward_kinematics(rot, pos, BODY.offsets)
+
+
+def test_a_seat_the_legs_reach_under_is_a_slab_open_underneath():
+    """Perched with one foot tucked under the seat: a full-height box would hold the foot, so the
+    seat is a slab the foot passes under; a point under it stands on the floor, one on it on
+    the seat, and the object is the slab alone."""
+    from prism_tools.synth.insole import insole_cell_positions
+    from prism_tools.synth.props import SLAB_M
+
+    front = _in_front_of_the_seat()
+    g, p = _concat(_standing(100, at=front), _perched(150), _standing(100, at=front))
+    (seat,) = infer_props(g, p, BODY, FPS)
+    assert seat.kind == "seat" and abs(seat.bottom_m - (seat.height_m - SLAB_M)) < 1e-12
+    assert seat.contains(p[150, [0, 1, 2], :2]).all()  # pelvis and both hips on it
+    cells = insole_cell_positions(g[150:151], p[150:151], BODY)[0, 1]  # (16, 3) tucked foot
+    assert seat.contains(cells[:, :2]).any() and cells[:, 2].max() < seat.bottom_m
+    np.testing.assert_array_equal(support_height([seat], cells), 0.0)  # under it: the floor
+    assert support_height([seat], cells[:, :2]).max() == seat.height_m  # (heights not given)
+    top = np.array([[*p[150, 0, :2], seat.height_m]])
+    assert support_height([seat], top)[0] == seat.height_m
+    (slab,) = props_as_objects([seat]).values()
+    np.testing.assert_allclose([slab.vertices[:, 2].min(), slab.vertices[:, 2].max()],
+                               [seat.bottom_m, seat.height_m])  # fmt: skip
