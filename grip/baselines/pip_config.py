@@ -29,6 +29,9 @@ shoulders, elbows, hands. The foot joints :data:`grip.core.skeleton.FOOT_JOINTS`
 SOLVERS: tuple[str, ...] = ("quadprog", "daqp")
 """Supported QP solvers (both exact dense active-set methods; section 1.6)."""
 
+SOFTEN_FACTORS: tuple[float, ...] = (0.1, 0.01)
+"""PD scalings of :attr:`PipConfig.soften_on_failure`'s retries, in order."""
+
 _ENUMS = {
     "friction": ("inner", "outer"),
     "velocity_bounds": ("code", "paper"),
@@ -91,6 +94,13 @@ class PipConfig:
             gravity or contact forces a body dropping onto the floor keeps its speed and
             sinks through it (a lie-down segment: 323 of 500 frames failed, 1.9 m under
             the floor), while from rest the QP is feasible again.
+        soften_on_failure: Before a frame counts as failed, retry its QP with both PD terms
+            scaled by each of :data:`SOFTEN_FACTORS` (not in PIP). A reference far from the
+            state (a start that no ground truth places: the estimate snaps from the standing
+            calibration to the motion in its first frames) asks for accelerations beyond
+            ``max_solution_norm``; with ``"stop"`` the body then halts, the next QP asks the
+            same, and every later frame fails (a walk started standing: 499 of 499). A softer
+            PD moves the body toward the reference until the full one is feasible again.
     """
 
     fps: float = 100.0
@@ -123,6 +133,7 @@ class PipConfig:
     max_solution_norm: float = 1e4
     regularization: float = 1e-8
     on_failure: str = "stop"
+    soften_on_failure: bool = True
 
     def __post_init__(self) -> None:
         for name, allowed in _ENUMS.items():

@@ -52,8 +52,11 @@ Per frame (state ``q, qd``; inputs pose ``phi``, joint velocities ``v``, contact
 The QP is solved with quadprog (the solver PIP used) or daqp, through ``qpsolvers``. A failed
 solve (no solution, a non-finite one, or ``|[qdd, lambda, tau]| > 1e4`` as in PIP's code) is
 retried with the other solver (section 1.6 names proxqp for the retry; it is not installed
-here); if that fails too the frame has ``qdd = 0`` and, by default, the body stops there
-(:attr:`~grip.baselines.pip_config.PipConfig.on_failure`); the failure is counted in the notes.
+here); if that fails too, the QP is solved again with softer PD terms
+(:attr:`~grip.baselines.pip_config.PipConfig.soften_on_failure`, not in PIP), and only when
+those fail too the frame has ``qdd = 0`` and, by default, the body stops there
+(:attr:`~grip.baselines.pip_config.PipConfig.on_failure`); failures and softened frames are
+counted in the notes.
 
 Frame 0 of :meth:`PipPhysics.reconstruct` outputs the reference pose unchanged at the given
 initial root position, with the state at rest unless an initial velocity is given (PIP's code).
@@ -76,6 +79,7 @@ import qpsolvers
 from grip.baselines.pip_config import (
     CONTACT_CANDIDATES,
     PD_JOINTS_CODE,
+    SOFTEN_FACTORS,
     SOLVERS,
     PipConfig,
     PipFrame,
@@ -167,6 +171,7 @@ class PipPhysics:
         self._qref = np.zeros(self.model.nq)
         self.qp_failures = 0
         self.qp_retries = 0
+        self.qp_softened = 0
         self.reset(self.model.qpos0)
 
     # ------------------------------------------------------------------ state
@@ -299,10 +304,11 @@ class PipPhysics:
         hess = np.einsum("ij,ik->jk", kw, k_mat)
         lin = -(kw.T @ h)
         hess[:nv, :nv] += self._s_r * np.einsum("ij,ik->jk", j_pd, j_pd)
-        lin[:nv] += self._s_r * (j_pd.T @ b_r)
+        lin_pd = np.zeros(n)  # the PD terms' part of the linear term (softened on a failure)
+        lin_pd[:nv] = self._s_r * (j_pd.T @ b_r)
         idx = np.arange(3, nv)
         hess[idx, idx] += self._s_theta
-        lin[3:nv] += self._s_theta * qdd_theta
+        lin_pd[3:nv] += self._s_theta * qdd_theta
         dc = np.maximum(d_corner, cfg.signorini_min_height_m) * cfg.w_signorini
         sig = dc * dc if cfg.weight_form == "code" else dc
         lam_idx = np.arange(nv, n)
@@ -310,7 +316,15 @@ class PipPhysics:
         hess[np.arange(n), np.arange(n)] += cfg.regularization
 
         g, hb = self._constraints(jp, height, contact_prob, foot_in, cj, qvel, nc)
-        y, failed, retried = self._solve(hess, lin, g, hb, k_mat, h)
+        y, failed, retried = self._solve(hess, lin + lin_pd, g, hb, k_mat, h)
+        if failed and cfg.soften_on_failure:
+            for f in SOFTEN_FACTORS:
+                y, failed, _ = self._solve(hess, lin + f * lin_pd, g, hb, k_mat, h)
+                if not failed:
+                    self.qp_softened += 1
+                    break
+        if failed:
+            self.qp_failures += 1
         qdd, lam = y[:nv], y[nv:].reshape(nc, 3)
         tau = k_mat @ y + h
 
@@ -399,7 +413,6 @@ class PipPhysics:
             y = _solve_qp(hess, lin, g, hb, self.fallback_solver)
             if ok(y):
                 return y, False, True
-        self.qp_failures += 1
         return np.zeros(hess.shape[0]), True, self.fallback_solver is not None
 
     def _foot_forces(self, cj: np.ndarray, corners: np.ndarray,
@@ -468,7 +481,7 @@ class PipPhysics:
         qpos0 = self.model.qpos0.copy()
         write_pose_vector(poses[0], self.index, qpos0)
         self.reset(qpos0, qvel0)
-        self.qp_failures = self.qp_retries = 0
+        self.qp_failures = self.qp_retries = self.qp_softened = 0
 
         out = {k: np.empty((t, *s)) for k, s in (("joint_pos", (sk.N_JOINTS, 3)),
                ("global_rot", (sk.N_JOINTS, 3, 3)), ("grf", (2, 3)), ("cop", (2, 3)),
@@ -484,6 +497,7 @@ class PipPhysics:
         notes = {
             "qp_failures": int(self.qp_failures),
             "qp_retries": int(self.qp_retries),
+            "qp_softened": int(self.qp_softened),
             "residual_force_mean_n": float(np.linalg.norm(out["residual"][:, :3], axis=1).mean()),
             "residual_torque_mean_nm": float(np.linalg.norm(out["residual"][:, 3:], axis=1).mean()),
             "solver": self.cfg.solver,

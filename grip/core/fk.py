@@ -93,6 +93,17 @@ def sole_points(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel) 
     return pts.reshape(*pts.shape[:-2], 2, 6, 3)
 
 
+def grounded_root(global_rot: np.ndarray, root_pos: np.ndarray, body: BodyModel) -> np.ndarray:
+    """``root_pos (3,)`` moved vertically so that the pose ``global_rot (24, 3, 3)`` rests its
+    lowest sole point on the floor (z = 0), as the standing rest pose does: where a physics
+    method starts a pose that no ground truth places (a new ``(3,)`` array)."""
+    root = np.array(root_pos, dtype=np.float64).reshape(3)
+    joints = joints_from_global(global_rot, body.offsets) + root
+    rot = np.asarray(global_rot, dtype=np.float64)
+    root[2] -= float(sole_points(rot, joints, body)[..., 2].min())
+    return root
+
+
 def rest_pose(n_frames: int = 1, world: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Identity local rotations; with ``world`` the root stands upright facing +y.
 

@@ -280,6 +280,8 @@ def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float,
     the true root height, which makes every later QP infeasible (PIP-4's nets: 20 deg off at
     frame 0 on some segments, 498 of 500 QPs failed and the body drifted off)."""
     from grip.baselines.pip_physics import PipPhysics
+    from grip.core.body import build_body
+    from grip.core.fk import grounded_root
     from grip.core.metrics import global_to_local_rot
     from grip.kinematics.features import recording_body, recording_calibration, targets
 
@@ -288,9 +290,10 @@ def _pip_physics(rec, global_rot, joint_vel, contact_prob, name: str, t0: float,
         first = targets(rec.slice_frames(0, 2))
         local[0] = global_to_local_rot(first.global_rot[:1])[0]
         root0 = first.root_pos[0]
-    else:  # (the standing pose stands on the floor: its feet are never below it)
-        cal = recording_calibration(rec, init=init)
-        local[0], root0 = cal.local_rot[0], cal.root_pos[0]
+    else:  # the estimate's own first pose, on the floor (no ground truth): a standing pose
+        # that the reference leaves at once makes the PD error, and every QP, explode
+        root0 = grounded_root(global_rot[0], recording_calibration(rec, init=init).root_pos[0],
+                              build_body(recording_body(rec)))  # fmt: skip
     pip = PipPhysics(recording_body(rec), cfg)
     out = pip.reconstruct(local, joint_vel, contact_prob, root0, name=rec.name)
     out.method = name

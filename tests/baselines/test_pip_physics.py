@@ -274,12 +274,39 @@ def test_failed_qp_keeps_going_and_is_counted(body, monkeypatch) -> None:
     monkeypatch.setattr(pip, "_solve_qp", failing)
     phys, rot, root = _standing(body)
     rec = phys.reconstruct(*_sequence(rot, root, 10))
-    assert rec.notes["qp_failures"] == 10 and rec.notes["qp_retries"] == 10
-    assert calls == ["quadprog", "daqp"] * 10
+    # each frame: the full QP and its two softened retries, each with both solvers
+    assert rec.notes["qp_failures"] == 10 and rec.notes["qp_retries"] == 30
+    assert calls == ["quadprog", "daqp"] * 30 and rec.notes["qp_softened"] == 0
     # qdd = 0 from rest: the body stays put, no forces, torques = bias forces
     np.testing.assert_allclose(rec.joint_pos, rec.joint_pos[:1].repeat(10, 0), atol=1e-12)
     np.testing.assert_array_equal(rec.grf, 0.0)
     assert np.isfinite(rec.torques).all() and np.abs(rec.residual[:, 2]).min() > 100.0
+
+
+def test_a_reference_far_from_the_state_is_followed_with_a_softer_pd(body) -> None:
+    """A start far from the reference (the estimate's first frames when it starts from the
+    standing calibration): the full PD asks for more than ``max_solution_norm`` and, without
+    softening, the body halts and every frame fails; with it the body moves toward the
+    reference and the full QP succeeds again."""
+    from grip.core.rotations import rot_x
+
+    far = np.repeat(rest_pose(1)[0], 40, 0)  # local rotations
+    for hip, knee in ((1, 4), (2, 5)):  # a deep squat: hips and knees 1.2 rad
+        far[:, hip], far[:, knee] = rot_x(np.array(-1.2)), rot_x(np.array(1.2))
+    out = {}
+    for soften in (False, True):
+        phys, rot, root = _standing(body, PipConfig(soften_on_failure=soften))
+        local = far.copy()
+        local[0] = rot  # frame 0: the state's pose (the rest pose)
+        out[soften] = phys.reconstruct(local, np.zeros((40, 24, 3)), np.ones((40, 2)), root)
+    halted = out[False]
+    assert halted.notes["qp_failures"] == 39  # every frame after the first
+    np.testing.assert_allclose(halted.joint_pos, halted.joint_pos[:1].repeat(40, 0), atol=1e-12)
+    soft = out[True]
+    assert soft.notes["qp_failures"] == 0 and 1 <= soft.notes["qp_softened"] < 20
+    want = forward_kinematics(far[-1:], root[None], body.offsets)[0][0, 4]
+    cos = (np.trace(soft.global_rot[-1, 4].T @ want) - 1.0) / 2.0
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) < 20.0  # the left shank follows
 
 
 @pytest.mark.parametrize("mode", ["stop", "coast"])
