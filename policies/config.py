@@ -16,7 +16,7 @@ from grip.task.config import TrackingEnvConfig
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
 VEC_ENVS: tuple[str, ...] = ("subproc", "dummy", "batched")
-FOLLOW: tuple[str, ...] = ("estimate", "truth")
+FOLLOW: tuple[str, ...] = ("estimate", "truth", "both")
 """What a run's controller follows (:attr:`PolicyRunConfig.follow`)."""
 
 GRIP_NET_ARCH: tuple[int, ...] = (2048, 1536, 1024, 1024, 512, 512)
@@ -188,7 +188,9 @@ class PolicyRunConfig:
     teacher of ``grip policy distill``: the reference set's "estimate" is the ground truth
     itself, :func:`grip.kinematics.reference.oracle_reference_clip`, with the sensor features
     of the ``--kin`` checkpoint so that teacher and student observe the same layout). Evaluate
-    such a policy with ``grip policy eval --reference truth``."""
+    such a policy with ``grip policy eval --reference truth``. ``"both"``: every training clip
+    twice, once with the estimates and once with the ground truth as the reference (named
+    ``<clip>#truth``): a controller that tracks motion rather than one estimator's errors."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a

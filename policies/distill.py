@@ -93,6 +93,11 @@ class DistillConfig:
         reverse_categories: As ``grip policy train``'s: training clips of these categories,
             played backwards, join the reference set (``RUN/reference_train.npz``).
         mirror_references: As ``grip policy train``'s: the mirror image of every clip joins.
+        truth_references: The student also follows the ground truth of every training clip
+            (the reference set holds each clip twice, ``follow = "both"`` of ``grip policy
+            train``): rollouts on the truth, where the teacher's label needs no shift, mixed
+            with rollouts on the estimate, so that the student learns to track motion rather
+            than one estimator's errors.
         threads: Torch threads (0: all cores).
         vec_env: ``"batched"``: the rollout environments stepped by one call (the env maker's
             ``batched`` form, :class:`envs.batched.BatchedTrackingEnv`; the same transitions
@@ -117,6 +122,7 @@ class DistillConfig:
     fall_height_m: float = 0.3
     reverse_categories: tuple[str, ...] = ("walk",)
     mirror_references: bool = True
+    truth_references: bool = False
     action_noise: float = 0.0
     threads: int = 0
     vec_env: str = "batched"

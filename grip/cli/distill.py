@@ -71,7 +71,8 @@ def cmd_distill(args: argparse.Namespace) -> int:
     kin = kin_checkpoint(args.kin)
     ref_path = out / "reference_train.npz"
     build_training_reference(ref_path, args.data, split_paths(args.data, "train"), [kin],
-                             cfg.reverse_categories, cfg.mirror_references)  # fmt: skip
+                             cfg.reverse_categories, cfg.mirror_references,
+                             follow="both" if cfg.truth_references else "estimate")  # fmt: skip
     try:  # (refuses to resume with other settings than iterations changed, or other teachers)
         dist = Distiller(cfg, teachers, out, ref_path, make_tracking_env, progress=tqdm,
                          log=tqdm.write)

@@ -39,7 +39,8 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     ``data`` with the estimates of each KinematicsNet checkpoint in ``kins``; training clips of
     ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``;
     with ``follow="truth"`` the ground truth is the reference, with the feature settings of
-    ``kins[0]``) unless it exists. Shared by ``grip policy train`` and ``grip policy distill``."""
+    ``kins[0]``; with ``follow="both"`` the estimates and, as ``<clip>#truth``, the ground
+    truth) unless it exists. Shared by ``grip policy train`` and ``grip policy distill``."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
@@ -55,7 +56,7 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.cli.recordings import reversed_training_recordings
 
         recs += reversed_training_recordings(data, files, reverse_categories)
-    sets = []
+    sets, est = [], None
     for kin in kins:
         try:
             est = KinematicsEstimator.from_checkpoint(kin)
@@ -68,8 +69,14 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
                                             truth=truth))  # fmt: skip
         if truth:
             break  # (the truth is the same whichever checkpoint gave the feature settings)
+    suffixes = None
+    if follow == "both" and est is not None:
+        with tqdm(total=len(recs), unit="rec", desc="ground truth as the reference") as bar:
+            sets.append(build_reference_set(recs, est, progress=bar.update, source="truth",
+                                            truth=True))  # fmt: skip
+        suffixes = [f"#{k}" for k in range(len(sets) - 1)] + ["#truth"]
     try:
-        ref = merge_reference_sets(sets, source=str(ref_path))
+        ref = merge_reference_sets(sets, source=str(ref_path), suffixes=suffixes)
     except ValueError as e:
         raise CliError(str(e)) from e
     if mirror:

@@ -101,11 +101,12 @@ def build_reference_set(
     return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)
 
 
-def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>") -> ReferenceSet:
+def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>",
+                         suffixes: Sequence[str] | None = None) -> ReferenceSet:  # fmt: skip
     """One reference set holding the clips of several, e.g. the same recordings estimated by
     several KinematicsNets (``grip policy train --kin A --kin B``): the controller then trains
     on references with the errors of each estimator. Clip names of the k-th set (k >= 1) get
-    the suffix ``#k`` so that every clip keeps a unique name.
+    the suffix ``#k`` (or ``suffixes[k]``) so that every clip keeps a unique name.
 
     Raises:
         ValueError: No set, or sets whose sensor observations differ (sites or insoles).
@@ -119,9 +120,10 @@ def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>")
             raise ValueError(f"{other.source}: sensor sites {list(other.sensor_sites)} / insoles "
                              f"{other.insoles} differ from {first.source}'s "
                              f"{list(first.sensor_sites)} / {first.insoles}")  # fmt: skip
+        tag = f"#{k}" if suffixes is None else suffixes[k]
         for c in other.clips:
             renamed = copy.copy(c)  # (shares the arrays; the caller's clip keeps its name)
-            renamed.name = f"{c.name}#{k}"
+            renamed.name = f"{c.name}{tag}"
             clips.append(renamed)
     return ReferenceSet(clips, first.sensor_sites, first.insoles, source)
 

@@ -489,6 +489,25 @@ def test_time_reversed_motions_join_the_policy_references(
                                  ("no-such-category",))  # fmt: skip
 
 
+def test_both_references_hold_each_clip_with_its_estimate_and_its_truth(built, tmp_path):
+    """``follow = "both"`` (and ``grip policy distill``'s ``truth_references``): every training
+    clip twice, the second named ``#truth`` with the ground truth as its estimate."""
+    from grip.cli.policy_runs import build_training_reference
+    from grip.cli.recordings import kin_checkpoint, split_paths
+
+    files = split_paths(built, "train")
+    ref_path = tmp_path / "both.npz"
+    build_training_reference(ref_path, built, files, [kin_checkpoint(None)], follow="both")
+    clips = {c.name: c for c in ReferenceSet.load(ref_path).clips}
+    est = [n for n in clips if not n.endswith("#truth")]
+    assert len(est) == len(files) and sorted(clips) == sorted(est + [f"{n}#truth" for n in est])
+    for n in est:
+        a, b = clips[n], clips[f"{n}#truth"]
+        np.testing.assert_array_equal(a.gt_qpos, b.gt_qpos)
+        np.testing.assert_allclose(b.est_rot, b.gt_rot, atol=1e-5)  # the truth is the reference
+        assert np.abs(a.est_rot - a.gt_rot).max() > 1e-2  # the estimate is not
+
+
 TINY_DISTILL = ["--set", "iterations=2", "--set", "decisions_per_iteration=64",
                 "--set", "n_envs=2", "--set", "max_samples=256", "--set", "categories=[]",
                 "--set", "reverse_categories=[]", "--set", "mirror_references=false",
@@ -576,6 +595,13 @@ def test_distill_policy_learns_the_ensembles_action_resumes_and_refuses(
     assert "none.pt" in capsys.readouterr().err
     assert main([*bad, "--set", "beta0=2"]) == 2
     assert main([*bad, "--set", "action_noise=-1"]) == 2
+    # truth_references: the student's rollouts also follow the ground truth of every clip
+    mixed = tmp_path / "d_truth"
+    assert main(["policy", "distill", "--teacher", str(pols[1]), "--data", str(built), "--out",
+                 str(mixed), *TINY_DISTILL, "--set", "iterations=1",
+                 "--set", "truth_references=true"]) == 0  # fmt: skip
+    names = [c.name for c in ReferenceSet.load(mixed / "reference_train.npz").clips]
+    assert len(names) == 2 * sum(n.endswith("#truth") for n in names) > 0
     # the data kept: the newest max_samples, across iterations
     from envs.factory import make_tracking_env
     from policies.distill import DistillConfig, Distiller
