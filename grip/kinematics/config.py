@@ -55,11 +55,6 @@ class TrainConfig:
             (:func:`grip.kinematics.dataset.source_weights`): 0 draws frames uniformly (in the
             whole shared corpus Bandai Namco dataset-2's locomotion is 76 % of them), 0.5 gives
             each source a share in proportion to the square root of its frames, 1 the same share.
-        speed_augment: Play each training window at a random speed between ``1 / (1 + a)``
-            and ``1 + a`` times the recorded one (log-uniform; 0 = off): the window is
-            resampled from the clip, the accelerations scaled by the speed squared, angular
-            and leaf velocities by the speed (the insoles' force is kept: its dynamic part is
-            not rescaled). Many motions in the corpus have few examples, each at one tempo.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
             AVX512-BF16 the LSTMs run several times faster
@@ -88,13 +83,10 @@ class TrainConfig:
     bf16: bool = False
     standing_init: float = 0.25
     source_balance: float = 0.0
-    speed_augment: float = 0.0
 
     def __post_init__(self) -> None:
         check(
             self,
-            (0.0 <= self.speed_augment < 1.0,
-             f"train.speed_augment must be in [0, 1), got {self.speed_augment}"),
             (0.0 <= self.source_balance <= 1.0,
              f"train.source_balance must be in [0, 1], got {self.source_balance}"),
             (0.0 <= self.standing_init <= 1.0,
@@ -145,6 +137,7 @@ REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
     RemovedSetting("train.time_warp", 0.0, "time-warp augmentation", REMOVED_IN),
     RemovedSetting("train.category_balance", 0.0, "category-balanced sampling", REMOVED_IN),
     RemovedSetting("train.reverse_categories", (), "time-reversed training clips", REMOVED_IN),
+    RemovedSetting("train.speed_augment", 0.0, "speed augmentation", "b92f8c9"),
 )
 """Training settings deleted from :class:`TrainConfig` that older checkpoints may hold."""
 

@@ -209,16 +209,11 @@ def sequence_sources(seqs: Sequence[SequenceArrays], groups: Mapping[str, str]) 
 
 def sample_windows(
     seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
-    weights: np.ndarray | None = None, speeds: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), drawn with probabilities ``weights``
     (``(len(seqs),)`` summing to 1; default: in proportion to sequence length).
-
-    ``speeds (n,)``: window ``i`` is the motion played ``speeds[i]`` times as fast, resampled
-    from ``speeds[i] x length`` frames of its sequence by linear interpolation (every input
-    and target channel alike; the caller rescales what depends on time: velocities by the
-    speed, accelerations by its square). ``None``: the frames as recorded.
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
@@ -231,25 +226,14 @@ def sample_windows(
     pick = rng.choice(len(seqs), size=n, p=weights)
     keys = tuple(seqs[0].y)
     xs, offs, ys = [], [], {k: [] for k in keys}
-    for j, i in enumerate(pick):
+    for i in pick:
         s = seqs[i]
         t = len(s.x)
-        if speeds is None or speeds[j] == 1.0:
-            start = int(rng.integers(0, max(t - length, 0) + 1))
-            idx = np.minimum(np.arange(start, start + length), t - 1)
-            xs.append(s.x[idx])
-            for k in keys:
-                ys[k].append(s.y[k][idx])
-        else:
-            span = float(speeds[j]) * (length - 1)
-            start = float(rng.uniform(0.0, max(t - 1 - span, 0.0)))
-            f = np.minimum(start + float(speeds[j]) * np.arange(length), t - 1)
-            lo = np.floor(f).astype(np.int64)
-            hi = np.minimum(lo + 1, t - 1)
-            w = (f - lo).astype(np.float32)[:, None]
-            xs.append((1 - w) * s.x[lo] + w * s.x[hi])
-            for k in keys:
-                ys[k].append((1 - w) * s.y[k][lo] + w * s.y[k][hi])
+        start = int(rng.integers(0, max(t - length, 0) + 1))
+        idx = np.minimum(np.arange(start, start + length), t - 1)
+        xs.append(s.x[idx])
+        for k in keys:
+            ys[k].append(s.y[k][idx])
         offs.append(s.offsets)
     out = {k: np.stack(v) for k, v in ys.items()}
     out["offsets"] = np.stack(offs)

@@ -133,25 +133,6 @@ def log_epoch(writer, record: dict) -> None:
     writer.flush()
 
 
-def speed_scaled(x: np.ndarray, y: dict[str, np.ndarray], speeds: np.ndarray,
-                 n_sites: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
-    """Windows resampled at ``speeds (B,)`` (:func:`grip.kinematics.dataset.sample_windows`)
-    with the time-dependent channels rescaled: each IMU's acceleration (3) by the speed
-    squared and angular velocity (3) by the speed (the feature layout of
-    :mod:`grip.kinematics.features`: 15 values per site), the leaf and pelvis velocities
-    (``lv``) by the speed. Copies; the inputs stay as they are."""
-    b = x.shape[0]
-    s = speeds.astype(np.float32).reshape(b, 1, 1)
-    acc = [15 * k + c for k in range(n_sites) for c in range(3)]
-    gyr = [15 * k + 3 + c for k in range(n_sites) for c in range(3)]
-    x = x.copy()
-    x[..., acc] *= s**2
-    x[..., gyr] *= s
-    y = dict(y)
-    y["lv"] = y["lv"] * s
-    return x, y
-
-
 class Trainer:
     """Owns the model, optimiser, data and the run folder."""
 
@@ -322,14 +303,8 @@ class Trainer:
         tick = clock.append if clock is not None else lambda _t: None
         for group in self.opt.param_groups:
             group["lr"] = lr
-        speeds = None
-        if tc.speed_augment > 0:
-            a = np.log1p(tc.speed_augment)
-            speeds = np.exp(self.rng.uniform(-a, a, tc.batch_size))
         x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
-                              self.weights, speeds)  # fmt: skip
-        if speeds is not None:
-            x, y = speed_scaled(x, y, speeds, len(self.cfg.features.sites))
+                              self.weights)  # fmt: skip
         tick(time.perf_counter())
         xt, yt = self._tensors(x, y, augment=True)
         tick(time.perf_counter())
