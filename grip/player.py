@@ -24,6 +24,7 @@ failure. ``Reconstruction.notes`` counts them: ``"blowups"`` and ``"blowup_frame
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,6 +74,20 @@ class StartState:
     qpos: np.ndarray
     qvel: np.ndarray
     amp: np.ndarray
+    warmup_frames: int = 0
+    """Frames played as the kinematic estimate before the humanoid starts, at the estimate's
+    pose of the last of them (:data:`STANDING_WARMUP_S` after a standing calibration); 0: the
+    humanoid starts at ``qpos`` at frame 0. Not a fall."""
+
+
+STANDING_WARMUP_S = 1.0
+"""After a standing calibration (no ground truth), the humanoid starts this late, at the
+estimate: KinematicsNet, started from the standing pose, converges within the first second
+(``grip kin eval --init standing``: within 0.3 % of a ground-truth start after it), and a
+recording that does not begin standing still makes the estimate snap to the motion in its first
+frames, which threw the humanoid in 95 % of the test segments started mid-motion. A recording
+that begins as GRIP's calibration asks, standing still, loses nothing: that second is the
+standing pose either way. A live stream (:class:`grip.eval.stream.GripStream`) starts at frame 0."""
 
 
 def _start(q: np.ndarray, g: dict[str, np.ndarray]) -> StartState:
@@ -82,10 +97,16 @@ def _start(q: np.ndarray, g: dict[str, np.ndarray]) -> StartState:
     return StartState(q[0].copy(), g["gt_qvel"][0].copy(), amp)
 
 
-def start_from_calibration(cal: Calibration, body: BodyParams, fps: float) -> StartState:
-    """The calibration pose at rest-to-frame-1 velocity (finite differences of its two frames)."""
+def start_from_calibration(cal: Calibration, body: BodyParams, fps: float,
+                           warmup: bool = True) -> StartState:  # fmt: skip
+    """The calibration pose at rest-to-frame-1 velocity (finite differences of its two frames);
+    after a standing calibration (``cal.measured`` false) with ``warmup``, the humanoid starts
+    :data:`STANDING_WARMUP_S` later, at the estimate."""
     q = pose_vector(cal.local_rot, cal.root_pos)
-    return _start(q, ground_truth_arrays(q, body, fps))
+    start = _start(q, ground_truth_arrays(q, body, fps))
+    if warmup and not cal.measured:
+        start = dataclasses.replace(start, warmup_frames=round(STANDING_WARMUP_S * fps))
+    return start
 
 
 def start_from_clip(clip) -> StartState:
@@ -168,7 +189,7 @@ class Player:
         self._gain = cfg.action_scale * humanoid.half
         self._obs: dict | None = None
         self._state: tuple[np.ndarray, np.ndarray] | None = None  # (pvw, rot) not yet observed
-        self.t = self.last = 0
+        self.t = self.last = self.warmup = 0
         self.done = False
         self.falls: list[tuple[int, int]] = []
         self.blowup_frames: list[int] = []
@@ -189,13 +210,24 @@ class Player:
         self.trace = _Trace(frames_hint or est.n_frames)
         self._floor = 0  # frames before this were replaced by a recovery: the buffer starts after
         self._down = False  # (recovery off) the humanoid is down: one fall until it is up
-        self.t = self.last = 0
+        self.t = self.last = self.warmup = 0
         self.done = False
         self.falls, self.blowup_frames = [], []
         self._action: np.ndarray | None = None
         self._held = 0  # frames the current action has been played (env_cfg.action_repeat)
         self._obs = self._observe(*h.state())
         self._record(0)
+        k = start.warmup_frames
+        if 0 < k < est.n_frames - 1:  # the first k frames: the kinematic estimate
+            pos, rot = kinematic_frames(est, self.trace.pos[0, 0], 0, k)
+            self.trace.replace(0, k, pos, rot)
+            qvel = np.zeros(75)
+            qvel[:3] = est.est_vel[k, -1]
+            self.t = k
+            self._teleport(pose_vector(global_to_local_rot(rot[-1]), pos[-1, 0]), qvel)
+            self.last = self._floor = k
+            self._record(k)
+        self.warmup = self.t
 
     def refresh(self, start: int) -> None:
         """The estimate changed from frame ``start`` on (a stream's newest frames): observe the
@@ -375,5 +407,5 @@ class Player:
             falls=np.minimum(np.array(self.falls, dtype=np.int64).reshape(-1, 2), last),
             ms_per_frame=ms_per_frame,
             notes={"blowups": self.blowups, "blowup_frames": list(self.blowup_frames),
-                   "recovery": self.recovery.enabled},
+                   "recovery": self.recovery.enabled, "warmup_frames": int(self.warmup)},
         )  # fmt: skip

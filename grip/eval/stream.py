@@ -154,7 +154,8 @@ class GripStream:
         self._features = FeatureStream(cfg, head.fps, cal.imu_ori, head.name)
         self._kin = estimator.stream_from(first_state(cal, head.body))
         self.clip = LiveEstimate(head.name, head.fps, cal.root_pos[0], cfg.n_features, capacity)
-        self._start = start_from_calibration(cal, head.body, head.fps)
+        # (live: the humanoid starts at frame 0, where a stream begins standing still)
+        self._start = start_from_calibration(cal, head.body, head.fps, warmup=False)
         self._pipeline = GripPipeline(runner, estimator, recovery)
         self._offsets = build_body(head.body).offsets
         self._capacity = capacity

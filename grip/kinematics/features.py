@@ -174,11 +174,14 @@ class Calibration:
         root_pos: ``(2, 3)`` pelvis positions of the same frames, world, m.
         imu_ori: ``(S, 3, 3)`` segment orientations of the sensor sites at frame 0 (NaN for a
             site without one: not re-aligned), or ``None`` when alignment is off.
+        measured: The pose is the recording's ground truth (``False``: the standing
+            calibration, assumed without motion capture).
     """
 
     local_rot: np.ndarray
     root_pos: np.ndarray
     imu_ori: np.ndarray | None = None
+    measured: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -305,7 +308,7 @@ def standing_calibration(rec, cfg: FeatureConfig = FeatureConfig()) -> Calibrati
         root[:2] = (np.asarray(sp.trans, dtype=np.float64)[0]
                     + np.asarray(sp.root_offset, dtype=np.float64))[:2]  # fmt: skip
     return Calibration(np.repeat(local[None], 2, axis=0), np.repeat(root[None], 2, axis=0),
-                       calibration_orientations(rec, cfg))  # fmt: skip
+                       calibration_orientations(rec, cfg), measured=False)  # fmt: skip
 
 
 def sensor_stream(rec, cfg: FeatureConfig = FeatureConfig(), init: str = "truth") -> SensorStream:

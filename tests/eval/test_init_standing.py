@@ -201,3 +201,21 @@ def test_cli_policy_eval_init_standing(monkeypatch, dataset, tmp_path) -> None:
     assert got["init"] == "standing" and got["segments"] == 1
     with pytest.raises(AssertionError, match="ground truth"):
         main(argv)
+
+
+def test_grip_from_a_standing_start_plays_the_estimate_for_the_first_second() -> None:
+    """Started standing (no ground truth), GRIP's first second is KinematicsNet's estimate (the
+    network converges from the standing pose; a recording begun mid-motion snaps to it) and the
+    humanoid starts at the estimate after it; from the truth it starts at frame 0."""
+    from grip.player import STANDING_WARMUP_S
+
+    rec = load_recording(SAMPLE_RECORDING).slice_frames(0, 200)
+    k = round(STANDING_WARMUP_S * rec.fps)
+    grip = make_method("grip", MethodOptions(init="standing")).reconstruct(rec)
+    kin = make_method("kinematics", MethodOptions(init="standing")).reconstruct(rec)
+    assert grip.notes["warmup_frames"] == k and grip.n_frames == 200
+    rel = [r.joint_pos[:k] - r.joint_pos[:k, :1] for r in (grip, kin)]
+    np.testing.assert_allclose(rel[0], rel[1], atol=1e-4)  # the estimate, as kinematics gives it
+    assert not grip.contacts[:k].any() and grip.contacts[k:].any()  # simulated after it
+    truth = make_method("grip", MethodOptions()).reconstruct(rec)
+    assert truth.notes["warmup_frames"] == 0 and truth.contacts[:k].any()
