@@ -278,7 +278,8 @@ class BatchedTrackingEnv:
         e_max = dist.max(axis=1)
         tau_d = np.array([self.envs[i].termination_dist_m for i in idx.tolist()])
         z = pos[:, 0, 2]
-        te = ((tau_d > 0) & (e_max > tau_d)) | (z < cfg.fall_height_m)
+        fell = (z < cfg.fall_height_m) & (z < gt[:, 2] - cfg.fall_below_reference_m)
+        te = ((tau_d > 0) & (e_max > tau_d)) | fell
         tr = tn >= self._n_frames[idx] - 1
         if cfg.max_episode_frames > 0:
             tr |= self._steps[idx] >= cfg.max_episode_frames

@@ -383,7 +383,8 @@ class GripTrackingEnv(gym.Env):
         err = float(dist.max())  # (the unstable check above also makes this never NaN)
         z = float(row[0, 2])
         tau = self.termination_dist_m
-        terminated = (tau > 0 and err > tau) or (z < cfg.fall_height_m)
+        fell = z < cfg.fall_height_m and z < gt[t, 2] - cfg.fall_below_reference_m
+        terminated = (tau > 0 and err > tau) or fell
         truncated = t >= clip.n_frames - 1 or (
             cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
         )

@@ -127,6 +127,9 @@ class StageConfig:
             truth (GRIP stage 1: 0.25 m; stage 2: off = 0).
         fall_height_m: End the episode when the pelvis is below this height, m (0: never); in
             stage 2 a fallen body otherwise lies on the floor until the clip ends.
+        fall_below_reference_m: ... and also this far below the ground truth's pelvis (0:
+            always; :attr:`grip.task.config.TrackingEnvConfig.fall_below_reference_m`): clips on
+            the floor are followed, not ended.
         max_episode_frames: Truncate episodes after this many steps (0: the clip's end).
         categories: Train on clips of these motion categories only (empty: all).
         termination_start_m: Termination curriculum: the stage starts with this (looser)
@@ -146,6 +149,7 @@ class StageConfig:
     timesteps: int = 0
     termination_dist_m: float = 0.25
     fall_height_m: float = 0.0
+    fall_below_reference_m: float = 0.0
     max_episode_frames: int = 300
     categories: tuple[str, ...] = ()
     termination_start_m: float = 0.0
@@ -227,6 +231,7 @@ class PolicyRunConfig:
         return dataclasses.replace(
             self.env, reference=reference or self.env.reference, random_start=True,
             termination_dist_m=stage.termination_dist_m, fall_height_m=stage.fall_height_m,
+            fall_below_reference_m=stage.fall_below_reference_m,
             max_episode_frames=stage.max_episode_frames, amp_window=self.amp.window,
         )  # fmt: skip
 

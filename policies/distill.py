@@ -86,6 +86,9 @@ class DistillConfig:
         categories: Motion categories of the training clips (globs).
         max_episode_frames: Truncate episodes after this many decisions (0: the clip's end).
         fall_height_m: An episode ends when the pelvis is below this height, m.
+        fall_below_reference_m: ... and also this far below the ground truth's pelvis, m (0:
+            always; floor clips are followed with it, :class:`grip.task.config.
+            TrackingEnvConfig`).
         action_noise: Standard deviation of Gaussian noise added to every action played
             (clipped to [-1, 1]); the label stays the teacher's action without noise. Noise in
             the rollouts shows the student the teacher's corrections from states a little off
@@ -120,6 +123,7 @@ class DistillConfig:
     categories: tuple[str, ...] = ("walk*", "run*", "dash*")
     max_episode_frames: int = 1000
     fall_height_m: float = 0.3
+    fall_below_reference_m: float = 0.0
     reverse_categories: tuple[str, ...] = ("walk",)
     mirror_references: bool = True
     truth_references: bool = False
@@ -308,7 +312,7 @@ class Distiller:
         if c.vec_env == "dummy":
             return stage2_rollout_env(self.make_env, teacher_env, self.reference,
                                       c.categories, c.n_envs, seed, c.fall_height_m,
-                                      c.max_episode_frames)  # fmt: skip
+                                      c.max_episode_frames, c.fall_below_reference_m)  # fmt: skip
         batched = getattr(self.make_env, "batched", None)
         if batched is None:
             raise ValueError("vec_env = 'batched' needs an env maker with a 'batched' form "
@@ -316,6 +320,7 @@ class Distiller:
         # stage2_rollout_env's settings, for the environments of one batch
         stage2 = {"reference": self.reference, "random_start": True, "clip_index": -1,
                   "termination_dist_m": 0.0, "fall_height_m": c.fall_height_m,
+                  "fall_below_reference_m": c.fall_below_reference_m,
                   "max_episode_frames": c.max_episode_frames}  # fmt: skip
         env_cfg = dataclasses.replace(teacher_env, **stage2)
         seeds = [seed + 1000 * i for i in range(c.n_envs)]

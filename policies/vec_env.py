@@ -154,14 +154,16 @@ def make_vec_env(cfg: PolicyRunConfig, stage: StageConfig, reference: str, seed:
 
 def stage2_rollout_env(make_env: EnvMaker, env_cfg: TrackingEnvConfig, reference: str,
                        categories: tuple[str, ...], n_envs: int, seed: int,
-                       fall_height_m: float = 0.3,
-                       max_episode_frames: int = 1000) -> DummyVecEnv:  # fmt: skip
+                       fall_height_m: float = 0.3, max_episode_frames: int = 1000,
+                       fall_below_reference_m: float = 0.0) -> DummyVecEnv:  # fmt: skip
     """In-process environments from ``make_env`` that play GRIP's stage-2 episodes with an
     exported policy's settings (``env_cfg``, e.g. ``runner.env_cfg``): random starts on the
-    clips of ``categories``, no distance termination, a pelvis below ``fall_height_m`` ends an
-    episode (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
+    clips of ``categories``, no distance termination, a pelvis below ``fall_height_m`` (and
+    ``fall_below_reference_m`` below the truth's) ends an episode
+    (:class:`policies.distill.Distiller`'s rollouts, ``benchmarks/policy_style.py``)."""
     cfg = dataclasses.replace(env_cfg, reference=str(reference), random_start=True,
                               clip_index=-1, termination_dist_m=0.0, fall_height_m=fall_height_m,
+                              fall_below_reference_m=fall_below_reference_m,
                               max_episode_frames=max_episode_frames)  # fmt: skip
     return DummyVecEnv([functools.partial(make_env, cfg, tuple(categories), seed + 1000 * i)
                         for i in range(n_envs)])  # fmt: skip

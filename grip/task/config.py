@@ -89,6 +89,11 @@ class TrackingEnvConfig:
         termination_dist_m: End an episode when any joint is farther than this from the ground
             truth, m (GRIP stage 1: 0.25); 0 turns early termination off (stage 2).
         fall_height_m: End an episode when the pelvis is below this height, m (0 = never).
+        fall_below_reference_m: With ``fall_height_m``: a pelvis below that height ends the
+            episode only when it is also this far below the ground truth's pelvis, m (0: always).
+            A clip that lies, crawls or rolls on the floor keeps its pelvis below 0.3 m; the
+            absolute rule ended every such episode at its first step (the teacher's stage 2:
+            failure rate 1.00 on "floor").
         align_root_xy: Compare joint positions with the ground truth (imitation reward and
             termination) after shifting the simulated body horizontally so that its pelvis is
             over the ground truth's. The policy follows a root integrated from the estimated
@@ -141,6 +146,7 @@ class TrackingEnvConfig:
     heightfield_cell_m: float = 0.02
     termination_dist_m: float = 0.25
     fall_height_m: float = 0.0
+    fall_below_reference_m: float = 0.0
     align_root_xy: bool = True
     random_start: bool = True
     clip_index: int = -1
@@ -171,6 +177,7 @@ class TrackingEnvConfig:
             (self.min_episode_frames >= 1, "min_episode_frames must be >= 1"),
             (self.amp_window >= 0, "amp_window must be >= 0 (0 = no AMP observation)"),
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
+            (self.fall_below_reference_m >= 0, "fall_below_reference_m must be >= 0 (0 = off)"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),
         )

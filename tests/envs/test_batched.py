@@ -95,3 +95,30 @@ def test_batched_refuses_mixed_configs(reference):
     b = GripTrackingEnv(dataclasses.replace(TrackingEnvConfig(), action_scale=0.3), reference)
     with pytest.raises(ValueError, match="same config"):
         BatchedTrackingEnv([a, b])
+
+
+@pytest.mark.parametrize("below", [0.0, 1.0])
+def test_a_low_pelvis_is_a_fall_only_below_the_reference(reference, below):
+    """``fall_below_reference_m``: without it a pelvis below ``fall_height_m`` ends the episode;
+    with 1 m it must also lie 1 m under the truth's standing pelvis (~0.9 m), which it never
+    does, so a floor clip's low pelvis would be followed. Batched and separate agree."""
+    cfg = TrackingEnvConfig(termination_dist_m=0.0, fall_height_m=0.8,
+                            fall_below_reference_m=below, max_episode_frames=200,
+                            random_start=False)  # fmt: skip
+    seeds = [7 + 1000 * i for i in range(N)]
+    ref = DummyVecEnv([functools.partial(_single, cfg, reference, s) for s in seeds])
+    bat = _batched(cfg, reference, seeds, 1)
+    ref.reset(), bat.reset()
+    fell = np.zeros(N, dtype=bool)
+    lowest = np.full(N, np.inf)
+    for _ in range(150):  # no balance: the body sinks below 0.8 m within the first steps
+        a = np.zeros((N, 69), np.float32)
+        _, _, d1, i1 = ref.step(a)
+        _, _, d2, _ = bat.step(a)
+        np.testing.assert_array_equal(d2, d1)
+        for k, info in enumerate(i1):
+            lowest[k] = min(lowest[k], info["root_height_m"])
+            fell[k] |= d1[k] and not info.get("TimeLimit.truncated", False)
+    assert (lowest < 0.8).all()  # the pelvis went below fall_height_m in every env
+    assert fell.all() if below == 0.0 else not fell.any()
+    bat.close()
