@@ -178,6 +178,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
         print(f"[{i + 1}/{len(sets)}] {s.name}: {', '.join(s.sites)}"
               f"{' + insoles' if s.insoles else ''}")  # fmt: skip
+        if carried_over(args.out / s.name):
+            print(f"      kept: {args.out / s.name / 'best.pt'} holds a finished run's exported "
+                  "weights (no last.pt to resume)")  # fmt: skip
+            continue
         _train_one(args.data, args.out / s.name, run_cfg)
     print(f"sweep finished; evaluate with: grip kin eval --sweep {args.out} --data {args.data}")
     return 0
@@ -248,6 +252,14 @@ def cmd_train_baseline(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from e
     info = {"method": args.baseline, "data": str(args.data.resolve()), "train_frames": n_frames}
     return fit_run(trainer, cfg, out, info, epochs=cfg.train.epochs, postfix="epoch")
+
+
+def carried_over(run: Path) -> bool:
+    """Whether a sweep run folder holds a finished run carried over as its exported weights
+    (``best.pt`` from ``grip kin export``, without the ``last.pt`` checkpoint a resume needs):
+    the sweep keeps it instead of training it again (a sweep moved between machines with only
+    its small exports, ``experiments/resume/``)."""
+    return (run / "best.pt").is_file() and not (run / "last.pt").exists()
 
 
 def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:

@@ -219,6 +219,20 @@ def test_sensor_sweep_trains_each_configuration_and_tabulates(
     res = json.loads(js.read_text())
     assert set(res) == set(names) and res["imu4_press"]["n_imu"] == 4
     assert all(r["PA_MPJPE_mm"] <= r["PEL_MPJPE_mm"] + 1e-6 for r in res.values())
+    # a finished run carried over as its export (no last.pt) is kept, not trained again, and
+    # evaluates as before
+    run = sweep / "imu4_nopress"
+    assert main(["kin", "export", str(run / "best.pt"), "--out", str(tmp_path / "x.pt")]) == 0
+    for f in ("best.pt", "last.pt"):
+        (run / f).unlink()
+    (tmp_path / "x.pt").rename(run / "best.pt")
+    capsys.readouterr()
+    assert main(args) == 0
+    assert "kept:" in capsys.readouterr().out and not (run / "last.pt").exists()
+    assert main(["kin", "eval", "--sweep", str(sweep), "--data", str(built),
+                 "--json", str(js)]) == 0  # fmt: skip
+    again = json.loads(js.read_text())["imu4_nopress"]
+    assert abs(again["PEL_MPJPE_mm"] - res["imu4_nopress"]["PEL_MPJPE_mm"]) < 1.0  # (fp16)
     # a run whose folder name lies about its sensors is refused
     (sweep / "imu2_press").rename(sweep / "imu3_press")
     assert main(["kin", "eval", "--sweep", str(sweep), "--data", str(built)]) == 2
