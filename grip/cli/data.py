@@ -373,30 +373,31 @@ def cmd_info(args: argparse.Namespace) -> int:
     return exit_status(errors, summary.get("files"))
 
 
-def cmd_plot(args: argparse.Namespace) -> int:
+def _read_recording(args: argparse.Namespace):
+    """The recording ``args.file`` under the command's input limits (errors as CliError)."""
     from grip.cli.errors import CliError
-    from grip.dataset.plot import plot_recording
     from prism_tools.io import load_recording
 
     limits_from_args(args)
     try:
-        rec = load_recording(args.file)
+        return load_recording(args.file)
     except (OSError, ValueError) as e:
         raise CliError(str(e)) from e
-    out = plot_recording(rec, args.out)
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from grip.dataset.plot import plot_recording
+
+    out = plot_recording(_read_recording(args), args.out)
     print(f"wrote {out}")
     return 0
 
 
 def cmd_cut(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
-    from prism_tools.io import load_recording, save_recording
+    from prism_tools.io import save_recording
 
-    limits_from_args(args)
-    try:
-        rec = load_recording(args.file)
-    except (OSError, ValueError) as e:
-        raise CliError(str(e)) from e
+    rec = _read_recording(args)
     n, fps = rec.n_frames, rec.fps
     start = round(args.start * fps)
     stop = n if args.end is None else round(args.end * fps)
