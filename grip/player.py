@@ -218,13 +218,9 @@ class Player:
         self._obs = self._observe(*h.state())
         self._record(0)
         k = start.warmup_frames
-        if 0 < k < est.n_frames - 1:  # the first k frames: the kinematic estimate
-            pos, rot = kinematic_frames(est, self.trace.pos[0, 0], 0, k)
-            self.trace.replace(0, k, pos, rot)
-            qvel = np.zeros(75)
-            qvel[:3] = est.est_vel[k, -1]
-            self.t = k
-            self._teleport(pose_vector(global_to_local_rot(rot[-1]), pos[-1, 0]), qvel)
+        if 0 < k < est.n_frames - 1:  # the first k frames: the kinematic estimate, as a
+            self.t = k  # recovery fills them (not counted as a fall)
+            self._recover(0, k)
             self.last = self._floor = k
             self._record(k)
         self.warmup = self.t
