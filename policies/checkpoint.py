@@ -142,3 +142,83 @@ def read_vecnorm(path: str | os.PathLike) -> dict[str, np.ndarray]:
             return {k: z[k] for k in z.files}
     except Exception as e:  # corrupt or hostile files raise many types
         raise ValueError(f"{path}: not a normaliser file ({str(e)[:200]})") from e
+
+
+PACKED_MOMENTS = torch.bfloat16
+"""The dtype :func:`pack_checkpoint` stores optimiser moments in: the float32 exponent range
+(Adam's second moments reach 1e-12, below fp16's), half the bytes."""
+
+
+def _moments_packed(optimizer: dict) -> dict:
+    """An optimiser state dict whose floating tensors of more than one element (Adam's
+    moments) are :data:`PACKED_MOMENTS`; scalars (the step counts) and settings unchanged.
+    ``torch.optim.Optimizer.load_state_dict`` casts them back to the parameters' dtype."""
+    state = {}
+    for key, entry in optimizer["state"].items():
+        state[key] = {name: (v.to(PACKED_MOMENTS)
+                             if torch.is_tensor(v) and v.is_floating_point() and v.dim() > 0
+                             else v)
+                      for name, v in entry.items()}  # fmt: skip
+    return {**optimizer, "state": state}
+
+
+def _packed_zip(src: Path, dst: Path) -> None:
+    """``src``'s PPO zip written to ``dst`` with its optimiser moments packed and every member
+    deflated; the other members are copied as bytes (never loaded)."""
+    ck = read_ppo_zip(src)  # validates the file; the optimiser is read without unpickling
+    buf = io.BytesIO()
+    torch.save(_moments_packed(ck.optimizer), buf)
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as zout:
+        for info in zin.infolist():
+            data = buf.getvalue() if info.filename == "policy.optimizer.pth" else zin.read(info)
+            zout.writestr(info.filename, data)
+
+
+def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> dict[str, int]:
+    """Write the resume state of a ``grip policy train`` run (``config.json`` and
+    ``checkpoint/``) to ``out_dir`` with the Adam moments of the policy's and of the
+    discriminator's optimiser in bfloat16 (:data:`PACKED_MOMENTS`) and ``model.zip``
+    deflated: the form a long run commits between sessions. The network weights, the
+    normaliser and the counters are kept exactly; a run resumed from it continues as from the
+    original up to the moments' rounding (a relative 0.4 %). Nothing in the run is unpickled.
+
+    Returns:
+        Bytes per file written (``checkpoint/model.zip``, ...), and ``"total"``.
+
+    Raises:
+        FileNotFoundError: ``run_dir`` has no ``checkpoint/`` or ``config.json``.
+        ValueError: naming the file, for a corrupt checkpoint; ``out_dir`` is ``run_dir``.
+    """
+    from grip.core.rundir import CHECKPOINT_DIR, CONFIG_FILE, STATE_FILE, RunDir
+    from policies.runner import load_weights
+
+    run_dir, out_dir = Path(run_dir), Path(out_dir)
+    ck_dir = run_dir / CHECKPOINT_DIR
+    names = ("model.zip", "amp.pt", "vecnorm.npz", STATE_FILE)
+    missing = [n for n in names if not (ck_dir / n).is_file()]
+    if missing or not (run_dir / CONFIG_FILE).is_file():
+        raise FileNotFoundError(f"{run_dir}: not a 'grip policy train' run with a checkpoint "
+                                f"(missing {', '.join(missing) or CONFIG_FILE})")  # fmt: skip
+    if out_dir.exists() and out_dir.resolve() == run_dir.resolve():
+        raise ValueError(f"{out_dir}: is the run itself; pack into another folder")
+    read_vecnorm(ck_dir / "vecnorm.npz")  # refuse a corrupt or pickled normaliser
+    amp = load_weights(ck_dir / "amp.pt", "discriminator checkpoint")
+    if not isinstance(amp, dict) or not isinstance(amp.get("opt"), dict):
+        raise ValueError(f"{ck_dir / 'amp.pt'}: not a discriminator checkpoint (no 'opt')")
+    amp = {**amp, "opt": _moments_packed(amp["opt"])}
+    state_text = (ck_dir / STATE_FILE).read_text()
+
+    def write(tmp: Path) -> None:
+        _packed_zip(ck_dir / "model.zip", tmp / "model.zip")
+        torch.save(amp, tmp / "amp.pt")
+        (tmp / "vecnorm.npz").write_bytes((ck_dir / "vecnorm.npz").read_bytes())
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rundir = RunDir(out_dir)
+    rundir.save_checkpoint(write, safe_json_loads(state_text, active_limits(), str(STATE_FILE)))
+    (out_dir / CONFIG_FILE).write_bytes((run_dir / CONFIG_FILE).read_bytes())
+    sizes = {f"{CHECKPOINT_DIR}/{n}": (out_dir / CHECKPOINT_DIR / n).stat().st_size
+             for n in names}  # fmt: skip
+    sizes[CONFIG_FILE] = (out_dir / CONFIG_FILE).stat().st_size
+    sizes["total"] = sum(sizes.values())
+    return sizes
