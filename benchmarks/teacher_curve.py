@@ -6,6 +6,9 @@ checkpoint (no simulation): what docs/teacher_student.md reports for the privile
   over the decisions trained, smoothed over ``--window`` rollouts, one colour per stage.
 * Per category: the hard-clip miner's decayed episode and failure counts (``state.json``'s
   ``mining``: the last few hundred rollouts), summed over each category's clips.
+* Per category over time: training success of the episodes of each category that ended in
+  each block of ``--block`` decisions (rows' ``by_category`` counts, recorded by runs since
+  2026-12-04), with each rising category's log-linear projection to ``--target``.
 * A projection: a straight line through the smoothed success rate of the current stage's last
   ``--fit`` rollouts against log(decisions), extended to ``--target``. It is an extrapolation
   of a noisy curve, not a prediction; it says how far the run is at its present pace.
@@ -46,6 +49,42 @@ def _clip_id(name: str) -> str:
     return re.sub(r"_seq\d+$", "", name)
 
 
+def _loglinear_to(log_x, y, target: float) -> tuple[float, float | None]:
+    """The slope of a straight line through ``y`` against ``log_x``, and the decisions where
+    it reaches ``target``: None for a line that does not rise (or reaches it only after
+    1e15 decisions)."""
+    slope, icpt = np.polyfit(log_x, y, 1)
+    if slope <= 1e-6 or (target - icpt) / slope > math.log(1e15):
+        return float(slope), None
+    return float(slope), float(math.exp((target - icpt) / slope))
+
+
+def _category_curves(hist: list[dict], block: int, target: float,
+                     min_episodes: int) -> dict[str, dict]:  # fmt: skip
+    """Training success per category in blocks of ``block`` decisions, from the rows' episode
+    counts (``by_category``: recorded by runs since 2026-12-04), and where a category's
+    success rises, the decisions its log-linear fit reaches ``target`` at."""
+    rows = [h for h in hist if "by_category" in h]
+    counts: dict[str, dict[int, list[int]]] = defaultdict(dict)
+    for h in rows:
+        b = int(h["timesteps"]) // block
+        for c, (n, f) in h["by_category"].items():
+            cell = counts[c].setdefault(b, [0, 0])
+            cell[0] += n
+            cell[1] += f
+    out = {}
+    for c in sorted(counts, key=lambda c: -sum(v[0] for v in counts[c].values())):
+        bs = sorted(b for b, v in counts[c].items() if v[0] >= min_episodes)
+        if not bs:
+            continue
+        x = [(b + 0.5) * block for b in bs]
+        succ = [1.0 - counts[c][b][1] / counts[c][b][0] for b in bs]
+        need = _loglinear_to(np.log(x), succ, target)[1] if len(bs) >= 3 else None
+        out[c] = {"decisions": x, "episodes": [counts[c][b][0] for b in bs], "success": succ,
+                  "decisions_to_target": need}  # fmt: skip
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", type=Path, required=True, help="'grip policy train' run folder")
@@ -53,6 +92,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window", type=int, default=20, help="rollouts of the moving average")
     ap.add_argument("--fit", type=int, default=100, help="rollouts of the projection's fit")
     ap.add_argument("--target", type=float, default=0.95, help="success rate to project to")
+    ap.add_argument("--block", type=int, default=250_000,
+                    help="decisions per block of the per-category curves")
+    ap.add_argument("--min-episodes", type=int, default=20,
+                    help="episodes a block needs to count in a category's curve")
     ap.add_argument("--png", type=Path, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -81,13 +124,10 @@ def main(argv: list[str] | None = None) -> int:
     xs = np.log(steps[cur][-args.fit :])
     proj = None
     if len(sm) >= 10:
-        slope, icpt = np.polyfit(xs, sm, 1)
-        if slope > 0:
-            need = math.exp((args.target - icpt) / slope)
-            proj = {"slope_per_log_decision": float(slope), "decisions_to_target": need,
-                    "hours_at_this_rate": need / out["decisions_per_hour"]}  # fmt: skip
-        else:
-            proj = {"slope_per_log_decision": float(slope), "decisions_to_target": None}
+        slope, need = _loglinear_to(xs, sm, args.target)
+        proj = {"slope_per_log_decision": slope, "decisions_to_target": need}
+        if need is not None:
+            proj["hours_at_this_rate"] = need / out["decisions_per_hour"]
     out["projection"] = proj
     # per category, from the miner's decayed counts
     mining = state.get("mining")
@@ -100,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
             fa[c] += f
         out["categories"] = {c: {"episodes": ep[c], "failure_rate": fa[c] / ep[c]}
                              for c in sorted(ep, key=lambda c: -ep[c]) if ep[c] > 0}  # fmt: skip
+    out["category_curves"] = _category_curves(hist, args.block, args.target,
+                                              args.min_episodes)
     print(f"{out['decisions']:,} decisions in {wall / 3600:.2f} h "
           f"({out['decisions_per_hour'] / 1e6:.2f} M/h)")  # fmt: skip
     for st, v in out["stages"].items():
@@ -111,6 +153,14 @@ def main(argv: list[str] | None = None) -> int:
               "at this rate (a log-linear extrapolation of the current stage)")  # fmt: skip
     for c, v in (out.get("categories") or {}).items():
         print(f"  {c:12s} episodes {v['episodes']:8.1f}  failure rate {v['failure_rate']:.2f}")
+    if out["category_curves"]:
+        print(f"training success per category, blocks of {args.block / 1e6:g} M decisions "
+              "(episodes that ended in the block):")  # fmt: skip
+        for c, v in out["category_curves"].items():
+            cells = " ".join(f"{s_:.2f}" for s_ in v["success"])
+            need = v["decisions_to_target"]
+            tail = f"  -> {args.target:.0%} at {need:.3g}" if need else "  (not rising)"
+            print(f"  {c:12s} {cells}{tail}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1))
@@ -120,13 +170,22 @@ def main(argv: list[str] | None = None) -> int:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, axes = plt.subplots(1, 3, figsize=(14, 3.8), constrained_layout=True)
+        curves = out["category_curves"]
+        fig, axes = plt.subplots(1, 4 if curves else 3, figsize=(19 if curves else 14, 3.8),
+                                 constrained_layout=True)  # fmt: skip
+        if curves:
+            for c, v in curves.items():
+                axes[3].plot(np.array(v["decisions"]) / 1e6, v["success"], marker=".", label=c)
+            axes[3].set_xlabel("decisions (M)")
+            axes[3].set_ylabel(f"success per category ({args.block / 1e6:g} M blocks)")
+            axes[3].grid(alpha=0.3)
+            axes[3].legend(fontsize=6, ncol=2)
         for st in dict.fromkeys(stage):
             idx = np.array([s == st for s in stage])
             x = steps[idx] / 1e6
-            for ax, y in zip(axes, (succ, mpjpe, eplen), strict=True):
+            for ax, y in zip(axes[:3], (succ, mpjpe, eplen), strict=True):
                 ax.plot(x, _smooth(np.nan_to_num(y[idx]), args.window), label=st)
-        for ax, lab in zip(axes, ("training success rate", "MPJPE vs reference (mm)",
+        for ax, lab in zip(axes[:3], ("training success rate", "MPJPE vs reference (mm)",
                                   "episode length (decisions)"), strict=True):  # fmt: skip
             ax.set_xlabel("decisions (M)")
             ax.set_ylabel(lab)

@@ -136,7 +136,8 @@ class TrainingCallback(BaseCallback):
                 if self.trainer.mining is not None and "clip_index" in info:
                     self.trainer.mining.add(int(info["clip_index"]), not ok)
                 mean_err = self.ep_err[i] / max(self.ep_err_n[i], 1)
-                self.episodes.append((ok, mean_err, int(self.ep_frames[i])))
+                cat = self.trainer.clip_categories.get(info.get("clip"), "unknown")
+                self.episodes.append((ok, mean_err, int(self.ep_frames[i]), cat))
                 self.ep_err[i] = self.ep_err_n[i] = self.ep_frames[i] = 0
         self.n += len(infos)
         self.bar.update(len(infos))
@@ -175,6 +176,12 @@ class TrainingCallback(BaseCallback):
             row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
             row["mpjpe_mm"] = 1000 * float(np.mean([e[1] for e in self.episodes]))
             row["ep_len"] = float(np.mean([e[2] for e in self.episodes]))
+            by_cat: dict[str, list[int]] = {}
+            for ok_, _, _, cat in self.episodes:
+                n_fail = by_cat.setdefault(cat, [0, 0])
+                n_fail[0] += 1
+                n_fail[1] += int(not ok_)
+            row["by_category"] = by_cat  # [episodes, failures] that ended in this rollout
         tr.history.append(row)
         d_acc = (stats["acc_real"] + stats["acc_fake"]) / 2
         succ, err = row.get("success_rate", 0.0), row.get("mpjpe_mm", 0.0)
@@ -255,6 +262,7 @@ class PolicyTrainer:
         real = RealSampler([A.reference_amp_features(c) for c in ref.clips], cfg.amp.window)
         self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed)
         self.mining: ClipFailureStats | None = None  # the current stage's hard-clip mining
+        self.clip_categories: dict[str, str] = {}  # clip name -> category, of the stage's clips
         self._mining_state: dict | None = None  # from the checkpoint, until its stage runs
 
     # -------------------------------------------------------------- bookkeeping
@@ -471,9 +479,10 @@ class PolicyTrainer:
             self.model.set_env(self.venv)
         self.stage_done0 = self.stage_done
         self.mining = None
+        clips = select_clips(load_reference(self.reference), stage.categories).clips
+        self.clip_categories = {c.name: c.category for c in clips}
         if stage.mining_mix > 0:
-            names = [c.name for c in select_clips(load_reference(self.reference),
-                                                  stage.categories).clips]  # fmt: skip
+            names = [c.name for c in clips]
             self.mining = ClipFailureStats(names, stage.mining_mix, stage.mining_decay,
                                            stage.mining_prior)  # fmt: skip
             saved = self._mining_state

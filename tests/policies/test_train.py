@@ -633,3 +633,46 @@ def test_batched_vec_env_trains_the_same_policy_as_dummy(tmp_path):
     ]
     for p, q in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
         torch.testing.assert_close(q, p, rtol=0, atol=0)
+
+
+def test_rows_count_the_episodes_of_each_category(run):
+    """Each rollout's row counts its ended episodes and failures per category: the per-category
+    learning curves of benchmarks/teacher_curve.py."""
+    _, tr = run
+    rows = [h for h in tr.history if h["episodes"]]
+    assert rows
+    cats = set(tr.clip_categories.values())
+    for h in rows:
+        by_cat = h["by_category"]
+        assert set(by_cat) <= cats, by_cat
+        assert sum(n for n, _ in by_cat.values()) == h["episodes"]
+        fails = sum(f for _, f in by_cat.values())
+        assert fails == round(h["episodes"] * (1.0 - h["success_rate"]))
+
+
+def test_teacher_curve_projects_rising_categories_only(tmp_path, capsys):
+    from tests.cli.test_data_cli import _benchmark
+
+    tc = _benchmark("teacher_curve")
+    hist = []
+    for r in range(40):  # 40 rollouts of 50 k decisions: "walk" rises, "dance" stays flat
+        t = r * 50_000 + 1
+        ok_walk = min(30, 5 + r)
+        hist.append({"timesteps": t, "stage": "stage2", "episodes": 60, "success_rate": 0.5,
+                     "mpjpe_mm": 90.0, "ep_len": 200.0,
+                     "by_category": {"walk": [30, 30 - ok_walk], "dance": [30, 24]}})  # fmt: skip
+    curves = tc._category_curves(hist, 250_000, 0.95, 20)
+    assert list(curves) == ["walk", "dance"] or list(curves) == ["dance", "walk"]
+    assert curves["dance"]["success"] == pytest.approx([0.2] * 8)
+    assert curves["dance"]["decisions_to_target"] is None
+    walk = curves["walk"]
+    assert walk["episodes"] == [150] * 8 and walk["success"] == sorted(walk["success"])
+    assert walk["decisions_to_target"] > 1e6
+    run = tmp_path / "run"
+    (run / "checkpoint").mkdir(parents=True)
+    (run / "checkpoint" / "state.json").write_text(json.dumps({"history": hist, "wall_s": 3600}))
+    assert tc.main(["--run", str(run), "--json", str(tmp_path / "c.json"),
+                    "--png", str(tmp_path / "c.png")]) == 0  # fmt: skip
+    assert "dance" in capsys.readouterr().out
+    assert json.loads((tmp_path / "c.json").read_text())["category_curves"]["walk"]["success"]
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
