@@ -10,7 +10,7 @@ code a tampered file names. :func:`read_ppo_zip` never does: it reads the two st
 ``data``, ignoring every serialized entry; the model itself is rebuilt from the run's own
 settings (:class:`policies.train.PolicyTrainer` on resume, :func:`policies.runner.export_policy`
 as plain MLPs). ``vecnorm.npz`` is read with ``allow_pickle=False`` (:func:`read_vecnorm`) and
-``amp.pt`` with :func:`policies.runner.load_weights`.
+``amp.pt`` with :func:`load_weights`.
 
 Every reader of a run folder goes through here; any run folder written by ``grip
 policy train`` (older ones included) reads this way.
@@ -126,6 +126,22 @@ def read_ppo_zip(path: str | os.PathLike) -> PPOCheckpoint:
     return PPOCheckpoint(path, policy, optimizer, counters)
 
 
+def load_weights(path: str | os.PathLike, what: str) -> object:
+    """``torch.load(path, weights_only=True)`` on the CPU; a refusal names the file and why.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: ``"{path}: not a {what}: ..."`` for a corrupt file or one holding pickled
+            Python objects (never executed).
+    """
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise
+    except Exception as e:  # corrupt or hostile files raise many types
+        raise ValueError(f"{path}: not a {what}: {describe_load_error(e)}") from e
+
+
 def read_vecnorm(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """The normaliser statistics a run saved (``vecnorm.npz``: plain arrays, read with
     ``allow_pickle=False``), in the order they were written.
@@ -190,8 +206,6 @@ def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> d
         ValueError: naming the file, for a corrupt checkpoint; ``out_dir`` is ``run_dir``.
     """
     from grip.core.rundir import CHECKPOINT_DIR, CONFIG_FILE, STATE_FILE, RunDir
-    from policies.runner import load_weights
-
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     ck_dir = run_dir / CHECKPOINT_DIR
     names = ("model.zip", "amp.pt", "vecnorm.npz", STATE_FILE)

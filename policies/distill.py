@@ -259,7 +259,7 @@ class Distiller:
         self.rundir.save_checkpoint(lambda tmp: torch.save(ck, tmp / "student.pt"), state)
 
     def _resume(self) -> None:
-        from policies.runner import load_weights
+        from policies.checkpoint import load_weights
 
         state = self.rundir.read_state()
         if state is None:

@@ -24,10 +24,10 @@ from torch import nn
 
 from grip.core.atomic import atomic_write
 from grip.core.limits import read_json_file
-from grip.core.loaderrors import describe_load_error
 from grip.task.amp import FRAME_DIM
 from grip.task.config import TrackingEnvConfig
 from policies.amp import Discriminator
+from policies.checkpoint import load_weights
 from policies.config import policy_config_from_dict
 
 FORMAT = "grip-policy"
@@ -110,22 +110,6 @@ def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
     mlp = _mlp([int(s) for s in sizes], activation)
     mlp.load_state_dict(unpack_weights(state))
     return mlp
-
-
-def load_weights(path: str | os.PathLike, what: str) -> object:
-    """``torch.load(path, weights_only=True)`` on the CPU; a refusal names the file and why.
-
-    Raises:
-        FileNotFoundError: No such file.
-        ValueError: ``"{path}: not a {what}: ..."`` for a corrupt file or one holding pickled
-            Python objects (never executed).
-    """
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise
-    except Exception as e:  # corrupt or hostile files raise many types
-        raise ValueError(f"{path}: not a {what}: {describe_load_error(e)}") from e
 
 
 class PolicyRunner:

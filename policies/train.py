@@ -27,7 +27,7 @@ import dataclasses
 import json
 import os
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -42,10 +42,10 @@ from grip.core.reference_sets import load_reference, select_clips
 from grip.core.rundir import RunDir
 from grip.task import amp as A
 from policies.amp import AmpTrainer, RealSampler
-from policies.checkpoint import read_ppo_zip, read_vecnorm
+from policies.checkpoint import load_weights, read_ppo_zip, read_vecnorm
 from policies.config import REMOVED_SETTINGS, PolicyRunConfig, StageConfig
 from policies.mining import ClipFailureStats
-from policies.runner import ACTIVATION_FNS, linear_layers, load_weights
+from policies.runner import ACTIVATION_FNS, linear_layers
 from policies.vec_env import (
     AmpReward,
     EnvMaker,
@@ -64,6 +64,18 @@ RESUMABLE: tuple[str, ...] = (
 )  # fmt: skip
 """Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
 run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
+
+
+def episodes_by_category(counts: Iterable[tuple[str, int, int]]) -> dict[str, list[int]]:
+    """A history row's ``"by_category"``: ``{category: [episodes, failures]}`` that ended in
+    the rollout, summed over ``(category, episodes, failures)`` (one per episode, or per clip),
+    categories in the order first seen."""
+    out: dict[str, list[int]] = {}
+    for cat, n, fails in counts:
+        acc = out.setdefault(cat, [0, 0])
+        acc[0] += int(n)
+        acc[1] += int(fails)
+    return out
 
 
 # ------------------------------------------------------------------------ callback
@@ -176,12 +188,9 @@ class TrainingCallback(BaseCallback):
             row["success_rate"] = float(np.mean([e[0] for e in self.episodes]))
             row["mpjpe_mm"] = 1000 * float(np.mean([e[1] for e in self.episodes]))
             row["ep_len"] = float(np.mean([e[2] for e in self.episodes]))
-            by_cat: dict[str, list[int]] = {}
-            for ok_, _, _, cat in self.episodes:
-                n_fail = by_cat.setdefault(cat, [0, 0])
-                n_fail[0] += 1
-                n_fail[1] += int(not ok_)
-            row["by_category"] = by_cat  # [episodes, failures] that ended in this rollout
+            row["by_category"] = episodes_by_category(
+                (cat, 1, not ok_) for ok_, _, _, cat in self.episodes
+            )
         tr.history.append(row)
         d_acc = (stats["acc_real"] + stats["acc_fake"]) / 2
         succ, err = row.get("success_rate", 0.0), row.get("mpjpe_mm", 0.0)
@@ -462,6 +471,27 @@ class PolicyTrainer:
             if self.venv is not None:
                 self.venv.close()
 
+    def _begin_stage_clips(self, stage: StageConfig) -> list[str]:
+        """The stage's clip bookkeeping: :attr:`clip_categories` and the hard-clip miner
+        :attr:`mining` (``None`` unless ``stage.mining_mix > 0``; its counts restored from the
+        checkpoint when they are this stage's).
+
+        Returns:
+            ``(C,)`` the category of each of the stage's clips, in the environments' clip order.
+        """
+        self.mining = None
+        clips = select_clips(load_reference(self.reference), stage.categories).clips
+        self.clip_categories = {c.name: c.category for c in clips}
+        if stage.mining_mix > 0:
+            names = [c.name for c in clips]
+            self.mining = ClipFailureStats(names, stage.mining_mix, stage.mining_decay,
+                                           stage.mining_prior)  # fmt: skip
+            saved = self._mining_state
+            if saved is not None and saved.get("stage_index") == self.stage_index:
+                self.mining.load_state_dict(saved)
+        self._mining_state = None
+        return [c.category for c in clips]
+
     def _run_stage(self, name: str, stage: StageConfig, remaining: int, state: dict | None,
                    bar) -> None:  # fmt: skip
         old_norm = vecnorm_state(self.venv) if self.venv is not None else None
@@ -478,17 +508,7 @@ class PolicyTrainer:
             load_vecnorm_state(self.venv, old_norm)
             self.model.set_env(self.venv)
         self.stage_done0 = self.stage_done
-        self.mining = None
-        clips = select_clips(load_reference(self.reference), stage.categories).clips
-        self.clip_categories = {c.name: c.category for c in clips}
-        if stage.mining_mix > 0:
-            names = [c.name for c in clips]
-            self.mining = ClipFailureStats(names, stage.mining_mix, stage.mining_decay,
-                                           stage.mining_prior)  # fmt: skip
-            saved = self._mining_state
-            if saved is not None and saved.get("stage_index") == self.stage_index:
-                self.mining.load_state_dict(saved)
-        self._mining_state = None
+        self._begin_stage_clips(stage)
         cb = TrainingCallback(self, name, stage, bar if bar is not None else tqdm(disable=True))
         self.model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False,
                          tb_log_name="ppo", progress_bar=False)  # fmt: skip

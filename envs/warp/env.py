@@ -30,7 +30,8 @@ What differs from the CPU env, and why:
 The API is :class:`envs.batched.BatchedTrackingEnv`'s, in tensors: :meth:`step` takes ``(N, 69)``
 actions and returns ``obs`` (dict of ``(N, ...)`` float32 tensors), ``reward``, ``terminated``,
 ``truncated`` and one info dict of ``(N, ...)`` tensors; :meth:`reset` starts new episodes in
-the worlds of a mask. Nothing is reset automatically.
+the worlds of a mask. Nothing is reset automatically. :meth:`set_termination_dist` and
+:meth:`set_clip_weights` (hard-clip mining) are the CPU env's, for the trainer's curricula.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ import mujoco_warp as mjw
 import numpy as np
 import torch
 import warp as wp
+from numpy.typing import ArrayLike
 
 from envs import rewards as R
 from envs.heightfield import rasterize
@@ -247,7 +249,8 @@ class WarpTrackingEnv:
             offset=torch.cumsum(lengths_t, 0) - lengths_t, n_frames=lengths_t,
             subject=torch.as_tensor(self._clip_subject, dtype=torch.int64, device=dev),
             **{k: cat(k) for k in parts})  # fmt: skip
-        self._clip_p = lengths_t.to(torch.float64) / lengths_t.sum()
+        self._clip_len = np.asarray(lengths, dtype=np.float64)
+        self._clip_p = torch.as_tensor(self._clip_len / self._clip_len.sum(), device=dev)
         f32 = dict(dtype=torch.float32, device=dev)
         self._lo = torch.as_tensor(self._lo_np, **f32)
         self._hi = torch.as_tensor(self._hi_np, **f32)
@@ -350,7 +353,8 @@ class WarpTrackingEnv:
             mask: The worlds to reset.
             clip, start: ``(M,)`` int64 clip and start frame of each of the M masked worlds
                 (as ``GripTrackingEnv.reset(options={"clip", "start"})``); drawn as
-                ``GripTrackingEnv`` draws random starts (clips by length) when ``None``.
+                ``GripTrackingEnv`` draws random starts (clips by length times the weights of
+                :meth:`set_clip_weights`) when ``None``.
         """
         cfg, c = self.cfg, self.clips
         idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
@@ -399,6 +403,25 @@ class WarpTrackingEnv:
         w = cfg.amp_window
         back = (start[:, None] + torch.arange(-w + 1, 1, device=self.device)).clamp(min=0)
         self._amp[idx] = c.amp[c.offset[clip][:, None] + back]
+
+    def set_clip_weights(self, weights: ArrayLike) -> None:
+        """Random starts pick clip ``i`` with probability proportional to its length times
+        ``weights[i]`` from the next reset on (all ones: by length, the default), as
+        :meth:`envs.tracking_env.GripTrackingEnv.set_clip_weights`. The trainer's hard-clip
+        mining (:class:`policies.mining.ClipFailureStats`) sets them.
+
+        Args:
+            weights: ``(C,)`` finite values >= 0, one per clip, not all zero (host values:
+                checked on the host, then copied to the device once).
+        """
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != self._clip_len.shape or not np.isfinite(w).all() or (w < 0).any():
+            raise ValueError(f"clip weights must be {self._clip_len.size} finite values >= 0, "
+                             f"got shape {w.shape}")  # fmt: skip
+        p = self._clip_len * w
+        if p.sum() <= 0:
+            raise ValueError("clip weights are all zero: no clip could be picked")
+        self._clip_p = torch.as_tensor(p / p.sum(), device=self.device)
 
     def set_termination_dist(self, dist_m: float) -> None:
         """Early-termination distance of every world from the next step on (m, 0 = off)."""
@@ -502,7 +525,10 @@ class WarpTrackingEnv:
         e_max = dist.amax(dim=1)
         z = pos[:, 0, 2]
         tau_d = self.termination_dist_m
-        te = ((tau_d > 0) & (e_max > tau_d)) | (z < cfg.fall_height_m)
+        # (GripTrackingEnv's rule: a low pelvis is a fall only when it is also
+        # fall_below_reference_m below the ground truth's, so clips on the floor are followed)
+        fell = (z < cfg.fall_height_m) & (z < c.gt_pvw[row, 0, 0, 2] - cfg.fall_below_reference_m)
+        te = ((tau_d > 0) & (e_max > tau_d)) | fell
         tr = tn >= c.n_frames[self.clip_index] - 1
         if cfg.max_episode_frames > 0:
             tr |= self._steps >= cfg.max_episode_frames

@@ -13,11 +13,19 @@ What is the device's: the rollout buffer (:class:`policies.warp.rollout.DeviceRo
 the observation and return normaliser (:class:`policies.warp.rollout.DeviceVecNormalize`, the
 formulas of SB3's ``VecNormalize``), the AMP discriminator's replay buffer, real windows and
 update (:class:`policies.warp.amp.DeviceAmpTrainer`) and the collect loop (auto-reset, the
-time-limit bootstrap of SB3's ``collect_rollouts``, episode statistics).
+time-limit bootstrap of SB3's ``collect_rollouts``, episode statistics, and each clip's ended
+and failed episodes, copied to the host once per rollout).
 
-Not supported yet (refused with the setting's name): hard-clip mining (``stage*.mining_mix``).
+Hard-clip mining (``stage*.mining_mix``) is the CPU trainer's: the miner
+(:class:`policies.mining.ClipFailureStats`) is built and restored from the checkpoint by
+:meth:`PolicyTrainer._begin_stage_clips` and saved by :meth:`PolicyTrainer.save_checkpoint`;
+after each rollout it takes the per-clip counts, decays, and its weights go to the env
+(``set_clip_weights``). History rows carry the CPU rows' ``"by_category"`` counts
+(:func:`policies.train.episodes_by_category`).
+
 The ``amp.pt`` of a device run keeps a torch generator state, so a run folder is resumed by the
-backend that started it (``config.json`` records ``"backend": "warp"``).
+backend that started it (``config.json`` records ``"backend": "warp"``). What the env does not
+support yet (clips with their own scene objects) it refuses when the stage's env is built.
 """
 
 from __future__ import annotations
@@ -34,7 +42,13 @@ from stable_baselines3.common.logger import configure
 
 from grip.task import amp as A
 from policies.config import PolicyRunConfig, StageConfig
-from policies.train import INFO_TERMS, ConstantLearningRate, PolicyTrainer, _upgrade_settings
+from policies.train import (
+    INFO_TERMS,
+    ConstantLearningRate,
+    PolicyTrainer,
+    _upgrade_settings,
+    episodes_by_category,
+)
 from policies.vec_env import load_vecnorm_state, vecnorm_state
 from policies.warp.amp import DeviceAmpTrainer
 from policies.warp.rollout import DeviceRolloutBuffer, DeviceVecNormalize
@@ -51,8 +65,10 @@ class TensorEnvMaker(Protocol):
     episodes on ``device`` (a torch/warp device name) that tracks the clips of ``categories``
     (all when empty), with ``num_envs``, ``observe() -> dict of (N, ...) tensors``,
     ``step(actions (N, A)) -> (obs, reward, terminated, truncated, info)`` (tensors; ``info``
-    holds ``reward/<term>``, ``mpjpe_m``, ``frames`` and ``amp_obs``), ``reset(mask)``,
-    ``set_termination_dist(m)`` and ``close()`` (:class:`envs.warp.env.WarpTrackingEnv`).
+    holds ``reward/<term>``, ``mpjpe_m``, ``frames``, ``clip_index`` and ``amp_obs``),
+    ``reset(mask)``, ``set_termination_dist(m)``, ``set_clip_weights(w (C,))`` (clips in the
+    order of :func:`grip.core.reference_sets.select_clips`) and ``close()``
+    (:class:`envs.warp.env.WarpTrackingEnv`).
     """
 
     def __call__(self, env_cfg: Any, categories: tuple[str, ...], num_envs: int, device: str,
@@ -77,19 +93,14 @@ class WarpPolicyTrainer(PolicyTrainer):
         make_env: The batched env constructor (:class:`TensorEnvMaker`).
 
     Raises:
-        ValueError: As :class:`PolicyTrainer`; also naming ``stage*.mining_mix`` when a stage
-            mines hard clips, and ``backend`` when ``run_dir`` holds a checkpoint of the CPU
-            trainer.
+        ValueError: As :class:`PolicyTrainer`; also naming ``backend`` when ``run_dir`` holds a
+            checkpoint of the CPU trainer.
     """
 
     def __init__(self, cfg: PolicyRunConfig, run_dir: str | os.PathLike,
                  reference: str | os.PathLike, make_env: TensorEnvMaker,
                  progress: Callable | None = None, init: str | os.PathLike | None = None,
                  init_member: int = 0) -> None:  # fmt: skip
-        for name, stage in cfg.stages():
-            if stage.mining_mix > 0:
-                raise ValueError(f"{name}.mining_mix = {stage.mining_mix}: hard-clip mining is "
-                                 "not supported by the warp backend yet (set it to 0)")  # fmt: skip
         super().__init__(cfg, run_dir, reference, make_env, progress, init, init_member)
         self.rundir.check_resume(cfg, defaults=PolicyRunConfig(), recorded={"backend": BACKEND},
                                  upgrade=_upgrade_settings)  # fmt: skip
@@ -99,6 +110,7 @@ class WarpPolicyTrainer(PolicyTrainer):
         self.venv: DeviceVecNormalize | None = None
         self.obs_space: spaces.Dict | None = None
         self.action_space = spaces.Box(-1.0, 1.0, (A.N_HINGES,), np.float32)
+        self.stage_clip_categories: list[str] = []  # (C,) the category of each env clip
 
     # -------------------------------------------------------------- env and model
     def _build_env(self, stage: StageConfig) -> DeviceVecNormalize:
@@ -137,7 +149,9 @@ class WarpPolicyTrainer(PolicyTrainer):
     def prepare_stage(self, stage: StageConfig, state: dict | None = None) -> None:
         """Build the stage's env and normaliser, and the model: restored from ``checkpoint/``
         when ``state`` (a resumed run's) is given, warm-started from ``init`` on a first
-        stage, else the previous stage's model with its normaliser statistics."""
+        stage, else the previous stage's model with its normaliser statistics; then the
+        stage's clip categories and hard-clip miner (:meth:`PolicyTrainer._begin_stage_clips`,
+        the miner's counts restored from the checkpoint)."""
         old_norm = vecnorm_state(self.venv) if self.venv is not None else None
         self.venv = self._build_env(stage)
         if state is not None and (self.ckpt_dir / "model.zip").is_file():
@@ -149,6 +163,7 @@ class WarpPolicyTrainer(PolicyTrainer):
         else:
             load_vecnorm_state(self.venv, old_norm)
         self.model.rollout_buffer.reset()
+        self.stage_clip_categories = self._begin_stage_clips(stage)
 
     @torch.no_grad()
     def act(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -172,7 +187,6 @@ class WarpPolicyTrainer(PolicyTrainer):
                    bar) -> None:  # fmt: skip
         self.prepare_stage(stage, state)
         self.stage_done0 = self.stage_done
-        self.mining = None
         self._learn(name, stage, bar)
         self.stage_done = stage.timesteps
 
@@ -186,6 +200,8 @@ class WarpPolicyTrainer(PolicyTrainer):
         env.set_termination_dist(tau)
         model.lr_schedule = ConstantLearningRate(self.learning_rate_now())
         self.set_actor_frozen(self.in_critic_warmup())
+        if self.mining is not None:  # (a resumed run's counts apply from its first rollout)
+            env.set_clip_weights(self.mining.weights())
         obs = env.observe()
         norm.returns.zero_()
         norm.update_obs(obs)
@@ -196,6 +212,7 @@ class WarpPolicyTrainer(PolicyTrainer):
         while self.stage_done < stage.timesteps:
             last, starts, stats = self._collect(last, starts, ep, bar, start)
             amp_stats = self.amp.update(stats.pop("amp_windows"))
+            self._mine(*stats["clips"])
             row = self._log_rollout(name, tau, stats, amp_stats)
             if bar is not None:
                 d_acc = (amp_stats["acc_real"] + amp_stats["acc_fake"]) / 2
@@ -223,7 +240,8 @@ class WarpPolicyTrainer(PolicyTrainer):
         ``collect_rollouts`` + ``VecNormalize`` + ``AmpReward`` on tensors).
 
         Returns the last normalised observations, the episode-start flags and the rollout's
-        sums (reward terms, episodes) with its AMP windows (``"amp_windows"``).
+        sums (reward terms, episodes; ``"clips"``: the episodes that ended and the failures,
+        per clip) with its AMP windows (``"amp_windows"``).
         """
         model, env, norm, amp = self.model, self.env, self.venv, self.amp
         buf, pol, p = model.rollout_buffer, model.policy, self.cfg.ppo
@@ -233,6 +251,8 @@ class WarpPolicyTrainer(PolicyTrainer):
         buf.reset()
         terms = torch.zeros(len(INFO_TERMS), dtype=torch.float64, device=dev)
         episodes = torch.zeros(4, dtype=torch.float64, device=dev)  # count, ok, MPJPE, frames
+        n_clips = len(self.stage_clip_categories)
+        per_clip = torch.zeros(2, n_clips, dtype=torch.float64, device=dev)  # ended, failed
         windows = []
         done = torch.zeros(n, dtype=torch.bool, device=dev)
         for _ in range(p.n_steps):
@@ -255,6 +275,9 @@ class WarpPolicyTrainer(PolicyTrainer):
                                      (d * ep[0] / ep[1].clamp(min=1)).sum(),
                                      (d * ep[2]).sum()])  # fmt: skip
             ep *= 1.0 - d
+            ci = info["clip_index"]  # (the clip of the episode that ended: before the reset)
+            per_clip[0].index_add_(0, ci, d)
+            per_clip[1].index_add_(0, ci, (done & ~ok).to(torch.float64))
             if bool(done.any()):
                 env.reset(done)
                 nxt = env.observe()
@@ -273,10 +296,31 @@ class WarpPolicyTrainer(PolicyTrainer):
             if bar is not None:
                 bar.update(n)
         buf.compute_returns_and_advantage(pol.predict_values(last), done)
-        host = terms.tolist() + episodes.tolist()
-        stats = {"terms": host[: len(INFO_TERMS)], "episodes": host[len(INFO_TERMS):],
-                 "decisions": p.n_steps * n, "amp_windows": torch.cat(windows)}  # fmt: skip
+        host = torch.cat([terms, episodes, per_clip.reshape(-1)]).cpu().numpy()  # (one copy)
+        k = len(INFO_TERMS)
+        stats = {"terms": host[:k].tolist(), "episodes": host[k : k + 4].tolist(),
+                 "clips": host[k + 4 :].reshape(2, n_clips), "decisions": p.n_steps * n,
+                 "amp_windows": torch.cat(windows)}  # fmt: skip
         return last, starts, stats
+
+    def _mine(self, ended: np.ndarray, failed: np.ndarray) -> None:
+        """Hard-clip mining after a rollout (the CPU trainer's ``TrainingCallback``): count the
+        episodes that ended per clip, decay, and give the env the new clip weights.
+
+        Args:
+            ended, failed: ``(C,)`` the rollout's ended and failed episodes of each clip.
+        """
+        mining = self.mining
+        if mining is None:
+            return
+        # (ClipFailureStats.add of each episode, summed: all of them come before end_rollout)
+        mining.episodes += ended
+        mining.fails += failed
+        mining.end_rollout()
+        w = mining.weights()
+        self.model.logger.record("mining/max_weight", float(w.max()))
+        self.model.logger.record("mining/min_weight", float(w.min()))
+        self.env.set_clip_weights(w)
 
     def _log_rollout(self, name: str, tau: float, stats: dict, amp_stats: dict) -> dict:
         """TensorBoard scalars and the history row of a rollout (the CPU trainer's keys)."""
@@ -298,6 +342,11 @@ class WarpPolicyTrainer(PolicyTrainer):
             row["success_rate"] = ok / count
             row["mpjpe_mm"] = 1000 * err / count
             row["ep_len"] = frames / count
+            ended, failed = stats["clips"]  # [episodes, failures] per category, as on the CPU
+            cats = self.stage_clip_categories
+            row["by_category"] = episodes_by_category(
+                (c, e, f) for c, e, f in zip(cats, ended, failed, strict=True) if e > 0
+            )
             log("episode/success_rate", row["success_rate"])
             log("episode/mpjpe_mm", row["mpjpe_mm"])
             log("episode/count", int(count))

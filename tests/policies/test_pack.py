@@ -14,8 +14,7 @@ import torch
 from envs.factory import make_tracking_env
 from envs.tracking_env import SAMPLE_REFERENCE
 from grip.cli.main import main
-from policies.checkpoint import read_ppo_zip
-from policies.runner import load_weights
+from policies.checkpoint import load_weights, read_ppo_zip
 from policies.train import PolicyTrainer, run_config_dict
 from tests.policies.test_train import _tiny
 

@@ -216,3 +216,106 @@ def test_each_world_has_its_subjects_model():
             if want.shape != got.shape or not np.allclose(want, got, atol=1e-6, equal_nan=True):
                 differ.append(f.name)
         assert set(differ) <= UNBATCHED_OK, differ
+
+
+FALL_STARTS = ((0, 30), (1, 20), (0, 120), (1, 150))
+FALL_DECISIONS = 30
+LIFT_M = 0.1
+
+
+@pytest.mark.parametrize(("below_m", "falls"), [(0.2, False), (0.0, True)])
+def test_fall_below_reference_matches_cpu_env(below_m, falls):
+    """``fall_below_reference_m``: terminations equal the CPU env's where the setting decides.
+
+    The ground truth of both clips is lifted 0.1 m (it floats), and ``fall_height_m`` = 1.5 m
+    is above both pelvises: every pelvis is "low" and so is its reference, as on a clip on the
+    floor under the teacher's 0.3 m. The simulated body starts at the truth and drops onto the
+    floor, so its pelvis is 0 to 0.2 m below the truth's for the whole test: with the setting
+    at 0.2 m no world falls, with 0 every world falls at its first decision. The pelvis stays at
+    least 0.5 mm away from the threshold (checked), far beyond float32 rounding.
+    """
+    import dataclasses
+
+    import torch
+    import warp as wp
+
+    from envs.batched import BatchedTrackingEnv
+    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+    from envs.warp.env import WarpTrackingEnv
+    from grip.core.reference import ReferenceSet
+    from grip.task.config import TrackingEnvConfig
+
+    wp.config.quiet = True
+    sample = ReferenceSet.load(SAMPLE_REFERENCE)
+    clips = []
+    for c in sample.clips:
+        q = c.gt_qpos.copy()
+        q[:, 2] += LIFT_M
+        clips.append(dataclasses.replace(c, gt_qpos=q))
+    ref = ReferenceSet(clips, sample.sensor_sites, sample.insoles)
+    cfg = TrackingEnvConfig(termination_dist_m=0.0, fall_height_m=1.5,
+                            fall_below_reference_m=below_m)  # fmt: skip
+    n = len(FALL_STARTS)
+    envs = [GripTrackingEnv(cfg, ref) for _ in FALL_STARTS]
+    for e in envs:
+        e.reset(seed=0)
+    cpu = BatchedTrackingEnv(envs, threads=1)
+    gpu = WarpTrackingEnv(cfg, ref, n, device="cpu")
+    for i, (c, s) in enumerate(FALL_STARTS):
+        cpu.reset(i, options={"clip": c, "start": s})
+    gpu.reset(torch.ones(n, dtype=torch.bool), torch.tensor([c for c, _ in FALL_STARTS]),
+              torch.tensor([s for _, s in FALL_STARTS]))  # fmt: skip
+    first_fall = np.full(n, -1)
+    try:
+        for step in range(FALL_DECISIONS):
+            act = np.zeros((n, 69), np.float32)
+            _, _, te_c, tr_c, info_c = cpu.step(act)
+            _, _, te_g, tr_g, info_g = gpu.step(torch.as_tensor(act))
+            np.testing.assert_array_equal(te_g.numpy(), te_c, err_msg=f"terminated, step {step}")
+            np.testing.assert_array_equal(tr_g.numpy(), tr_c, err_msg=f"truncated, step {step}")
+            z = np.array([i["root_height_m"] for i in info_c])
+            np.testing.assert_allclose(info_g["root_height_m"].numpy(), z, atol=1e-4)
+            gt_z = np.array([ref.clip(i["clip_index"]).gt_pos[i["frame"], 0, 2] for i in info_c])
+            assert np.all(z < cfg.fall_height_m) and np.all((z < gt_z) & (z > gt_z - 0.2))
+            assert np.abs(z - (gt_z - below_m)).min() > 5e-4, "too close to the threshold"
+            first_fall[(first_fall < 0) & te_c] = step
+            if te_c.any():
+                break  # (a finished episode is not stepped on)
+    finally:
+        cpu.close()
+    if falls:
+        np.testing.assert_array_equal(first_fall, 0)
+    else:
+        np.testing.assert_array_equal(first_fall, -1)
+        assert step == FALL_DECISIONS - 1
+
+
+def test_clip_weights_choose_the_clips_drawn():
+    """``set_clip_weights`` (hard-clip mining): a reset draws clips by length times the
+    weights, so a clip of weight 0 is never drawn; bad weights are refused as on the CPU."""
+    import torch
+    import warp as wp
+
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from envs.warp.env import WarpTrackingEnv
+    from grip.core.reference import ReferenceSet
+    from grip.task.config import TrackingEnvConfig
+
+    wp.config.quiet = True
+    n = 16
+    env = WarpTrackingEnv(TrackingEnvConfig(), ReferenceSet.load(SAMPLE_REFERENCE), n, seed=3)
+    everyone = torch.ones(n, dtype=torch.bool)
+    assert set(env.clip_index.tolist()) == {0, 1}  # (by length: both clips are 250 frames)
+    for only in (0, 1):
+        w = np.zeros(2)
+        w[only] = 2.5
+        env.set_clip_weights(w)
+        for _ in range(3):
+            env.reset(everyone)
+            np.testing.assert_array_equal(env.clip_index.numpy(), only)
+    env.set_clip_weights([1.0, 1.0])
+    env.reset(everyone)
+    assert set(env.clip_index.tolist()) == {0, 1}
+    for bad in ([1.0], [1.0, -0.5], [1.0, np.nan], [0.0, 0.0]):
+        with pytest.raises(ValueError, match="clip weights"):
+            env.set_clip_weights(bad)

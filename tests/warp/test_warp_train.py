@@ -1,6 +1,7 @@
 """PPO + AMP on the device (:class:`policies.warp.train.WarpPolicyTrainer`) end to end on MuJoCo
 Warp's CPU device, on the bundled sample: both stages, the checkpoint resumes, the exported file
-plays in the CPU player, and a CPU policy warm-starts a device run with the same actions.
+plays in the CPU player, a CPU policy warm-starts a device run with the same actions, and the
+teacher's recipe (hard-clip mining, ``fall_below_reference_m``) trains and resumes.
 
 ``slow``: MuJoCo Warp compiles its kernels on first use (about a minute on a cold cache); they
 skip where the ``gpu`` extra is absent.
@@ -38,7 +39,7 @@ def _tiny():
     )  # fmt: skip
 
 
-def _trainer(cfg, run, **kw):
+def _trainer(cfg, run, make_env=None, **kw):
     import warp as wp
 
     from envs.tracking_env import SAMPLE_REFERENCE
@@ -46,7 +47,8 @@ def _trainer(cfg, run, **kw):
     from policies.warp.train import WarpPolicyTrainer
 
     wp.config.quiet = True
-    return WarpPolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_warp_tracking_env, **kw)
+    return WarpPolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_env or make_warp_tracking_env,
+                             **kw)  # fmt: skip
 
 
 def _write_config(run, cfg, **extra) -> None:
@@ -83,7 +85,7 @@ def test_both_stages_train_on_the_device(warp_run):
 
 
 def test_checkpoint_resumes(warp_run, tmp_path):
-    from policies.runner import load_weights
+    from policies.checkpoint import load_weights
 
     run, tr = warp_run
     copy = tmp_path / "run"
@@ -216,3 +218,105 @@ def test_clips_with_their_own_props_are_refused_naming_the_setting(tmp_path):
     tr = WarpPolicyTrainer(cfg, run, path, make_warp_tracking_env)
     with pytest.raises(NotImplementedError, match=r"own scene objects.*env\.terrain"):
         tr.train()
+
+
+TEACHER_TINY = ("ppo.n_envs=4", "ppo.n_steps=8", "ppo.batch_size=16", "ppo.n_epochs=1",
+                "ppo.net_arch=[16]", "amp.hidden=[16]", "amp.window=2", "amp.batch_size=16",
+                "amp.replay_size=256", "checkpoint_every=1",
+                "stage1.timesteps=64", "stage1.termination_dist_m=0.12",
+                "stage1.termination_anneal_steps=0", "stage1.max_episode_frames=15",
+                "stage1.mining_decay=0.9", "stage2.timesteps=32",
+                "stage2.termination_dist_m=0.12", "stage2.max_episode_frames=15",
+                "stage2.mining_decay=0.9")  # fmt: skip
+"""configs/policy/teacher.toml at the size of :func:`_tiny`: episodes of 5 decisions and a tight
+termination distance in both stages, so that some episodes fail and others reach their limit."""
+
+
+def _spying_maker(pushed: list):
+    """The warp env constructor, recording every ``set_clip_weights`` call in ``pushed``."""
+    from envs.warp.factory import make_warp_tracking_env
+
+    def make(*args, **kwargs):
+        env = make_warp_tracking_env(*args, **kwargs)
+        push = env.set_clip_weights
+
+        def spy(w) -> None:
+            pushed.append(np.array(w, dtype=np.float64))
+            push(w)
+
+        env.set_clip_weights = spy
+        return env
+
+    return make
+
+
+def test_teacher_recipe_mines_hard_clips_checkpoints_and_resumes(tmp_path):
+    """The teacher's recipe (hard-clip mining in both stages, ``fall_below_reference_m``; a
+    tight termination distance so that episodes fail) trains on the device: per rollout the
+    trainer counts the ended and failed episodes of each clip, records them per category in the
+    history row, and gives the env the miner's weights (the same weights as a
+    :class:`ClipFailureStats` fed with the rows' counts); the checkpoint keeps the miner's
+    counts as the CPU trainer's does, and a resumed run goes on from them."""
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from grip.assets import REPO_ROOT
+    from grip.config import load_config
+    from grip.core.reference import ReferenceSet
+    from policies.config import PolicyRunConfig
+    from policies.mining import ClipFailureStats
+
+    cfg = load_config(REPO_ROOT / "configs" / "policy" / "teacher.toml", PolicyRunConfig(),
+                      TEACHER_TINY)  # fmt: skip
+    assert cfg.stage1.mining_mix > 0 and cfg.stage2.mining_mix > 0
+    assert cfg.stage2.fall_below_reference_m > 0 and cfg.env.action_repeat == 3
+    clips = ReferenceSet.load(SAMPLE_REFERENCE).clips
+    names, cats = [c.name for c in clips], [c.category for c in clips]
+    assert len(set(cats)) == len(cats)  # (one clip per category: rows give per-clip counts)
+    run = tmp_path / "run"
+    _write_config(run, cfg)
+    pushed: list[np.ndarray] = []
+    tr = _trainer(cfg, run, make_env=_spying_maker(pushed))
+    tr.train()
+    assert [h["stage"] for h in tr.history] == ["stage1", "stage1", "stage2"]
+    for h in tr.history:
+        by_cat = h["by_category"]
+        assert set(by_cat) <= set(cats), by_cat
+        assert sum(n for n, _ in by_cat.values()) == h["episodes"] > 0
+        assert sum(f for _, f in by_cat.values()) == round(h["episodes"] * (1 - h["success_rate"]))
+    stage1 = [h for h in tr.history if h["stage"] == "stage1"]
+    fails = sum(f for h in stage1 for _, f in h["by_category"].values())
+    assert 0 < fails < sum(h["episodes"] for h in stage1)  # (mining had something to weigh)
+    # each stage: its first weights at the start (a fresh miner: all ones), then one per rollout
+    want = []
+    for name, stage in cfg.stages():
+        miner = ClipFailureStats(names, stage.mining_mix, stage.mining_decay, stage.mining_prior)
+        want.append(miner.weights())
+        for h in tr.history:
+            if h["stage"] == name:
+                for i, cat in enumerate(cats):
+                    miner.episodes[i] += h["by_category"].get(cat, [0, 0])[0]
+                    miner.fails[i] += h["by_category"].get(cat, [0, 0])[1]
+                miner.end_rollout()
+                want.append(miner.weights())
+    assert len(pushed) == len(want) == 5
+    for got, w in zip(pushed, want, strict=True):
+        np.testing.assert_allclose(got, w, rtol=1e-12)
+    assert pushed[2].std() > 0 and pushed[4].std() > 0  # (the failures differ by clip)
+    np.testing.assert_allclose(tr.mining.episodes, miner.episodes, rtol=1e-12)
+    state = json.loads((run / "checkpoint" / "state.json").read_text())
+    assert state["mining"] == json.loads(json.dumps({"stage_index": 1,
+                                                     **tr.mining.state_dict()}))  # fmt: skip
+    # resumed with a longer stage 2: the saved counts' weights first (a fresh miner's would be
+    # all ones), then one rollout more
+    copy = tmp_path / "copy"
+    shutil.copytree(run, copy)
+    longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=64))
+    pushed_again: list[np.ndarray] = []
+    again = _trainer(longer, copy, make_env=_spying_maker(pushed_again))
+    again.train()
+    assert again.history[:3] == json.loads(json.dumps(tr.history))
+    assert len(again.history) == 4 and len(pushed_again) == 2
+    np.testing.assert_allclose(pushed_again[0], pushed[-1], rtol=1e-12)
+    new = again.history[-1]["episodes"]
+    assert new > 0
+    assert again.mining.episodes.sum() == pytest.approx((sum(state["mining"]["episodes"]) + new)
+                                                        * cfg.stage2.mining_decay)  # fmt: skip
