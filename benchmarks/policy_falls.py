@@ -12,6 +12,11 @@ repeat) and prints:
 
     python benchmarks/policy_falls.py --reference RUN/reference_train.npz \\
         [--policy grip/assets/policy_default.pt] [--episodes 120] [--category 'walk*' ...]
+
+``--timeline K`` instead plays clip K of the selected categories once from its frame 0 and
+prints every 5th decision until the episode ends: pelvis height against the reference's, root
+error, horizontal speed against the reference's, contacts, MPJPE and the position-imitation
+reward (how a fall builds up).
 """
 
 from __future__ import annotations
@@ -42,6 +47,10 @@ def main() -> None:
                     help="glob on the motion category (repeatable; default walk*, run*, dash*)")
     ap.add_argument("--max-frames", type=int, default=1000, help="episode length limit")
     ap.add_argument("--fall-height", type=float, default=0.3, help="pelvis height of a fall, m")
+    ap.add_argument("--fall-below", type=float, default=0.0,
+                    help="a low pelvis is a fall only this far under the reference's, m")
+    ap.add_argument("--timeline", type=int, default=None, metavar="K",
+                    help="trace clip K (of the selected categories) from its frame 0")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     torch.set_grad_enabled(False)
@@ -50,11 +59,15 @@ def main() -> None:
     ref = select_clips(load_reference(args.reference), cats)
     cfg = dataclasses.replace(runner.env_cfg, termination_dist_m=0.0,
                               fall_height_m=args.fall_height, max_episode_frames=args.max_frames,
+                              fall_below_reference_m=args.fall_below,
                               random_start=True, clip_index=-1, reference="")  # fmt: skip
     env = GripTrackingEnv(cfg, ref)
     k = cfg.action_repeat
     if k > 1:
         env = ActionRepeat(env, k)
+    if args.timeline is not None:
+        _timeline(env, runner, args.timeline)
+        return
     weights = runner.env_cfg.reward.weights
     obs, _ = env.reset(seed=args.seed)
     episodes, rows = [], []
@@ -94,6 +107,33 @@ def main() -> None:
             print(f"| {nm} | {b[:, i].mean():.3f} | {o[:, i].mean():.3f} |")
         print(f"| share with a negative reward | {(b[:, 0] < 0).mean():.2f} "
               f"| {(o[:, 0] < 0).mean():.2f} |")
+
+
+def _timeline(env, runner, k: int) -> None:
+    """Play clip ``k`` from frame 0 and print every 5th decision (the module docstring)."""
+    base = env.unwrapped
+    obs, _ = env.reset(options={"clip": k, "start": 0})
+    clip = base.clip
+    dt = 1.0 / clip.fps
+    print(f"{clip.name} ({clip.category}, {clip.n_frames} frames)")
+    print("frame | pelvis z / ref (m) | root err (m) | speed / ref (m/s) | contacts | MPJPE (mm) "
+          "| r_imit_pos")  # fmt: skip
+    done, n = False, 0
+    while not done:
+        obs, _, term, trunc, info = env.step(runner.act(obs))
+        done, n = term or trunc, n + 1
+        if n % 5 and not done:
+            continue
+        data, t = base._sim.data, min(int(info["frame"]), clip.n_frames - 1)
+        g = clip.gt_qpos
+        step = g[min(t + 1, clip.n_frames - 1), :2] - g[max(t - 1, 0), :2]
+        ref_v = np.linalg.norm(step) / (2 * dt)
+        print(f"{t:5d} | {data.qpos[2]:.2f} / {g[t, 2]:.2f} | "
+              f"{np.linalg.norm(data.qpos[:2] - g[t, :2]):.2f} | "
+              f"{np.linalg.norm(data.qvel[:2]):.2f} / {ref_v:.2f} | {data.ncon} | "
+              f"{1000 * info.get('mpjpe_m', np.nan):.0f} | "
+              f"{info.get('reward/imit_pos', np.nan):.2f}")
+    print("fell" if term else "reached the end or the length limit")
 
 
 if __name__ == "__main__":
