@@ -23,6 +23,7 @@ from envs.terrain import Scene
 __all__ = [
     "HeightField",
     "add_heightfield",
+    "add_scene_assets",
     "add_static_meshes",
     "rasterize",
     "sample_heightmap",
@@ -31,6 +32,8 @@ __all__ = [
 _MAX_CELLS = 4_000_000  # rasterize() refuses grids larger than this (2000 x 2000 nodes)
 _FLOOR_CONTACT_ATTRS = ("condim", "friction", "solref", "solimp", "solmix", "priority",
                         "margin", "gap")  # fmt: skip
+_TERRAIN_RGBA = "0.62 0.56 0.48 1"
+_OVERHANG_RGBA = "0.55 0.45 0.35 1"
 
 
 # --------------------------------------------------------------------------------------------
@@ -300,7 +303,7 @@ def add_heightfield(
     name: str = "terrain",
     *,
     base_m: float = 0.01,
-    rgba: str = "0.62 0.56 0.48 1",
+    rgba: str = _TERRAIN_RGBA,
 ) -> str:
     """Add a height field as a static MuJoCo terrain geom to an MJCF document.
 
@@ -340,7 +343,15 @@ def add_heightfield(
     if base_m <= 0.0:
         raise ValueError(f"base_m must be positive, got {base_m}")
     root, world, asset = _world_and_asset(mjcf_xml, ("hfield", "geom"), (name,))
+    pos = _add_hfield_asset(asset, hf, name, base_m)
+    attrs = {"name": name, "type": "hfield", "hfield": name, "pos": pos}
+    _add_static_geom(world, attrs, rgba)
+    return ET.tostring(root, encoding="unicode")
 
+
+def _add_hfield_asset(asset: ET.Element, hf: HeightField, name: str, base_m: float) -> str:
+    """Append the ``<hfield>`` of :func:`add_heightfield` to ``asset``; return the ``pos``
+    attribute of a geom that puts it in place."""
     h = hf.heights
     ny, nx = h.shape
     h_min = float(h.min())
@@ -353,17 +364,13 @@ def add_heightfield(
     ET.SubElement(asset, "hfield", name=name, nrow=str(ny), ncol=str(nx),
                   size=" ".join(_fmt(s) for s in (rx, ry, size_z, base_m + h_min)),
                   elevation="\n".join(rows))  # fmt: skip
-
     cx = float(hf.origin_xy[0]) + rx
     cy = float(hf.origin_xy[1]) + ry
-    attrs = {"name": name, "type": "hfield", "hfield": name,
-             "pos": f"{_fmt(cx)} {_fmt(cy)} {_fmt(h_min)}"}  # fmt: skip
-    _add_static_geom(world, attrs, rgba)
-    return ET.tostring(root, encoding="unicode")
+    return f"{_fmt(cx)} {_fmt(cy)} {_fmt(h_min)}"
 
 
 def add_static_meshes(mjcf_xml: str, meshes, prefix: str = "overhang", *,
-                      rgba: str = "0.55 0.45 0.35 1") -> str:  # fmt: skip
+                      rgba: str = _OVERHANG_RGBA) -> str:  # fmt: skip
     """Add meshes as static MuJoCo geoms (the overhangs of :func:`envs.terrain.split_overhangs`:
     a stool's seat slab), with the floor's collision bits and contact parameters as
     :func:`add_heightfield` gives its field. MuJoCo collides with each mesh's convex hull.
@@ -383,11 +390,68 @@ def add_static_meshes(mjcf_xml: str, meshes, prefix: str = "overhang", *,
     names = [f"{prefix}_{k}" for k in range(len(meshes))]
     root, world, asset = _world_and_asset(mjcf_xml, ("mesh", "geom"), names)
     for name, m in zip(names, meshes, strict=True):
-        ET.SubElement(asset, "mesh", name=name,
-                      vertex=" ".join(_fmt(x) for x in np.asarray(m.vertices).reshape(-1)),
-                      face=" ".join(str(int(i)) for i in np.asarray(m.faces).reshape(-1)))
+        _add_mesh_asset(asset, m, name)
         _add_static_geom(world, {"name": name, "type": "mesh", "mesh": name}, rgba)
     return ET.tostring(root, encoding="unicode")
+
+
+def add_scene_assets(mjcf_xml: str, fields, meshes, n_overhang_geoms: int, *,
+                     base_m: float = 0.01) -> str:  # fmt: skip
+    """Add the height fields and overhang meshes of several scenes as assets, with the static
+    geoms that show one scene at a time: for a batch of worlds that each show one of them
+    (MuJoCo Warp can point a geom at another asset in each world, but cannot give each world
+    its own assets; :mod:`envs.warp.scenes` places the geoms per world).
+
+    The fields become ``<hfield>`` assets ``terrain_<k>`` (as :func:`add_heightfield` writes
+    them) and the meshes ``<mesh>`` assets ``overhang_mesh_<k>``; one hfield geom ``terrain``
+    on field 0, where :func:`add_heightfield` puts it (when there are fields), and
+    ``n_overhang_geoms`` mesh geoms ``overhang_<j>`` on mesh 0: the names the geoms of
+    :func:`add_heightfield` and :func:`add_static_meshes` have in a scene's own model. All get
+    the floor's collision bits and contact parameters.
+
+    Args:
+        mjcf_xml: A complete ``<mujoco>`` document with a ``<worldbody>``.
+        fields: Height fields.
+        meshes: Triangle meshes (``.vertices (V, 3)``, ``.faces (F, 3)``), world frame, m; at
+            least one when ``n_overhang_geoms > 0``.
+        n_overhang_geoms: The mesh geoms.
+        base_m: Depth of each field's base below its lowest node, m.
+
+    Returns:
+        The modified document as a string.
+    """
+    if base_m <= 0.0:
+        raise ValueError(f"base_m must be positive, got {base_m}")
+    if n_overhang_geoms > 0 and not meshes:
+        raise ValueError("overhang geoms need at least one mesh")
+    geoms = (["terrain"] if fields else []) + [f"overhang_{j}" for j in range(n_overhang_geoms)]
+    fnames = [f"terrain_{k}" for k in range(len(fields))]
+    mnames = [f"overhang_mesh_{k}" for k in range(len(meshes))]
+    root, world, asset = _world_and_asset(mjcf_xml, ("hfield", "mesh", "geom"),
+                                          geoms + fnames + mnames)  # fmt: skip
+    pos = [
+        _add_hfield_asset(asset, hf, name, base_m) for name, hf in zip(fnames, fields, strict=True)
+    ]
+    for name, m in zip(mnames, meshes, strict=True):
+        _add_mesh_asset(asset, m, name)
+    if fields:
+        _add_static_geom(world, {"name": "terrain", "type": "hfield", "hfield": fnames[0],
+                                 "pos": pos[0]}, _TERRAIN_RGBA)  # fmt: skip
+    for name in geoms[1 if fields else 0 :]:
+        _add_static_geom(world, {"name": name, "type": "mesh", "mesh": mnames[0]},
+                         _OVERHANG_RGBA)  # fmt: skip
+    return ET.tostring(root, encoding="unicode")
+
+
+def _add_mesh_asset(asset: ET.Element, mesh, name: str) -> None:
+    """Append a ``<mesh>`` of a triangle mesh's vertices and faces to ``asset``."""
+    ET.SubElement(
+        asset,
+        "mesh",
+        name=name,
+        vertex=" ".join(_fmt(x) for x in np.asarray(mesh.vertices).reshape(-1)),
+        face=" ".join(str(int(i)) for i in np.asarray(mesh.faces).reshape(-1)),
+    )
 
 
 def _world_and_asset(mjcf_xml: str, tags: tuple[str, ...], names) -> tuple:

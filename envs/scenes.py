@@ -9,8 +9,15 @@ import functools
 import types
 
 import mujoco
+import trimesh
 
-from envs.heightfield import add_heightfield, add_static_meshes, rasterize, sample_heightmap
+from envs.heightfield import (
+    HeightField,
+    add_heightfield,
+    add_static_meshes,
+    rasterize,
+    sample_heightmap,
+)
 from envs.terrain import make_scene, split_overhangs
 from grip.core.body import BodyParams
 from grip.core.mjcf import SIM_TEXTURE_PX, MjcfConfig, build_mjcf
@@ -52,23 +59,8 @@ class HumanoidScenes:
         return (self.terrain,)
 
     def _compile(self, body: BodyParams, objects: SceneObjects | None, kind: str):
-        if kind == "objects":
-            objs = {n: types.SimpleNamespace(vertices=v, faces=f)
-                    for n, (v, f) in objects.items()}  # fmt: skip
-            scene = make_scene("objects", objects=objs)
-        else:
-            scene = make_scene(kind)
-        # (small textures: they are only drawn by an env's render(); the physics is the same)
-        xml = build_mjcf(body, dataclasses.replace(self.mjcf, texture_px=SIM_TEXTURE_PX))
-        # what rests on the floor becomes the height field (physics and height map); what does
-        # not (a stool's seat slab) static geoms, which the height map does not show
-        resting, overhangs = split_overhangs(scene)
-        hf = None if resting.is_flat else rasterize(resting, self.cell_m)
-        if hf is not None:
-            xml = add_heightfield(xml, hf)
-        if overhangs:
-            xml = add_static_meshes(xml, overhangs)
-        return mujoco.MjModel.from_xml_string(xml), hf
+        hf, overhangs = scene_parts(kind, objects, self.cell_m)
+        return compile_scene(body, self.mjcf, hf, overhangs), hf
 
     def _compiled_model(self, body: BodyParams, objects: SceneObjects | None, skey: tuple,
                         bkey: tuple):  # fmt: skip
@@ -102,6 +94,47 @@ class HumanoidScenes:
             self._scenes.pop(next(iter(self._scenes)))
         self._scenes[skey] = h
         return h
+
+
+def scene_parts(kind: str, objects: SceneObjects | None = None, cell_m: float = 0.02
+                ) -> tuple[HeightField | None, tuple[trimesh.Trimesh, ...]]:  # fmt: skip
+    """What a scene adds to the humanoid's model: the height field of the meshes that rest on
+    the floor (``None`` when there are none) and the meshes that do not (overhangs, such as a
+    stool's seat slab: static geoms, which the height map does not show).
+
+    Args:
+        kind: ``"objects"`` (a clip's ``objects``) or a scene name of
+            :func:`envs.terrain.make_scene`.
+        objects: The clip's scene objects (``kind = "objects"``).
+        cell_m: Resolution of the height field, m.
+    """
+    if kind == "objects":
+        objs = {n: types.SimpleNamespace(vertices=v, faces=f)
+                for n, (v, f) in objects.items()}  # fmt: skip
+        scene = make_scene("objects", objects=objs)
+    else:
+        scene = make_scene(kind)
+    resting, overhangs = split_overhangs(scene)
+    hf = None if resting.is_flat else rasterize(resting, cell_m)
+    return hf, overhangs
+
+
+def humanoid_xml(body: BodyParams, mjcf: MjcfConfig) -> str:
+    """The MJCF of a subject's humanoid on the flat floor, as the scenes compile it."""
+    # (small textures: they are only drawn by an env's render(); the physics is the same)
+    return build_mjcf(body, dataclasses.replace(mjcf, texture_px=SIM_TEXTURE_PX))
+
+
+def compile_scene(body: BodyParams, mjcf: MjcfConfig, hf: HeightField | None,
+                  overhangs: tuple[trimesh.Trimesh, ...] = ()) -> mujoco.MjModel:  # fmt: skip
+    """A subject's humanoid in a scene of :func:`scene_parts`: its height field as the
+    ``"terrain"`` geom, its overhangs as the static mesh geoms ``"overhang_<k>"``."""
+    xml = humanoid_xml(body, mjcf)
+    if hf is not None:
+        xml = add_heightfield(xml, hf)
+    if overhangs:
+        xml = add_static_meshes(xml, overhangs)
+    return mujoco.MjModel.from_xml_string(xml)
 
 
 def humanoid_config(cfg: TrackingEnvConfig) -> HumanoidConfig:

@@ -15,9 +15,14 @@ What differs from the CPU env, and why:
 * Subjects: every clip's body is compiled once (:mod:`envs.scenes`); the model arrays that
   differ between subjects (segment lengths, masses, gains) are batched per world and written
   at each reset, so worlds of different subjects step together.
-* One scene for all worlds: the flat floor or one fixed terrain (``cfg.terrain`` =
-  ``"flat"``, ``"boxes"``, ``"stairs"``, ``"chair"``, or ``"auto"`` with clips without objects).
-  Clips with their own scene objects need one height field per world (not done yet).
+* Scenes: one model for all worlds, where the CPU env switches models. A fixed terrain
+  (``cfg.terrain`` = ``"boxes"``, ``"stairs"``, ``"chair"``) or the flat floor is every world's
+  scene. With ``"auto"``, clips with their own scene objects (props) each show theirs: the model
+  holds every props clip's height field and overhang meshes, and each world points its
+  ``terrain`` and ``overhang_<j>`` geoms at its clip's and places them as the clip's own CPU
+  model does, or parks them far under the floor (per-world geom arrays written at each reset,
+  :mod:`envs.warp.scenes`). The height map samples each world's field, and the blow-up height
+  bound is above each world's own.
 * Blow-ups: MuJoCo C resets a state it cannot integrate and warns; MuJoCo Warp does neither.
   A world is a blow-up when its state is non-finite or beyond the ``blowup_*`` bounds
   (:func:`grip.sim.humanoid.absurd_rows`' bounds, here in torch).
@@ -47,10 +52,9 @@ import warp as wp
 from numpy.typing import ArrayLike
 
 from envs import rewards as R
-from envs.heightfield import rasterize
-from envs.scenes import humanoid_scenes
-from envs.terrain import make_scene
+from envs.scenes import compile_scene, humanoid_scenes, humanoid_xml, scene_parts
 from envs.warp import torch_task as T
+from envs.warp.scenes import SLOT_FIELDS, scene_slots, scenes_xml
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceSource
 from grip.sim.model import HumanoidIndex
@@ -66,6 +70,13 @@ UNBATCHED_OK = frozenset(("site_size", "key_qpos", "dof_length"))
 """Model arrays that may differ between subjects and that MuJoCo Warp does not batch per world:
 none of them is read by a step with sensors off (site sizes are the insole touch zones, the
 keyframe is never loaded, dof_length only scales the sleeping and set_const heuristics)."""
+
+
+NCONMAX, NJMAX = 64, 400
+"""Contacts and constraint rows allocated per world on the flat floor."""
+NCONMAX_TERRAIN, NJMAX_TERRAIN = 256, 1200
+"""... where a scene has a height field or overhangs (the sole pads touch both the floor and the
+field's flat part: 64 pairs standing, docs/gpu.md)."""
 
 
 def _batchable_fields() -> dict[str, bool]:
@@ -108,19 +119,24 @@ class WarpTrackingEnv:
         device: A warp device name (``"cpu"``, ``"cuda"``, ``"cuda:0"``); torch tensors live on
             the same device.
         seed: Seed of the env's ``torch.Generator`` (clip and start draws).
-        nconmax: Contacts allocated per world (MuJoCo Warp allocates N x nconmax).
-        njmax: Constraint rows allocated per world.
+        nconmax: Contacts allocated per world (MuJoCo Warp allocates N x nconmax); ``None``:
+            :data:`NCONMAX` on the flat floor, :data:`NCONMAX_TERRAIN` where a scene has a
+            height field or overhangs.
+        njmax: Constraint rows allocated per world; ``None``: :data:`NJMAX` or
+            :data:`NJMAX_TERRAIN` so.
 
     Attributes:
         num_envs: N.
         model, data: The MuJoCo Warp model and data (read-only for callers).
         clip_index, frame: ``(N,)`` each world's clip and the clip frame it is at.
-        subject_models: The compiled MuJoCo model of each subject (of the clips' bodies).
+        subject_models: The compiled MuJoCo model of each subject (of the clips' bodies), in
+            the scene (with ``terrain = "auto"`` and props clips: the assets of every props
+            clip's scene, :func:`envs.warp.scenes.scenes_xml`).
     """
 
     def __init__(self, cfg: TrackingEnvConfig, reference: ReferenceSource, num_envs: int,
-                 device: str = "cpu", seed: int = 0, nconmax: int = 64,
-                 njmax: int = 400) -> None:  # fmt: skip
+                 device: str = "cpu", seed: int = 0, nconmax: int | None = None,
+                 njmax: int | None = None) -> None:  # fmt: skip
         if cfg.pin_root or cfg.teacher_obs:
             raise ValueError("WarpTrackingEnv: pin_root and teacher_obs are CPU-only settings")
         if cfg.amp_window < 1:
@@ -140,47 +156,77 @@ class WarpTrackingEnv:
                                device=self.device)  # fmt: skip
         self._build_models(cfg, reference)
         self._build_clips(reference)
-        self._alloc_sim(nconmax, njmax)
+        terrain = self._has_terrain
+        self._alloc_sim(
+            (NCONMAX_TERRAIN if terrain else NCONMAX) if nconmax is None else nconmax,
+            (NJMAX_TERRAIN if terrain else NJMAX) if njmax is None else njmax,
+        )
         self._alloc_episodes()
         self.reset(torch.ones(n, dtype=torch.bool, device=self.device))
 
     # ------------------------------------------------------------------ construction
     def _build_models(self, cfg: TrackingEnvConfig, reference: ReferenceSource) -> None:
         """Compile each subject's humanoid in the scene; keep the first as the warp model and
-        the arrays that differ as per-subject tables."""
+        the arrays that differ as per-subject tables. Clips with their own scene objects
+        (``terrain = "auto"``) get one model of every scene and per-scene tables of its slot
+        geoms (:mod:`envs.warp.scenes`)."""
+        n_clips = len(reference)
+        # the scenes: one per props clip (as the CPU env's HumanoidScenes, keyed by clip), or
+        # the fixed terrain of every clip
+        parts: list = []
+        clip_scene = np.full(n_clips, -1, dtype=np.int64)
+        if cfg.terrain == "auto":
+            for i in range(n_clips):
+                objects = reference.clip(i).objects
+                if objects:
+                    clip_scene[i] = len(parts)
+                    parts.append(scene_parts("objects", objects, cfg.heightfield_cell_m))
+            fixed = None
+        else:
+            fixed = scene_parts(cfg.terrain, None, cfg.heightfield_cell_m)
         scenes = humanoid_scenes(cfg)
         subjects: dict[tuple, int] = {}
         models: list[mujoco.MjModel] = []
         self._clip_subject = []
         kd_over_kp = []
-        for i in range(len(reference)):
+        for i in range(n_clips):
             clip = reference.clip(i)
-            if clip.objects and cfg.terrain == "auto":
-                raise NotImplementedError(
-                    f"WarpTrackingEnv: clip {clip.name!r} has its own scene objects; one height "
-                    "field per world is not supported yet (set env.terrain to a fixed scene: "
-                    "flat, boxes, stairs or chair)"
-                )
             key = (clip.body.height_m, clip.body.mass_kg)
             if key not in subjects:
                 h = scenes.get(clip.body)
                 subjects[key] = len(models)
-                models.append(copy.copy(h.model))  # (a snapshot: switching changes h.model)
+                if parts:
+                    xml = scenes_xml(humanoid_xml(clip.body, cfg.mjcf), parts)
+                    models.append(mujoco.MjModel.from_xml_string(xml))
+                else:
+                    models.append(copy.copy(h.model))  # (a snapshot: switching changes h.model)
                 kd_over_kp.append(h.kd_over_kp.copy())
                 if len(models) == 1:
-                    self.index = HumanoidIndex.from_model(h.model)
+                    self.index = HumanoidIndex.from_model(models[0])
                     self._lo_np, self._hi_np = h.lo.copy(), h.hi.copy()
-                    self._z_range = h.z_range
+                    body0 = clip.body
             self._clip_subject.append(subjects[key])
         self._kd_over_kp = kd_over_kp
         self.subject_models = models
         self.mj_model = mjm = copy.copy(models[0])
         mjm.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-        self._hf = None
-        if cfg.terrain not in ("auto", "flat"):
-            hf = rasterize(make_scene(cfg.terrain), cfg.heightfield_cell_m)
-            self._hf = T.TorchHeightField(hf, self.device)
-            self._z_range = (-cfg.blowup_depth_m, hf.max_height + cfg.blowup_height_m)
+        # the slot geoms of each scene; the height map's field and the blow-up height of each
+        # clip's scene
+        self._slots = None
+        if parts:
+            own = [compile_scene(body0, cfg.mjcf, hf, over) for hf, over in parts]
+            self._slots = scene_slots(models[0], parts, own)
+        scene_list = parts if fixed is None else [fixed]
+        fields = [hf for hf, _ in scene_list if hf is not None]
+        has_field = np.array([hf is not None for hf, _ in scene_list], dtype=bool)
+        # (index -1, a flat clip, reads the -1 appended)
+        scene_field = np.append(np.where(has_field, np.cumsum(has_field) - 1, -1), -1)
+        clip_field = scene_field[clip_scene if fixed is None else np.zeros(n_clips, np.int64)]
+        tops = np.append([hf.max_height for hf in fields], 0.0)
+        self._clip_scene_np, self._clip_field_np = clip_scene, clip_field.astype(np.int64)
+        self._clip_z_hi_np = tops[clip_field] + cfg.blowup_height_m
+        self._hf = T.TorchHeightFields(fields, self.device) if fields else None
+        self._has_terrain = bool(fields) or any(over for _, over in scene_list)
         # the arrays that differ between subjects, per subject
         batchable = _batchable_fields()
         self._subject_fields: dict[str, torch.Tensor] = {}
@@ -263,13 +309,12 @@ class WarpTrackingEnv:
     def _alloc_sim(self, nconmax: int, njmax: int) -> None:
         """The warp model (subject arrays batched per world), data, and torch views of it."""
         n, ix = self.num_envs, self.index
+        batched = set(self._subject_fields) | set(SLOT_FIELDS if self._slots else ())
         with wp.ScopedDevice(self.wp_device):
-            self.model = mjw.put_model(
-                self.mj_model, batch_sizes=dict.fromkeys(self._subject_fields, n)
-            )
+            self.model = mjw.put_model(self.mj_model, batch_sizes=dict.fromkeys(batched, n))
             self.data = mjw.make_data(self.mj_model, nworld=n, nconmax=nconmax, njmax=njmax)
         m, d = self.model, self.data
-        self._model_views = {k: wp.to_torch(getattr(m, k)) for k in self._subject_fields}
+        self._model_views = {k: wp.to_torch(getattr(m, k)) for k in batched}
         tt = wp.to_torch
         self._qpos, self._qvel, self._ctrl = tt(d.qpos), tt(d.qvel), tt(d.ctrl)
         self._xpos, self._xmat, self._cvel = tt(d.xpos), tt(d.xmat), tt(d.cvel)
@@ -287,6 +332,19 @@ class WarpTrackingEnv:
         ang = np.setdiff1d(np.arange(self.mj_model.nv), np.arange(rv, rv + 3))
         self._ang = torch.as_tensor(ang, device=dev)
         self._root_z = ix.root_qpos_adr + 2
+        self._clip_field = torch.as_tensor(self._clip_field_np, device=dev)
+        self._clip_z_hi = torch.as_tensor(self._clip_z_hi_np, dtype=torch.float32, device=dev)
+        self._scene_tables = None
+        if self._slots is not None:
+            sl = self._slots
+            # (a clip without objects, scene -1, reads the last rows: every slot parked)
+            scene = np.where(self._clip_scene_np >= 0, self._clip_scene_np, len(sl.xpos) - 1)
+            self._clip_scene = torch.as_tensor(scene, device=dev)
+            self._slot_geoms = torch.as_tensor(sl.geoms, device=dev)
+            self._scene_tables = {k: torch.as_tensor(v, device=dev) for k, v in sl.model.items()}
+            self._scene_xpos = torch.as_tensor(sl.xpos, device=dev)
+            self._scene_xmat = torch.as_tensor(sl.xmat, device=dev)
+            self._geom_xpos, self._geom_xmat = tt(d.geom_xpos), tt(d.geom_xmat)
 
     def _alloc_episodes(self) -> None:
         n, dev, cfg = self.num_envs, self.device, self.cfg
@@ -304,6 +362,8 @@ class WarpTrackingEnv:
         self._good_rot = torch.zeros(n, _NJ, 3, 3, **f32)
         self._good_t = torch.zeros(n, **i64)
         self.termination_dist_m = torch.full((n,), cfg.termination_dist_m, **f32)
+        self._field = torch.full((n,), -1, **i64)  # the height field each world's clip shows
+        self._z_hi = torch.full((n,), cfg.blowup_height_m, **f32)  # highest pelvis allowed, m
         self.blowups = 0
 
     # ------------------------------------------------------------------ state
@@ -334,13 +394,14 @@ class WarpTrackingEnv:
         return torch.stack([pos, vel, w], dim=1), self._xmat[:, b]
 
     def _blown(self) -> torch.Tensor:
-        """``(N,)`` bool: the state is non-finite or beyond the ``blowup_*`` bounds."""
+        """``(N,)`` bool: the state is non-finite or beyond the ``blowup_*`` bounds (the
+        pelvis' height above the top of the world's scene, as on the CPU)."""
         cfg, q, v = self.cfg, self._qpos, self._qvel
         lin = v[:, self._root_lin]
         ok = (lin * lin).sum(dim=1) <= cfg.blowup_lin_vel_mps**2
         ok &= v[:, self._ang].abs().amax(dim=1) <= cfg.blowup_ang_vel_radps
         z = q[:, self._root_z]
-        ok &= (z >= self._z_range[0]) & (z <= self._z_range[1])
+        ok &= (z >= -cfg.blowup_depth_m) & (z <= self._z_hi)
         ok &= torch.isfinite(q).all(dim=1)
         return ~ok
 
@@ -378,8 +439,22 @@ class WarpTrackingEnv:
         row = c.offset[clip] + start
         # the world's subject and state (Humanoid.reset: fresh data, PD targets at the pose)
         subj = c.subject[clip]
-        for name, view in self._model_views.items():
-            view[idx] = self._subject_fields[name][subj].to(view.dtype).reshape(m, *view.shape[1:])
+        for name, table in self._subject_fields.items():
+            view = self._model_views[name]
+            view[idx] = table[subj].to(view.dtype).reshape(m, *view.shape[1:])
+        if self._scene_tables is not None:
+            # the clip's scene: its slot geoms' model rows and poses (envs.warp.scenes)
+            scene, g = self._clip_scene[clip], self._slot_geoms
+            at = (idx[:, None], g[None, :])
+            for name, table in self._scene_tables.items():
+                view = self._model_views[name]
+                view[at] = table[scene].to(view.dtype).reshape(m, g.numel(), *view.shape[2:])
+            self._geom_xpos[at] = self._scene_xpos[scene].to(self._geom_xpos.dtype)
+            self._geom_xmat[at] = (
+                self._scene_xmat[scene].to(self._geom_xmat.dtype).reshape(m, g.numel(), 3, 3)
+            )
+        self._field[idx] = self._clip_field[clip]
+        self._z_hi[idx] = self._clip_z_hi[clip]
         for a in self._clear:
             a[idx] = 0
         self._qpos[idx] = c.qpos[row]
@@ -568,7 +643,7 @@ class WarpTrackingEnv:
         if self._hf is None:
             hm = (-root[:, 2:3]).expand(-1, self._grid.shape[0])
         else:
-            hm = self._hf.around(root[:, :2], h, self._grid) - root[:, 2:3]
+            hm = self._hf.around(root[:, :2], h, self._grid, self._field) - root[:, 2:3]
         return {"sensor": c.sensor[row], "kinematic": kin, "self": self_vec,
                 "environment": hm.contiguous()}  # fmt: skip
 

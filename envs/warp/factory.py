@@ -17,7 +17,6 @@ def make_warp_tracking_env(env_cfg: TrackingEnvConfig, categories: tuple[str, ..
 
     Raises:
         ValueError: No clip matches ``categories``, or settings the env refuses.
-        NotImplementedError: Clips with their own scene objects (``env.terrain = "auto"``).
     """
     ref = select_clips(load_reference(env_cfg.reference), categories)
     return WarpTrackingEnv(env_cfg, ref, num_envs, device=device, seed=seed)

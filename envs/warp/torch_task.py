@@ -13,6 +13,8 @@ angular (rad/s) velocities of the bodies; ``rot (B, J, 3, 3)`` their world rotat
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 
@@ -142,45 +144,60 @@ def amp_frames(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, hinges: torch.Tenso
                      dim=1)  # fmt: skip
 
 
-class TorchHeightField:
-    """:meth:`envs.heightfield.HeightField.sample` on a device: bilinear terrain heights,
-    0 outside the grid.
+class TorchHeightFields:
+    """:meth:`envs.heightfield.HeightField.sample` of several height fields on a device, each
+    batch row reading its own field: bilinear terrain heights, 0 outside a field's grid and on
+    the flat floor.
 
     Args:
-        hf: The height field.
-        device, dtype: Where and how its coefficients are kept.
+        fields: The F height fields.
+        device, dtype: Where and how their coefficients are kept (the cells of every field
+            concatenated, with each field's origin, spacing, size and first cell).
     """
 
-    def __init__(self, hf: HeightField, device: torch.device | str,
+    def __init__(self, fields: Sequence[HeightField], device: torch.device | str,
                  dtype: torch.dtype = torch.float32) -> None:  # fmt: skip
-        h = np.asarray(hf.heights, dtype=np.float64)
-        ny, nx = h.shape
-        a = h[:-1, :-1]
-        coef = np.stack([a, h[:-1, 1:] - a, h[1:, :-1] - a,
-                         h[1:, 1:] - h[1:, :-1] - h[:-1, 1:] + a], axis=-1)  # fmt: skip
-        self.coef = torch.as_tensor(coef.reshape(-1, 4), dtype=dtype, device=device)
-        self.origin = torch.tensor(np.array(hf.origin_xy), dtype=dtype, device=device)
-        self.inv = 1.0 / float(hf.cell_m)
-        self.nx, self.ny = nx, ny
-        self.max_height = float(h.max())
+        if not fields:
+            raise ValueError("TorchHeightFields needs at least one height field")
+        coefs, first = [], [0]
+        for hf in fields:
+            h = np.asarray(hf.heights, dtype=np.float64)
+            a = h[:-1, :-1]
+            coef = np.stack([a, h[:-1, 1:] - a, h[1:, :-1] - a,
+                             h[1:, 1:] - h[1:, :-1] - h[:-1, 1:] + a], axis=-1)  # fmt: skip
+            coefs.append(coef.reshape(-1, 4))
+            first.append(first[-1] + len(coefs[-1]))
+        self.coef = torch.as_tensor(np.concatenate(coefs), dtype=dtype, device=device)
+        f = dict(dtype=dtype, device=device)
+        self.origin = torch.as_tensor(np.array([hf.origin_xy for hf in fields]), **f)  # (F, 2)
+        self.inv = torch.as_tensor([1.0 / float(hf.cell_m) for hf in fields], **f)
+        self.nx = torch.as_tensor([hf.shape[1] for hf in fields], **f)
+        self.ny = torch.as_tensor([hf.shape[0] for hf in fields], **f)
+        self.first = torch.as_tensor(first[:-1], dtype=torch.int64, device=device)
+        self.max_height = np.array([hf.max_height for hf in fields])  # (F,) m, on the host
 
-    def sample(self, xy: torch.Tensor) -> torch.Tensor:
-        """Heights ``(...)`` at world points ``xy (..., 2)``, m."""
-        uv = (xy - self.origin) * self.inv
+    def sample(self, xy: torch.Tensor, field: torch.Tensor) -> torch.Tensor:
+        """Heights ``(B, P)`` at world points ``xy (B, P, 2)``, m, row ``b`` on field
+        ``field[b]`` (``(B,)`` int64; -1: the flat floor)."""
+        k = field.clamp(min=0)
+        inv = self.inv[k][:, None]
+        nx, ny = self.nx[k][:, None], self.ny[k][:, None]
+        uv = (xy - self.origin[k][:, None]) * inv[..., None]
         u, v = uv[..., 0], uv[..., 1]
         # (a non-finite point reads cell 0 and comes out 0: it is outside the grid)
-        iu = torch.nan_to_num(torch.floor(u)).clamp(0.0, self.nx - 2)
-        iv = torch.nan_to_num(torch.floor(v)).clamp(0.0, self.ny - 2)
+        iu = torch.minimum(torch.nan_to_num(torch.floor(u)).clamp(min=0.0), nx - 2)
+        iv = torch.minimum(torch.nan_to_num(torch.floor(v)).clamp(min=0.0), ny - 2)
         fu, fv = u - iu, v - iv
-        k = (iv * (self.nx - 1) + iu).long()
-        c = self.coef[k]  # (..., 4)
+        cell = self.first[k][:, None] + (iv * (nx - 1) + iu).long()
+        c = self.coef[cell]  # (B, P, 4)
         r = c[..., 0] + c[..., 1] * fu + (c[..., 2] + c[..., 3] * fu) * fv
-        inside = (u >= 0.0) & (u <= self.nx - 1) & (v >= 0.0) & (v <= self.ny - 1)
+        inside = (u >= 0.0) & (u <= nx - 1) & (v >= 0.0) & (v <= ny - 1) & (field >= 0)[:, None]
         return torch.where(inside, r, torch.zeros_like(r))
 
-    def around(self, center_xy: torch.Tensor, h: torch.Tensor,
-               grid: torch.Tensor) -> torch.Tensor:  # fmt: skip
+    def around(self, center_xy: torch.Tensor, h: torch.Tensor, grid: torch.Tensor,
+               field: torch.Tensor) -> torch.Tensor:  # fmt: skip
         """:func:`envs.heightfield.sample_heightmap` of B frames: heights ``(B, N)`` at
-        ``center_xy (B, 2) + grid (N, 2) @ rot2.T`` with ``rot2 = h[:, :2, :2]``."""
+        ``center_xy (B, 2) + grid (N, 2) @ rot2.T`` with ``rot2 = h[:, :2, :2]``, on the field
+        of each row (``field (B,)``, -1: the flat floor)."""
         pts = center_xy[:, None, :] + grid[None] @ h[:, :2, :2].transpose(1, 2)
-        return self.sample(pts)
+        return self.sample(pts, field)

@@ -24,8 +24,10 @@ after each rollout it takes the per-clip counts, decays, and its weights go to t
 (:func:`policies.train.episodes_by_category`).
 
 The ``amp.pt`` of a device run keeps a torch generator state, so a run folder is resumed by the
-backend that started it (``config.json`` records ``"backend": "warp"``). What the env does not
-support yet (clips with their own scene objects) it refuses when the stage's env is built.
+backend that started it (``config.json`` records ``"backend": "warp"``). Clips with their own
+scene objects (props) run in the same batch as flat ones (:class:`envs.warp.env.WarpTrackingEnv`
+selects each world's height field and overhang meshes), so the teacher's recipe
+(``configs/policy/teacher.toml``) trains here as on the CPU.
 """
 
 from __future__ import annotations

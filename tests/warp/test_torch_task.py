@@ -94,19 +94,26 @@ def test_amp_frames_equal_numpy(states):
     np.testing.assert_allclose(got.numpy(), want, atol=1e-13)
 
 
-def test_height_field_equals_numpy():
+def test_height_fields_equal_numpy():
+    """Each row samples its own field (two fields of different grids) or the flat floor (-1)."""
     rng = np.random.default_rng(2)
-    hf = HeightField(np.array([-1.0, 0.5]), 0.1, rng.uniform(0, 0.5, size=(12, 17)))
+    fields = [
+        HeightField(np.array([-1.0, 0.5]), 0.1, rng.uniform(0, 0.5, size=(12, 17))),
+        HeightField(np.array([0.3, -1.2]), 0.05, rng.uniform(0, 0.8, size=(30, 21))),
+    ]
     grid = O.heightmap_grid(9, 1.5)
-    centers = rng.uniform(-2.0, 2.5, size=(B, 2))  # partly off the grid: 0 there
+    centers = rng.uniform(-2.0, 2.5, size=(B, 2))  # partly off the grids: 0 there
     yaw = rng.uniform(-np.pi, np.pi, size=B)
     h = np.zeros((B, 3, 3))
     h[:, 0, 0] = h[:, 1, 1] = np.cos(yaw)
     h[:, 1, 0], h[:, 0, 1], h[:, 2, 2] = np.sin(yaw), -np.sin(yaw), 1.0
-    want = np.stack(
-        [sample_heightmap(hf, c, hh[:2, :2], grid) for c, hh in zip(centers, h, strict=True)]
-    )
-    th = T.TorchHeightField(hf, "cpu", torch.float64)
-    got = th.around(_t(centers), _t(h), _t(grid))
+    field = np.arange(B) % 3 - 1  # -1 (flat), 0, 1, -1, ...
+    want = np.stack([sample_heightmap(fields[k] if k >= 0 else None, c, hh[:2, :2], grid)
+                     for c, hh, k in zip(centers, h, field, strict=True)])  # fmt: skip
+    th = T.TorchHeightFields(fields, "cpu", torch.float64)
+    got = th.around(_t(centers), _t(h), _t(grid), torch.as_tensor(field))
     np.testing.assert_allclose(got.numpy(), want, atol=1e-12)
-    assert (want == 0).any() and (want > 0).any()
+    for k in (0, 1):
+        assert (want[field == k] > 0).any() and (want[field == k] == 0).any()
+    assert (want[field == -1] == 0).all()
+    np.testing.assert_array_equal(th.max_height, [f.max_height for f in fields])

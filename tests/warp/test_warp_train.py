@@ -1,7 +1,8 @@
 """PPO + AMP on the device (:class:`policies.warp.train.WarpPolicyTrainer`) end to end on MuJoCo
 Warp's CPU device, on the bundled sample: both stages, the checkpoint resumes, the exported file
 plays in the CPU player, a CPU policy warm-starts a device run with the same actions, and the
-teacher's recipe (hard-clip mining, ``fall_below_reference_m``) trains and resumes.
+teacher's recipe (hard-clip mining, ``fall_below_reference_m``) trains and resumes, also on a
+data set with a clip that has its own scene objects.
 
 ``slow``: MuJoCo Warp compiles its kernels on first use (about a minute on a cold cache); they
 skip where the ``gpu`` extra is absent.
@@ -196,28 +197,57 @@ def test_cli_backend_warp_trains_and_policy_eval_plays_it(tiny_policy_settings, 
     assert main([*train, "--device", "cpu"]) == 2  # --device without --backend warp
 
 
-def test_clips_with_their_own_props_are_refused_naming_the_setting(tmp_path):
-    from envs.tracking_env import SAMPLE_REFERENCE
-    from grip.core.reference import ReferenceSet
+def test_teacher_recipe_trains_on_clips_with_their_own_props(tmp_path):
+    """The teacher's recipe (``env.terrain = "auto"``) on a data set with a props clip (the walk
+    with a 0.3 m block ahead of its last frames, beside the flat run) trains on the device; the
+    env it built shows the block in the height map of the walk's worlds, as the CPU env does,
+    and none in the run's."""
+    import torch
 
+    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+    from envs.warp.factory import make_warp_tracking_env
+    from grip.assets import REPO_ROOT
+    from grip.config import load_config
+    from grip.core.reference import ReferenceSet
+    from policies.config import PolicyRunConfig
+    from policies.warp.train import WarpPolicyTrainer
+
+    cfg = load_config(REPO_ROOT / "configs" / "policy" / "teacher.toml", PolicyRunConfig(),
+                      TEACHER_TINY)  # fmt: skip
+    assert cfg.env.terrain == "auto"
     ref = ReferenceSet.load(SAMPLE_REFERENCE)
     v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.3]])
     f = np.array([[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]])
     clips = [dataclasses.replace(ref.clip(0), objects={"box": (v, f)}), *ref.clips[1:]]
     path = tmp_path / "props.npz"
-    ReferenceSet(clips, ref.sensor_sites, ref.insoles).save(path)
-    cfg = _tiny()
+    props = ReferenceSet(clips, ref.sensor_sites, ref.insoles)
+    props.save(path)
     run = tmp_path / "run"
     _write_config(run, cfg)
     import warp as wp
 
-    from envs.warp.factory import make_warp_tracking_env
-    from policies.warp.train import WarpPolicyTrainer
-
     wp.config.quiet = True
-    tr = WarpPolicyTrainer(cfg, run, path, make_warp_tracking_env)
-    with pytest.raises(NotImplementedError, match=r"own scene objects.*env\.terrain"):
-        tr.train()
+    made = []
+
+    def make(*args, **kwargs):
+        made.append(make_warp_tracking_env(*args, **kwargs))
+        return made[-1]
+
+    tr = WarpPolicyTrainer(cfg, run, path, make)
+    tr.train()
+    assert [h["stage"] for h in tr.history] == ["stage1", "stage1", "stage2"]
+    assert all(np.isfinite(h["reward/imit_pos"]) and h["episodes"] > 0 for h in tr.history)
+    env = made[-1]
+    assert not env.overflowed()
+    starts = ((0, 240), (0, 230), (1, 240), (1, 230))
+    env.reset(torch.ones(env.num_envs, dtype=torch.bool), torch.tensor([c for c, _ in starts]),
+              torch.tensor([s for _, s in starts]))  # fmt: skip
+    hm = env.observe()["environment"].numpy()
+    cpu = GripTrackingEnv(env.cfg, props)
+    for w, (c, s) in enumerate(starts):
+        obs, _ = cpu.reset(options={"clip": c, "start": s})
+        np.testing.assert_allclose(hm[w], obs["environment"], atol=1e-5)
+        assert (np.ptp(hm[w]) > 0.1) if c == 0 else (np.ptp(hm[w]) == 0)
 
 
 TEACHER_TINY = ("ppo.n_envs=4", "ppo.n_steps=8", "ppo.batch_size=16", "ppo.n_epochs=1",
