@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import pytest
 
 from grip.config import ConfigError, load_config
@@ -29,3 +31,23 @@ def test_shipped_default_config_loads():
 
     path = Path(__file__).resolve().parents[1] / "configs" / "kinematics" / "default.toml"
     assert load_config(path, KinematicsRunConfig()).hidden > 0
+
+
+@pytest.mark.parametrize("name", ["default", "finetune", "teacher", "teacher_gpu"])
+def test_policy_recipes_load(name: str) -> None:
+    """Every training recipe of configs/policy loads into valid settings; the GPU teacher is the
+    CPU teacher's task at GRIP's network size and batch."""
+    from grip.cli.paths import load_run_config
+    from policies.config import PolicyRunConfig
+
+    root = Path(__file__).resolve().parents[1] / "configs" / "policy"
+    cfg = load_run_config(root / f"{name}.toml", "policy", PolicyRunConfig(), [])
+    assert cfg.total_timesteps() > 0
+    if name == "teacher_gpu":
+        cpu = load_run_config(root / "teacher.toml", "policy", PolicyRunConfig(), [])
+        assert cfg.ppo.net_arch == (2048, 1536, 1024, 1024, 512, 512)
+        assert (cfg.ppo.n_envs, cfg.ppo.batch_size, cfg.amp.batch_size) == (4096, 32768, 8192)
+        assert cfg.env == cpu.env and cfg.follow == cpu.follow == "truth"
+        for a, b in ((cfg.stage1, cpu.stage1), (cfg.stage2, cpu.stage2)):
+            assert (a.categories, a.mining_mix, a.fall_below_reference_m) == (
+                b.categories, b.mining_mix, b.fall_below_reference_m)  # fmt: skip
