@@ -176,10 +176,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "             action clipped to [-1, 1] (an ensemble: the mean of its members', each\n"
             "             member with its own normaliser). The observation normalisation is\n"
             "             inside the graph; float32 weights; no discriminator, no value network.\n"
-            "             Needs the onnx package (docs/exports.md: running it with onnxruntime)"
+            "             Needs the onnx package (docs/exports.md: running it with onnxruntime)\n"
+            "With --checkpoint, --out is a folder: the run's resume state, packed (below)"
         ),
         epilog="example: grip policy export runs/policy --out runs/policy_fp16.pt\n"
-        "         grip policy export grip/assets/policy_default.pt --out policy.onnx",
+        "         grip policy export grip/assets/policy_default.pt --out policy.onnx\n"
+        "         grip policy export runs/teacher --checkpoint --out experiments/resume/T1",
     )
     x.add_argument("run", type=Path, metavar="RUN|POLICY",
                    help="'grip policy train' run folder; with --out FILE.onnx also a policy "
@@ -191,6 +193,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="weights of the policy, value and discriminator networks of a .pt: fp16 "
                    "(default), fp32, or int8 with a float32 scale per row (about a third of the "
                    "fp16 file; what an ensemble stores); an ONNX graph is fp32")  # fmt: skip
+    x.add_argument("--checkpoint", action="store_true",
+                   help="instead: write the run's resume state (config.json and checkpoint/) to "
+                   "the folder --out with both optimisers' Adam moments in bfloat16 and "
+                   "model.zip deflated (0.6 of the size; weights, normaliser, counters, miner "
+                   "and history exact): what a long run commits between sessions; copy it to a "
+                   "run folder and rerun 'grip policy train' to resume")  # fmt: skip
     x.set_defaults(func=cmd_export)
 
     c = psub.add_parser(
@@ -227,25 +235,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          "with a scale per row by default, the others as the files store "
                          "them")  # fmt: skip
     c.set_defaults(func=cmd_combine)
-
-    k = psub.add_parser(
-        "pack",
-        help="write a run's resume state small enough to commit between sessions",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=(
-            "Write config.json and checkpoint/ of a 'grip policy train' run to --out with the\n"
-            "Adam moments of the policy's and the discriminator's optimisers in bfloat16 and\n"
-            "model.zip deflated (about 0.6 of the size). Weights, normaliser, counters, the\n"
-            "miner's state and the history are kept exactly; the run resumes from the packed\n"
-            "folder with the same command (copy it to the run folder first), continuing as\n"
-            "from the original up to the moments' rounding. Nothing in the run is unpickled."
-        ),
-        epilog="example: grip policy pack runs/teacher --out experiments/resume/teacher_T1",
-    )
-    k.add_argument("run", type=Path, help="'grip policy train' run folder")
-    k.add_argument("--out", required=True, type=Path, metavar="DIR",
-                   help="folder to write (its checkpoint/ is replaced atomically)")
-    k.set_defaults(func=cmd_pack)
 
     from grip.cli import distill
 
@@ -374,7 +363,7 @@ def _warp_settings(cfg, device: str):
     return dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, device=device))
 
 
-def cmd_pack(args: argparse.Namespace) -> int:
+def _export_checkpoint(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from policies.checkpoint import pack_checkpoint
 
@@ -393,6 +382,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from policies.runner import export_policy
 
+    if args.checkpoint:
+        if args.precision is not None:
+            raise CliError("--precision is for a policy file, not with --checkpoint")
+        return _export_checkpoint(args)
     onnx = args.out.suffix.lower() == ".onnx"
     if not args.run.exists():
         raise CliError(f"{args.run}: no such run folder or policy file")

@@ -1,5 +1,6 @@
-"""``grip policy pack``: a run's resume state with its optimiser moments in bfloat16, which a
-run resumes from as from the original (up to the moments' rounding), never unpickling."""
+"""``grip policy export RUN --checkpoint``: a run's resume state with its optimiser moments in
+bfloat16, which a run resumes from as from the original (up to the moments' rounding), never
+unpickling."""
 
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ def trained(tmp_path_factory):
 def test_pack_halves_the_moments_and_keeps_weights_counters_and_state(trained, tmp_path, capsys):
     _, run = trained
     out = tmp_path / "packed"
-    assert main(["policy", "pack", str(run), "--out", str(out)]) == 0
+    assert main(["policy", "export", str(run), "--checkpoint", "--out", str(out)]) == 0
     assert str(out) in capsys.readouterr().out
     orig, packed = (read_ppo_zip(d / "checkpoint/model.zip") for d in (run, out))
     assert packed.counters == orig.counters
@@ -63,7 +64,7 @@ def test_pack_halves_the_moments_and_keeps_weights_counters_and_state(trained, t
 
 def test_a_packed_run_resumes_like_the_original(trained, tmp_path):
     cfg, run = trained
-    main(["policy", "pack", str(run), "--out", str(tmp_path / "packed")])
+    main(["policy", "export", str(run), "--checkpoint", "--out", str(tmp_path / "packed")])
     longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=128))
     got = {}
     for how, src in (("orig", run), ("packed", tmp_path / "packed")):
@@ -85,8 +86,12 @@ def test_a_packed_run_resumes_like_the_original(trained, tmp_path):
 def test_pack_refuses_a_folder_without_a_checkpoint_and_the_run_itself(trained, tmp_path, capsys):
     _, run = trained
     (tmp_path / "empty").mkdir()
-    assert main(["policy", "pack", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["policy", "export", str(tmp_path / "empty"), "--checkpoint", "--out",
+                 str(tmp_path / "o")]) == 2
     assert "empty" in capsys.readouterr().err
-    assert main(["policy", "pack", str(run), "--out", str(run)]) == 2
+    assert main(["policy", "export", str(run), "--checkpoint", "--out", str(run)]) == 2
     assert "is the run itself" in capsys.readouterr().err
     assert (run / "checkpoint/model.zip").is_file()
+    assert main(["policy", "export", str(run), "--checkpoint", "--precision", "fp32", "--out",
+                 str(tmp_path / "p")]) == 2  # fmt: skip
+    assert "--precision" in capsys.readouterr().err and not (tmp_path / "p").exists()
