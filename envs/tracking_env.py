@@ -26,6 +26,7 @@ from envs import rewards as R
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
+from grip.core.reference_sets import clip_probabilities
 from grip.sim.humanoid import ROW, ROW_DIM, Humanoid, body_state
 from grip.task import amp as A
 from grip.task import observations as O
@@ -171,14 +172,7 @@ class GripTrackingEnv(gym.Env):
         """Random starts pick clip ``i`` with probability proportional to its length times
         ``weights[i]`` from the next reset on (all ones: by length, the default). The trainer's
         hard-clip mining (:class:`policies.mining.ClipFailureStats`) sets them."""
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != self._clip_len.shape or not np.isfinite(w).all() or (w < 0).any():
-            raise ValueError(f"clip weights must be {self._clip_len.size} finite values >= 0, "
-                             f"got shape {w.shape}")  # fmt: skip
-        p = self._clip_len * w
-        if p.sum() <= 0:
-            raise ValueError("clip weights are all zero: no clip could be picked")
-        self._clip_p = p / p.sum()
+        self._clip_p = clip_probabilities(self._clip_len, weights)
 
     # ------------------------------------------------------------------ models
     def _humanoid_for(self, clip: ReferenceClip, i: int) -> Humanoid:

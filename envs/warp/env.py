@@ -57,6 +57,7 @@ from envs.warp import torch_task as T
 from envs.warp.scenes import SLOT_FIELDS, scene_slots, scenes_xml
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceSource
+from grip.core.reference_sets import clip_probabilities
 from grip.sim.model import HumanoidIndex
 from grip.task import amp as A
 from grip.task import observations as O
@@ -489,14 +490,8 @@ class WarpTrackingEnv:
             weights: ``(C,)`` finite values >= 0, one per clip, not all zero (host values:
                 checked on the host, then copied to the device once).
         """
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != self._clip_len.shape or not np.isfinite(w).all() or (w < 0).any():
-            raise ValueError(f"clip weights must be {self._clip_len.size} finite values >= 0, "
-                             f"got shape {w.shape}")  # fmt: skip
-        p = self._clip_len * w
-        if p.sum() <= 0:
-            raise ValueError("clip weights are all zero: no clip could be picked")
-        self._clip_p = torch.as_tensor(p / p.sum(), device=self.device)
+        self._clip_p = torch.as_tensor(clip_probabilities(self._clip_len, weights),
+                                       device=self.device)  # fmt: skip
 
     def set_termination_dist(self, dist_m: float) -> None:
         """Early-termination distance of every world from the next step on (m, 0 = off)."""

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import fnmatch
 
+import numpy as np
+
 from grip.core.reference import ReferenceSet
 
 _REFERENCE: dict[str, ReferenceSet] = {}
@@ -39,3 +41,20 @@ def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
         raise ValueError(f"{ref.source}: no clip matches categories {list(patterns)} "
                          f"(categories present: {cats})")  # fmt: skip
     return ReferenceSet(clips, ref.sensor_sites, ref.insoles, ref.source)
+
+
+def clip_probabilities(lengths: np.ndarray, weights) -> np.ndarray:
+    """The probability of starting an episode on each clip: its length times its weight,
+    normalised (the environments' ``set_clip_weights``; hard-clip mining's weights).
+
+    Raises:
+        ValueError: ``weights`` is not one finite value >= 0 per clip, or all are zero.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != lengths.shape or not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError(f"clip weights must be {lengths.size} finite values >= 0, "
+                         f"got shape {w.shape}")  # fmt: skip
+    p = lengths * w
+    if p.sum() <= 0:
+        raise ValueError("clip weights are all zero: no clip could be picked")
+    return p / p.sum()
