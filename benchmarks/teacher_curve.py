@@ -5,7 +5,8 @@ checkpoint (no simulation): what docs/teacher_student.md reports for the privile
   without a fall or the distance termination), MPJPE against the reference and episode length
   over the decisions trained, smoothed over ``--window`` rollouts, one colour per stage.
 * Per category: the hard-clip miner's decayed episode and failure counts (``state.json``'s
-  ``mining``: the last few hundred rollouts), summed over each category's clips.
+  ``mining``: the last few hundred rollouts), summed over each category's clips (with
+  ``--by-source``, over each category's clips of one source).
 * Per category over time: training success of the episodes of each category that ended in
   each block of ``--block`` decisions (rows' ``by_category`` counts, recorded by runs since
   2026-12-04), with each rising category's log-linear projection to ``--target``.
@@ -37,10 +38,18 @@ def _smooth(x: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([head, np.convolve(x, k, mode="valid")])
 
 
-def _categories(data: Path) -> dict[str, str]:
-    """Clip id -> category from a dataset's manifest."""
+def _categories(data: Path, by_source: bool = False) -> dict[str, str]:
+    """Clip id -> category from a dataset's manifest; with ``by_source``, ``"category
+    source"``, the source being the clip's split group without its last part (the folder of
+    people or styles: ``bandai_namco/dataset-1``, ``cmu``, ``hdm05``)."""
     man = json.loads((data / "manifest.json").read_text())
-    return {c["clip_id"]: c.get("category") or "unknown" for c in man["clips"]}
+    out = {}
+    for c in man["clips"]:
+        cat = c.get("category") or "unknown"
+        if by_source:
+            cat = f"{cat} {str(c.get('group') or c['clip_id']).rsplit('/', 1)[0]}"
+        out[c["clip_id"]] = cat
+    return out
 
 
 def _clip_id(name: str) -> str:
@@ -96,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="decisions per block of the per-category curves")
     ap.add_argument("--min-episodes", type=int, default=20,
                     help="episodes a block needs to count in a category's curve")
+    ap.add_argument("--by-source", action="store_true",
+                    help="the miner's failure rates per category and source")
     ap.add_argument("--png", type=Path, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -132,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     # per category, from the miner's decayed counts
     mining = state.get("mining")
     if mining and args.data is not None:
-        cats = _categories(args.data)
+        cats = _categories(args.data, args.by_source)
         ep, fa = defaultdict(float), defaultdict(float)
         for name, e, f in zip(mining["names"], mining["episodes"], mining["fails"], strict=True):
             c = cats.get(_clip_id(name), "unknown")

@@ -676,3 +676,19 @@ def test_teacher_curve_projects_rising_categories_only(tmp_path, capsys):
     assert "dance" in capsys.readouterr().out
     assert json.loads((tmp_path / "c.json").read_text())["category_curves"]["walk"]["success"]
     assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_teacher_curve_groups_categories_by_source(tmp_path):
+    from tests.cli.test_data_cli import _benchmark
+
+    tc = _benchmark("teacher_curve")
+    clips = [{"clip_id": "bandai_namco/dataset-1_walk_x_001", "category": "walk",
+              "group": "bandai_namco/dataset-1/x"},
+             {"clip_id": "cmu/14_01", "category": "walk", "group": "cmu/14"},
+             {"clip_id": "cmu/14_02", "category": None, "group": None}]  # fmt: skip
+    (tmp_path / "manifest.json").write_text(json.dumps({"clips": clips}))
+    assert tc._categories(tmp_path) == {"bandai_namco/dataset-1_walk_x_001": "walk",
+                                        "cmu/14_01": "walk", "cmu/14_02": "unknown"}
+    assert tc._categories(tmp_path, by_source=True) == {
+        "bandai_namco/dataset-1_walk_x_001": "walk bandai_namco/dataset-1",
+        "cmu/14_01": "walk cmu", "cmu/14_02": "unknown cmu"}  # fmt: skip
