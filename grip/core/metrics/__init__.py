@@ -13,13 +13,26 @@ ship); foot penetration is measured on the body model's sole corner points inste
 vertices (:func:`grip.core.fk.sole_points`).
 
 Modules: :mod:`.pose` (joint position/rotation errors, jitter), :mod:`.sip` (SIP-masked pose
-metrics), :mod:`.physical` (feet, GRF, ZMP), :mod:`.translation` (root translation),
+metrics), :mod:`.physical` (feet, GRF, ZMP), :mod:`.translation` (root translation), :mod:`.pace`
+(horizontal distance of a simulated pelvis to the one it follows and to the truth),
 :mod:`.aggregate` (success rate, segment means). Import the names from this package.
 """
 
 from __future__ import annotations
 
 from grip.core.metrics.aggregate import success_rate, summarize
+from grip.core.metrics.pace import (
+    PACE_KEYS,
+    PACE_TIMES_S,
+    ROOT_GT_KEYS,
+    Gap,
+    Pace,
+    distance_at,
+    drift_rate,
+    horizontal_distance,
+    horizontal_gap,
+    measure_pace,
+)
 from grip.core.metrics.physical import (
     contacts_from_motion,
     foot_penetration,
@@ -62,18 +75,28 @@ from grip.core.metrics.translation import (
 )
 
 __all__ = [
+    "PACE_KEYS",
+    "PACE_TIMES_S",
+    "ROOT_GT_KEYS",
     "SIP_EVAL_JOINTS",
     "SIP_MASKED_JOINTS",
+    "Gap",
+    "Pace",
     "TranslationErrorCurve",
     "acceleration_error",
     "angular_error_masked",
     "contacts_from_motion",
     "cumulative_translation_error",
+    "distance_at",
+    "drift_rate",
     "foot_penetration",
     "foot_sliding",
     "global_to_local_rot",
+    "horizontal_distance",
+    "horizontal_gap",
     "jitter",
     "local_to_global_rot",
+    "measure_pace",
     "mpjpe",
     "mpjre",
     "mpjre_local",
