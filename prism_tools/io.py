@@ -3,10 +3,11 @@
 Two formats:
 
 ``.pkl``
-    Real PRISM pickles (one dict per take). They are read with :class:`RestrictedUnpickler`,
-    whose ``find_class`` admits only the globals needed to rebuild numpy arrays, dtypes and
-    scalars and builtin containers/scalars; anything else (``os.system``, ``builtins.eval``, any
-    class) is refused before it can be called. Written with pickle protocol 4.
+    Real PRISM pickles (one dict per take). They are read with :class:`RestrictedUnpickler`
+    (:mod:`grip.core.safe_pickle`), whose ``find_class`` admits only the globals needed to
+    rebuild numpy arrays, dtypes and scalars and builtin containers/scalars; anything else
+    (``os.system``, ``builtins.eval``, any class) is refused before it can be called. Written
+    with pickle protocol 4.
 ``.npz``
     This project's pickle-free variant: every array of the PRISM dict is stored under its
     slash-joined key path (``"imu/L_Wrist/ori_world"``) and everything else (strings, numbers,
@@ -29,13 +30,10 @@ existing file untouched and no temporary file behind.
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
-import math
 import os
 import pickle
 import re
-from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any, Literal
@@ -49,9 +47,9 @@ from grip.core.limits import (
     active_limits,
     check_file_size,
     check_npz,
-    check_tree,
     safe_json_loads,
 )
+from grip.core.safe_pickle import RefusedGlobal, RestrictedUnpickler, restricted_loads
 from prism_tools.errors import RecordingError
 from prism_tools.gaps import fill_gaps as _fill_gaps
 from prism_tools.prism_dict import recording_from_prism_dict
@@ -78,164 +76,6 @@ _ARRAY_MARKER = "__ndarray__"
 _PICKLE_PROTOCOL = 4
 
 
-def _numpy_globals() -> dict[tuple[str, str], Any]:
-    """The globals a pickle of numpy arrays/dtypes/scalars references, old and new spellings."""
-    try:
-        from numpy._core import multiarray, numeric
-    except ImportError:  # numpy < 2
-        from numpy.core import multiarray, numeric  # type: ignore[no-redef]
-
-    out: dict[tuple[str, str], Any] = {
-        ("numpy", "ndarray"): np.ndarray,
-        ("numpy", "dtype"): np.dtype,
-    }
-    # numpy 2.x writes numpy._core.*, numpy 1.x wrote numpy.core.*: resolve both to the objects
-    # above without importing the deprecated numpy.core shim.
-    for pkg in ("numpy._core", "numpy.core"):
-        out[(f"{pkg}.multiarray", "_reconstruct")] = multiarray._reconstruct
-        out[(f"{pkg}.multiarray", "scalar")] = multiarray.scalar
-        out[(f"{pkg}.numeric", "_frombuffer")] = numeric._frombuffer
-    return out
-
-
-_BUILTIN_NAMES = (
-    "dict", "list", "tuple", "set", "frozenset", "bytearray", "bytes", "str", "int", "float",
-    "complex", "bool", "slice", "range",
-)  # fmt: skip
-
-
-def _allowed_globals(limits: InputLimits) -> dict[tuple[str, str], Any]:
-    """The allow-list, each callable wrapped so that what it would build is bounded first."""
-    import builtins
-
-    out: dict[tuple[str, str], Any] = {}
-    for key, obj in _numpy_globals().items():
-        if key[1] == "_reconstruct":
-            obj = _bounded_reconstruct(limits)
-        elif key == ("numpy", "ndarray"):
-            obj = _bounded_ndarray(limits)
-        out[key] = obj
-    for name in _BUILTIN_NAMES:
-        wrapped = _bounded_builtin(getattr(builtins, name), limits)
-        out[("builtins", name)] = wrapped
-        out[("__builtin__", name)] = wrapped  # protocol 0-2 spelling
-    out[("__builtin__", "xrange")] = out[("builtins", "range")]
-    out[("collections", "OrderedDict")] = _bounded_builtin(OrderedDict, limits)
-    # Protocols 0-2 encode bytes (the raw data of arrays) as _codecs.encode(str, "latin1").
-    out[("_codecs", "encode")] = _latin1_encode
-    return out
-
-
-def _size_of_arg(arg: Any) -> int:
-    """Number of items ``arg`` would produce when iterated (0 for scalars)."""
-    if isinstance(arg, range):
-        try:
-            return len(arg)
-        except OverflowError:
-            return 2**63
-    if isinstance(arg, str | bytes | bytearray | list | tuple | dict | set | frozenset):
-        return len(arg)
-    return 0
-
-
-def _bounded_builtin(cls: type, limits: InputLimits) -> Callable[..., Any]:
-    """``cls`` wrapped: refuses sizes (``bytearray(10**10)``) and ranges above the limits."""
-
-    def build(*args: Any) -> Any:
-        for arg in args:
-            if cls in (bytes, bytearray) and isinstance(arg, int) and not isinstance(arg, bool):
-                limits.check("max_array_bytes", arg, f"pickled {cls.__name__}({arg})", " bytes")
-            limits.check("max_elements", _size_of_arg(arg),
-                         f"items of a pickled {cls.__name__}")  # fmt: skip
-        return cls(*args)
-
-    build.__name__ = build.__qualname__ = cls.__name__
-    return build
-
-
-def _array_nbytes(shape: Any, dtype: Any) -> int:
-    dims = (shape,) if isinstance(shape, int) else tuple(shape)
-    if not all(isinstance(d, int | np.integer) and d >= 0 for d in dims):
-        raise pickle.UnpicklingError(f"bad array shape {shape!r}")
-    return math.prod(int(d) for d in dims) * np.dtype(dtype).itemsize
-
-
-def _bounded_reconstruct(limits: InputLimits) -> Callable[..., Any]:
-    """numpy's ``_reconstruct(ndarray, shape, dtype)`` with the array size bounded."""
-    from numpy._core.multiarray import _reconstruct
-
-    def reconstruct(subtype: Any, shape: Any, dtype: Any) -> Any:
-        if subtype is not np.ndarray and getattr(subtype, "_grip_ndarray", False) is not True:
-            raise pickle.UnpicklingError("numpy _reconstruct of a class other than ndarray")
-        limits.check("max_array_bytes", _array_nbytes(shape, dtype),
-                     f"pickled array of shape {shape!r}", " bytes")  # fmt: skip
-        return _reconstruct(np.ndarray, shape, dtype)
-
-    return reconstruct
-
-
-def _bounded_ndarray(limits: InputLimits) -> Callable[..., Any]:
-    """``numpy.ndarray(shape, dtype=float, ...)`` with the array size bounded."""
-
-    def ndarray(shape: Any, dtype: Any = float, *args: Any) -> np.ndarray:
-        limits.check("max_array_bytes", _array_nbytes(shape, dtype),
-                     f"pickled ndarray of shape {shape!r}", " bytes")  # fmt: skip
-        return np.ndarray(shape, dtype, *args)
-
-    ndarray._grip_ndarray = True  # type: ignore[attr-defined]
-    return ndarray
-
-
-def _latin1_encode(text: Any, encoding: str = "utf-8", errors: str = "strict") -> bytes:
-    """``_codecs.encode`` as protocols 0-2 use it (str -> latin-1 bytes), nothing else."""
-    if not isinstance(text, str) or str(encoding).lower().replace("_", "-") not in (
-        "latin1", "latin-1", "iso-8859-1",
-    ):  # fmt: skip
-        raise pickle.UnpicklingError(
-            f"_codecs.encode with encoding {encoding!r} (only latin1 str -> bytes is allowed)"
-        )
-    return text.encode("latin-1", errors)
-
-
-class _RefusedGlobal(pickle.UnpicklingError):
-    """A pickle referenced a global outside the allow-list."""
-
-    def __init__(self, module: str, name: str) -> None:
-        super().__init__(f"{module}.{name}")
-        self.qualname = f"{module}.{name}"
-
-
-class RestrictedUnpickler(pickle.Unpickler):
-    """An unpickler that can rebuild numpy arrays and builtin containers, and nothing else.
-
-    ``find_class`` looks the requested ``(module, name)`` up in a fixed allow-list of already
-    imported objects (it never imports a module); anything else raises before it can be called.
-    The allowed callables are wrapped so that an array, ``bytes``/``bytearray`` or container
-    larger than ``limits`` allows is refused before it is built (a 76-byte pickle cannot ask for
-    ``bytearray(5_000_000_000)``), and ``_codecs.encode`` accepts only latin-1. Persistent ids
-    are refused too.
-
-    Args:
-        file: Binary file object to read from.
-        limits: Size limits; default :func:`grip.core.limits.active_limits`.
-        **kwargs: Passed to :class:`pickle.Unpickler` (``encoding``, ...).
-    """
-
-    def __init__(self, file: IO[bytes], *, limits: InputLimits | None = None,
-                 **kwargs: Any) -> None:  # fmt: skip
-        super().__init__(file, **kwargs)
-        self._allowed = _allowed_globals(limits or active_limits())
-
-    def find_class(self, module: str, name: str) -> Any:
-        try:
-            return self._allowed[(module, name)]
-        except KeyError:
-            raise _RefusedGlobal(module, name) from None
-
-    def persistent_load(self, pid: Any) -> Any:
-        raise pickle.UnpicklingError("persistent ids are not allowed")
-
-
 def _format_of(path: Path, fmt: str | None) -> Format:
     suffix_fmt = _SUFFIX_FORMATS.get(path.suffix.lower())
     if fmt is None:
@@ -257,13 +97,8 @@ def _read_pickle(path: Path, limits: InputLimits) -> Any:
         check_file_size(path, limits)
         # Read the (bounded) file first: a length field of a truncated pickle then cannot make
         # the unpickler allocate what the file does not hold.
-        data = path.read_bytes()
-        _check_opcodes(data)
-        obj = RestrictedUnpickler(io.BytesIO(data), limits=limits, encoding="latin1").load()
-        del data
-        check_tree(obj, limits, "pickle")
-        return obj
-    except _RefusedGlobal as e:
+        return restricted_loads(path.read_bytes(), limits, "pickle")
+    except RefusedGlobal as e:
         raise RecordingError(
             f"{path}: refused to unpickle global {e.qualname!r}: only numpy arrays/dtypes/scalars "
             "and builtin containers are allowed (is this file a PRISM recording?)"
@@ -276,27 +111,6 @@ def _read_pickle(path: Path, limits: InputLimits) -> Any:
         raise RecordingError(
             f"{path}: corrupt or truncated pickle ({type(e).__name__}: {_short(e)})"
         ) from None
-
-
-_MEMO_PUTS = frozenset({"PUT", "BINPUT", "LONG_BINPUT"})
-
-
-def _check_opcodes(data: bytes) -> None:
-    """Scan the pickle's opcodes before running any of them.
-
-    A memo slot is an index into an array the C unpickler grows to that size: one
-    ``LONG_BINPUT 499103675`` in a damaged file makes it allocate and clear 4 GB. A well-formed
-    pickle never stores to a slot beyond the number of opcodes before it, so such a file is
-    refused here. Unknown opcodes (a corrupt file) end the scan with ``ValueError``.
-    """
-    import pickletools
-    import warnings
-
-    with warnings.catch_warnings():  # (protocol-0 strings of a damaged file warn while decoded)
-        warnings.simplefilter("ignore")
-        for n, (op, arg, _pos) in enumerate(pickletools.genops(data)):
-            if op.name in _MEMO_PUTS and isinstance(arg, int) and arg > n:
-                raise pickle.UnpicklingError(f"memo slot {arg} at opcode {n} (a damaged pickle)")
 
 
 def _short(e: BaseException) -> str:
@@ -466,9 +280,7 @@ def _recording_from_dict(d: dict[str, Any], path: Path, force_unit: ForceUnit, f
     if fill_gaps > 0:
         d, filled = _fill_gaps(d, fill_gaps, source=str(path))
     try:
-        rec = recording_from_prism_dict(
-            d, source=str(path), force_unit=force_unit, limits=limits
-        )
+        rec = recording_from_prism_dict(d, source=str(path), force_unit=force_unit, limits=limits)
     except RecordingError as e:
         if fill_gaps > 0 and "non-finite" in str(e):
             raise RecordingError(
