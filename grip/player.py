@@ -204,6 +204,7 @@ class Player:
         self.est, self.name, self.fps = est, name, float(fps)
         h.reset(start.qpos, start.qvel)
         self._root_offset = start.qpos[:3] - est.est_root_pos[0]
+        self._ref_offset = self._root_offset.copy()  # (recoveries move _root_offset, not this)
         self._frames.update(est, h.kd_over_kp, self._feedforward)
         if self._amp is not None:
             self._amp.reset(start.amp[None])
@@ -392,7 +393,9 @@ class Player:
         return self.done
 
     def reconstruction(self, ms_per_frame: float = float("nan")) -> Reconstruction:
-        """The frames played so far (method ``"grip"``)."""
+        """The frames played so far (method ``"grip"``); ``ref_root_pos``: the estimate's
+        integrated pelvis where the episode started it (what the policy follows until a
+        recovery re-anchors it on the humanoid)."""
         tr, last = self.trace, self.last
         sl = slice(0, last + 1)
         return Reconstruction(
@@ -400,6 +403,7 @@ class Player:
             joint_pos=tr.pos[sl].copy(), global_rot=tr.rot[sl].copy(), grf=tr.grf[sl].copy(),
             cop=tr.cop[sl].copy(), torques=tr.torques[sl].copy(),
             contacts=tr.contacts[sl].copy(),
+            ref_root_pos=self.est.est_root_pos[sl] + self._ref_offset,
             falls=np.minimum(np.array(self.falls, dtype=np.int64).reshape(-1, 2), last),
             ms_per_frame=ms_per_frame,
             notes={"blowups": self.blowups, "blowup_frames": list(self.blowup_frames),

@@ -20,6 +20,9 @@ cop                 (T, 2, 3)        centre of pressure of each foot (world), m;
 torques             (T, 69)          joint torques, N m, :func:`grip.core.mjcf.hinge_names` order
 contacts            (T, 2)           left, right foot in contact (bool)
 residual            (T, 6)           residual root force (N, world) and torque (N m, root frame)
+ref_root_pos        (T, 3)           the pelvis the method followed (GRIP: the kinematic
+                                     estimate's, integrated from its velocity, where the episode
+                                     started it; not moved by fall recoveries), world, m
 falls               (K, 2)           per fall event: [first replaced frame, detection frame]
 ==================  ===============  ==========================================================
 """
@@ -53,8 +56,9 @@ _ARRAYS: dict[str, tuple[int, ...]] = {
     "torques": (N_HINGES,),
     "contacts": (2,),
     "residual": (6,),
+    "ref_root_pos": (3,),
 }
-_OPTIONAL = ("grf", "cop", "torques", "contacts", "residual")
+_OPTIONAL = ("grf", "cop", "torques", "contacts", "residual", "ref_root_pos")
 
 
 class ReconstructionError(ValueError):
@@ -95,6 +99,8 @@ class Reconstruction(PoseTrack):
         joint_pos, global_rot: The motion (required).
         grf, cop, torques, contacts, residual: Physical quantities, ``None`` if the method has
             none.
+        ref_root_pos: ``(T, 3)`` the pelvis a tracking method followed (world, m; the pace
+            metrics of :mod:`grip.core.metrics.pace`), ``None`` for the others.
         falls: ``(K, 2)`` int fall events ``[first replaced frame, detection frame]``.
         ms_per_frame: Wall time the method spent per frame (0 if not measured).
         notes: Free-form facts about the run (solver failures, repaired frames, ...).
@@ -110,6 +116,7 @@ class Reconstruction(PoseTrack):
     torques: np.ndarray | None = None
     contacts: np.ndarray | None = None
     residual: np.ndarray | None = None
+    ref_root_pos: np.ndarray | None = None
     falls: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
     ms_per_frame: float = 0.0
     notes: dict = field(default_factory=dict)

@@ -21,12 +21,18 @@ def _rec(t: int = 5, **kw) -> Reconstruction:
 
 
 def test_round_trip_keeps_every_array(tmp_path) -> None:
+    ref = np.arange(15.0).reshape(5, 3)
     r = _rec(grf=np.ones((5, 2, 3)), contacts=np.ones((5, 2), bool), torques=np.zeros((5, 69)),
-             falls=[[1, 3]], ms_per_frame=2.5, notes={"qp_failures": 0})  # fmt: skip
+             falls=[[1, 3]], ms_per_frame=2.5, notes={"qp_failures": 0},
+             ref_root_pos=ref)  # fmt: skip
     r.save(tmp_path / "r.npz")
     back = Reconstruction.load(tmp_path / "r.npz")
     np.testing.assert_array_equal(back.joint_pos, r.joint_pos)
     np.testing.assert_array_equal(back.grf, r.grf)
+    np.testing.assert_array_equal(back.ref_root_pos, ref)
+    np.testing.assert_array_equal(back.slice_frames(1, 3).ref_root_pos, ref[1:3])
+    _rec().save(tmp_path / "bare.npz")  # a method that follows nothing has none
+    assert Reconstruction.load(tmp_path / "bare.npz").ref_root_pos is None
     assert back.contacts.dtype == bool and back.cop is None and back.residual is None
     assert back.falls.tolist() == [[1, 3]] and back.fell
     assert back.ms_per_frame == 2.5 and back.notes == {"qp_failures": 0}
@@ -43,6 +49,7 @@ def test_slice_shifts_fall_events() -> None:
 @pytest.mark.parametrize("kw, match", [
     ({"grf": np.zeros((4, 2, 3))}, "grf has shape"),
     ({"falls": [[3, 9]]}, "fall events"),
+    ({"ref_root_pos": np.zeros((5, 2))}, "ref_root_pos has shape"),
 ])  # fmt: skip
 def test_bad_arrays_are_named(kw, match) -> None:
     with pytest.raises(ReconstructionError, match=match):
