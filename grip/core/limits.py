@@ -20,6 +20,7 @@ numpy and stdlib only.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import os
@@ -42,6 +43,7 @@ __all__ = [
     "check_file_size",
     "check_npz",
     "check_tree",
+    "check_zip",
     "limit_help",
     "safe_json_loads",
     "set_active_limits",
@@ -69,7 +71,9 @@ class InputLimits:
         max_file_bytes: Largest file read, bytes (2 GiB).
         max_array_bytes: Largest single array (npz member, unpickled array or bytes), bytes,
             decompressed (512 MiB).
-        max_total_bytes: Largest sum of the arrays of one file, bytes, decompressed (4 GiB).
+        max_total_bytes: Largest sum of what one file expands to, bytes, decompressed: its
+            arrays, the members of a zip (npz, torch file, ``model.zip``), everything a pickle
+            asks to build (1 GiB: a 20-minute PRISM take holds about 0.2 GiB).
         max_elements: Most items of one container (list, tuple, set, dict, range) built while
             unpickling, and most containers walked in one file.
         max_depth: Deepest nesting of containers (pickle) or JSON values.
@@ -82,6 +86,10 @@ class InputLimits:
         max_typical_vel_mps: Largest accepted median speed of a stream, m/s (mm/s: ~1,000x).
         max_force_bw: Largest accepted insole force, body weights.
         max_position_m: Largest accepted position magnitude or span of a trajectory, metres.
+        max_line_bytes: Longest line of a text export (device CSVs), bytes (1 MiB).
+        max_model_params: Most parameters of one network that a model file (KinematicsNet
+            checkpoint, baseline, policy file, run folder) may declare (100 M: GRIP's policy at
+            full scale has 9.2 M).
     """
 
     min_fps: float = 1.0
@@ -92,7 +100,7 @@ class InputLimits:
     max_frame_joints: float = 10_000_000
     max_file_bytes: float = 2 * _GIB
     max_array_bytes: float = 512 * _MIB
-    max_total_bytes: float = 4 * _GIB
+    max_total_bytes: float = 1 * _GIB
     max_elements: float = 10_000_000
     max_depth: float = 64
     max_int_digits: float = 100
@@ -102,6 +110,8 @@ class InputLimits:
     max_typical_vel_mps: float = 50.0
     max_force_bw: float = 30.0
     max_position_m: float = 1000.0
+    max_line_bytes: float = 1 * _MIB
+    max_model_params: float = 100_000_000
 
     def __post_init__(self) -> None:
         check_fields(self, lambda v: (not isinstance(v, bool) and isinstance(v, int | float)
@@ -274,6 +284,42 @@ def check_file_size(path: str | os.PathLike, limits: InputLimits) -> int:
     return size
 
 
+def check_zip(source: str | os.PathLike | bytes | Any, limits: InputLimits,
+              what: str = "zip") -> list[zipfile.ZipInfo]:  # fmt: skip
+    """The members of a zip (an npz, a torch file, a ``model.zip``) with the sizes they declare
+    checked before any is decompressed (a 2 MB zip of deflated zeros expands to gigabytes).
+
+    Python's :mod:`zipfile` never inflates a member beyond its declared size, nor does torch's
+    reader (it allocates that size), so the declared sizes bound what the file expands to.
+
+    Args:
+        source: A path, the bytes of a zip, or a seekable binary file.
+        limits: The limits to apply.
+        what: What the zip is, for the messages (``"npz"``, ``"torch file"``).
+
+    Returns:
+        The members, in the order of the zip's directory.
+
+    Raises:
+        LimitExceeded: More members than ``max_elements``, a member larger than
+            ``max_array_bytes`` or all together larger than ``max_total_bytes`` (uncompressed).
+        zipfile.BadZipFile: Not a zip.
+    """
+    if isinstance(source, bytes | bytearray):
+        source = io.BytesIO(source)
+    with zipfile.ZipFile(source) as zf:
+        infos = zf.infolist()
+    limits.check("max_elements", len(infos), f"number of {what} members")
+    total = 0
+    for info in infos:
+        limits.check("max_array_bytes", info.file_size,
+                     f"{what} member {info.filename!r} (uncompressed size)", " bytes")  # fmt: skip
+        total += info.file_size
+        limits.check("max_total_bytes", total, f"sum of the {what}'s members (uncompressed)",
+                     " bytes")  # fmt: skip
+    return infos
+
+
 def _npy_header(f: Any) -> tuple[tuple[int, ...], bool, np.dtype]:
     fmt = np.lib.format
     version = fmt.read_magic(f)
@@ -308,13 +354,10 @@ def check_npz(
     out: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
     total = 0
     try:
+        check_zip(path, limits, "npz")
         with zipfile.ZipFile(path) as zf:
-            infos = zf.infolist()
-            limits.check("max_elements", len(infos), "number of npz members")
-            for info in infos:
+            for info in zf.infolist():
                 name = info.filename.removesuffix(".npy")
-                limits.check("max_array_bytes", info.file_size,
-                             f"npz member {name!r} (uncompressed size)", " bytes")  # fmt: skip
                 with zf.open(info) as f:
                     shape, _fortran, dtype = _npy_header(f)
                     header_len = f.tell()
@@ -428,7 +471,8 @@ def read_json_file(path: str | os.PathLike, what: str = "JSON file",
 
 # ---------------------------------------------------------------------------------- trees
 def check_tree(obj: Any, limits: InputLimits, what: str = "content") -> None:
-    """Walks a nested structure (dicts, lists, tuples, sets, arrays) without recursion.
+    """Walks a nested structure (dicts, lists, tuples, sets, numpy arrays, torch tensors)
+    without recursion.
 
     Raises:
         LimitExceeded: Nesting deeper than ``max_depth``, more than ``max_elements`` containers
@@ -441,8 +485,8 @@ def check_tree(obj: Any, limits: InputLimits, what: str = "content") -> None:
     nbytes = 0
     while stack:
         node, depth = stack.pop()
-        if isinstance(node, np.ndarray):
-            nbytes += node.nbytes
+        if _is_array(node):
+            nbytes += int(node.nbytes)
             limits.check("max_total_bytes", nbytes, f"{what}: sum of its arrays", " bytes")
             continue
         if isinstance(node, Mapping):
@@ -456,4 +500,13 @@ def check_tree(obj: Any, limits: InputLimits, what: str = "content") -> None:
         items += n + 1
         limits.check("max_elements", items, f"{what}: containers and items walked")
         stack.extend((c, depth + 1) for c in children
-                     if isinstance(c, Mapping | list | tuple | set | frozenset | np.ndarray))
+                     if isinstance(c, Mapping | list | tuple | set | frozenset)
+                     or _is_array(c))  # fmt: skip
+
+
+def _is_array(node: Any) -> bool:
+    """A numpy array, or an array of another library (a torch tensor: ``nbytes``, ``shape``
+    and ``dtype``; its ``nbytes`` is its logical size, so a stride-0 view counts in full)."""
+    return isinstance(node, np.ndarray) or (
+        not isinstance(node, type) and isinstance(getattr(node, "nbytes", None), int)
+        and hasattr(node, "shape") and hasattr(node, "dtype"))  # fmt: skip

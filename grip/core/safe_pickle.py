@@ -7,10 +7,10 @@ executed: :class:`RestrictedUnpickler` looks every global the pickle names up in
 allow-list of already imported objects (numpy's array, dtype and scalar reconstruction helpers,
 builtin containers and scalars, ``collections.OrderedDict``, latin-1 ``_codecs.encode``) and
 refuses anything else (``os.system``, ``builtins.eval``, any class) before it can be called. The
-allowed callables are wrapped so that whatever they would build is bounded by
-:class:`grip.core.limits.InputLimits` first, and :func:`check_opcodes` refuses damaged memo
-indices before the unpickler runs. :func:`restricted_loads` does all of it for a byte string;
-:func:`load_object_npy` reads a ``.npy`` holding a pickled object (what
+allowed callables are wrapped so that whatever they would build, each call and the sum of all
+calls, is bounded by :class:`grip.core.limits.InputLimits` first, and :func:`check_opcodes`
+refuses damaged memo indices before the unpickler runs. :func:`restricted_loads` does all of
+it for a byte string; :func:`load_object_npy` reads a ``.npy`` holding a pickled object (what
 ``np.save(..., allow_pickle=True)`` writes) the same way, never through
 ``np.load(allow_pickle=True)``.
 """
@@ -34,6 +34,7 @@ __all__ = [
     "RestrictedUnpickler",
     "check_opcodes",
     "load_object_npy",
+    "npy_header",
     "restricted_loads",
 ]
 
@@ -64,23 +65,45 @@ _BUILTIN_NAMES = (
 )  # fmt: skip
 
 
+class _Budget:
+    """What the callables of one pickle have built so far, bytes, against ``max_total_bytes``:
+    each call is bounded by ``max_array_bytes``/``max_elements``, their sum by this (twelve
+    ``bytearray(500 MB)`` calls fit in a 146-byte pickle)."""
+
+    def __init__(self, limits: InputLimits) -> None:
+        self.limits, self.spent = limits, 0
+
+    def spend(self, nbytes: int, what: str) -> None:
+        """Count ``nbytes`` about to be built; refuses before they are."""
+        self.spent += int(nbytes)
+        self.limits.check("max_total_bytes", self.spent,
+                          f"what the pickle builds (with {what})", " bytes")  # fmt: skip
+
+
+_ITEM_BYTES = 64
+"""Bytes counted per item of a container a pickled call builds (a pointer, a new int or float
+object, a hash-table slot): an upper estimate."""
+
+
 def _allowed_globals(limits: InputLimits) -> dict[tuple[str, str], Any]:
-    """The allow-list, each callable wrapped so that what it would build is bounded first."""
+    """The allow-list, each callable wrapped so that what it would build is bounded first: by
+    itself, and together with what the pickle's other calls built (:class:`_Budget`)."""
     import builtins
 
+    budget = _Budget(limits)
     out: dict[tuple[str, str], Any] = {}
     for key, obj in _numpy_globals().items():
         if key[1] == "_reconstruct":
-            obj = _bounded_reconstruct(limits)
+            obj = _bounded_reconstruct(limits, budget)
         elif key == ("numpy", "ndarray"):
-            obj = _bounded_ndarray(limits)
+            obj = _bounded_ndarray(limits, budget)
         out[key] = obj
     for name in _BUILTIN_NAMES:
-        wrapped = _bounded_builtin(getattr(builtins, name), limits)
+        wrapped = _bounded_builtin(getattr(builtins, name), limits, budget)
         out[("builtins", name)] = wrapped
         out[("__builtin__", name)] = wrapped  # protocol 0-2 spelling
     out[("__builtin__", "xrange")] = out[("builtins", "range")]
-    out[("collections", "OrderedDict")] = _bounded_builtin(OrderedDict, limits)
+    out[("collections", "OrderedDict")] = _bounded_builtin(OrderedDict, limits, budget)
     # Protocols 0-2 encode bytes (the raw data of arrays) as _codecs.encode(str, "latin1").
     out[("_codecs", "encode")] = _latin1_encode
     return out
@@ -98,8 +121,24 @@ def _size_of_arg(arg: Any) -> int:
     return 0
 
 
-def _bounded_builtin(cls: type, limits: InputLimits) -> Callable[..., Any]:
-    """``cls`` wrapped: refuses sizes (``bytearray(10**10)``) and ranges above the limits."""
+def _built_bytes(cls: type, args: tuple) -> int:
+    """An upper estimate of the bytes ``cls(*args)`` builds (a ``range`` is lazy)."""
+    if cls is range:
+        return _ITEM_BYTES
+    nbytes = _ITEM_BYTES
+    for arg in args:
+        if cls in (bytes, bytearray) and isinstance(arg, int) and not isinstance(arg, bool):
+            nbytes += max(0, arg)
+        elif cls in (bytes, bytearray, str):
+            nbytes += 4 * _size_of_arg(arg)  # (the str of bytes is a repr: up to 4 per byte)
+        else:
+            nbytes += _ITEM_BYTES * _size_of_arg(arg)
+    return nbytes
+
+
+def _bounded_builtin(cls: type, limits: InputLimits, budget: _Budget) -> Callable[..., Any]:
+    """``cls`` wrapped: refuses sizes (``bytearray(10**10)``) and ranges above the limits, and
+    what would take the pickle's total above ``max_total_bytes``."""
 
     def build(*args: Any) -> Any:
         for arg in args:
@@ -107,6 +146,7 @@ def _bounded_builtin(cls: type, limits: InputLimits) -> Callable[..., Any]:
                 limits.check("max_array_bytes", arg, f"pickled {cls.__name__}({arg})", " bytes")
             limits.check("max_elements", _size_of_arg(arg),
                          f"items of a pickled {cls.__name__}")  # fmt: skip
+        budget.spend(_built_bytes(cls, args), f"a {cls.__name__}")
         return cls(*args)
 
     build.__name__ = build.__qualname__ = cls.__name__
@@ -120,26 +160,28 @@ def _array_nbytes(shape: Any, dtype: Any) -> int:
     return math.prod(int(d) for d in dims) * np.dtype(dtype).itemsize
 
 
-def _bounded_reconstruct(limits: InputLimits) -> Callable[..., Any]:
+def _bounded_reconstruct(limits: InputLimits, budget: _Budget) -> Callable[..., Any]:
     """numpy's ``_reconstruct(ndarray, shape, dtype)`` with the array size bounded."""
     from numpy._core.multiarray import _reconstruct
 
     def reconstruct(subtype: Any, shape: Any, dtype: Any) -> Any:
         if subtype is not np.ndarray and getattr(subtype, "_grip_ndarray", False) is not True:
             raise pickle.UnpicklingError("numpy _reconstruct of a class other than ndarray")
-        limits.check("max_array_bytes", _array_nbytes(shape, dtype),
-                     f"pickled array of shape {shape!r}", " bytes")  # fmt: skip
+        nbytes = _array_nbytes(shape, dtype)
+        limits.check("max_array_bytes", nbytes, f"pickled array of shape {shape!r}", " bytes")
+        budget.spend(nbytes, f"an array of shape {shape!r}")
         return _reconstruct(np.ndarray, shape, dtype)
 
     return reconstruct
 
 
-def _bounded_ndarray(limits: InputLimits) -> Callable[..., Any]:
+def _bounded_ndarray(limits: InputLimits, budget: _Budget) -> Callable[..., Any]:
     """``numpy.ndarray(shape, dtype=float, ...)`` with the array size bounded."""
 
     def ndarray(shape: Any, dtype: Any = float, *args: Any) -> np.ndarray:
-        limits.check("max_array_bytes", _array_nbytes(shape, dtype),
-                     f"pickled ndarray of shape {shape!r}", " bytes")  # fmt: skip
+        nbytes = _array_nbytes(shape, dtype)
+        limits.check("max_array_bytes", nbytes, f"pickled ndarray of shape {shape!r}", " bytes")
+        budget.spend(nbytes, f"an ndarray of shape {shape!r}")
         return np.ndarray(shape, dtype, *args)
 
     ndarray._grip_ndarray = True  # type: ignore[attr-defined]
@@ -240,23 +282,24 @@ def restricted_loads(data: bytes, limits: InputLimits | None = None, what: str =
 
 
 _NPY_MAGIC = b"\x93NUMPY"
+#: Bytes that always hold an npy header: magic, version, a 4-byte length and at most 64 KiB.
+NPY_HEADER_MAX_BYTES = 12 + 65535
 
 
-def load_object_npy(data: bytes, limits: InputLimits | None = None) -> Any:
-    """The Python object a ``.npy`` file of a pickled object holds, read without running it.
-
-    ``np.save(path, obj, allow_pickle=True)`` writes a 0-d array of dtype object: an npy header
-    (a Python literal, read with :func:`ast.literal_eval`) followed by the pickle of that array.
-    The pickle goes through :func:`restricted_loads`; the 0-d array's item is returned.
+def npy_header(data: bytes) -> tuple[dict, int]:
+    """The header of an ``.npy`` file and where its data starts, read without numpy's loader.
 
     Args:
-        data: The file's bytes.
-        limits: Size limits; default :func:`grip.core.limits.active_limits`.
+        data: The file's first bytes (:data:`NPY_HEADER_MAX_BYTES` always suffice) or all of it.
+
+    Returns:
+        ``(header, offset)``: the header dict (``descr``, ``fortran_order``, ``shape``), parsed
+        with :func:`ast.literal_eval` (literals only, nothing is called), and the offset of the
+        array data (for an object array: the pickle).
 
     Raises:
-        ValueError: Not an npy file, an unreadable header, or not a 0-d object array.
-        RefusedGlobal, grip.core.limits.LimitExceeded, pickle.UnpicklingError, ...: As
-            :func:`restricted_loads`.
+        ValueError: Not an npy file, an unknown version, or a header that is cut off or not a
+            dict literal.
     """
     if not data.startswith(_NPY_MAGIC) or len(data) < 10:
         raise ValueError("not an npy file (no \\x93NUMPY magic)")
@@ -270,14 +313,36 @@ def load_object_npy(data: bytes, limits: InputLimits | None = None) -> Any:
     if size > 65535 or start + size > len(data):
         raise ValueError(f"npy header of {size} bytes does not fit the file")
     try:
-        header = ast.literal_eval(data[start : start + size].decode("utf-8" if major == 3
-                                                                    else "latin1"))  # fmt: skip
+        text = data[start : start + size].decode("utf-8" if major == 3 else "latin1")
+        header = ast.literal_eval(text)
     except (ValueError, SyntaxError, UnicodeDecodeError, MemoryError, RecursionError) as e:
         raise ValueError(f"unreadable npy header ({type(e).__name__})") from None
-    if not isinstance(header, dict) or header.get("descr") != "|O" or header.get("shape") != ():
+    if not isinstance(header, dict) or not {"descr", "shape"} <= set(header):
+        raise ValueError("unreadable npy header (not a dict with 'descr' and 'shape')")
+    return header, start + size
+
+
+def load_object_npy(data: bytes, limits: InputLimits | None = None) -> Any:
+    """The Python object a ``.npy`` file of a pickled object holds, read without running it.
+
+    ``np.save(path, obj, allow_pickle=True)`` writes a 0-d array of dtype object: an npy header
+    (:func:`npy_header`) followed by the pickle of that array. The pickle goes through
+    :func:`restricted_loads`; the 0-d array's item is returned.
+
+    Args:
+        data: The file's bytes.
+        limits: Size limits; default :func:`grip.core.limits.active_limits`.
+
+    Raises:
+        ValueError: Not an npy file, an unreadable header, or not a 0-d object array.
+        RefusedGlobal, grip.core.limits.LimitExceeded, pickle.UnpicklingError, ...: As
+            :func:`restricted_loads`.
+    """
+    header, offset = npy_header(data)
+    if header.get("descr") != "|O" or header.get("shape") != ():
         raise ValueError("not a pickled object (the npy header does not declare a 0-d array of "
                          "dtype object)")  # fmt: skip
-    arr = restricted_loads(data[start + size :], limits, "npy pickle")
+    arr = restricted_loads(data[offset:], limits, "npy pickle")
     if not isinstance(arr, np.ndarray) or arr.dtype != object or arr.shape != ():
         raise ValueError("the npy pickle is not a 0-d object array")
     return arr[()]
