@@ -42,6 +42,8 @@ _KEYS = (*_INFO_KEYS, "clip", "clip_index", "frame", "max_joint_err_m", "mpjpe_m
 _HINGES = slice(ROW["hinge_q"].start, ROW["hinge_qd"].stop)
 _TORQUE, _HQD = ROW["torque"], ROW["hinge_qd"]
 _ROOT = O.OBS_ROW["est_root_pos"]
+_ROOT_XY = slice(_ROOT.start, _ROOT.start + 2)
+_TRACK = R.TRACKING_TERMS  # (the energy term follows the tracking terms)
 
 
 def _play(sims: Sequence, targets: np.ndarray, rows: np.ndarray, warned: np.ndarray) -> None:
@@ -121,6 +123,7 @@ class BatchedTrackingEnv:
         self._warned = np.zeros(n, dtype=bool)
         self._gt = np.zeros((n, envs[0]._gt_rows.shape[1]))
         self._ref_disp = np.zeros((n, 2))
+        self._gap = np.zeros((n, 2))
         self._est_rows = np.zeros((n, O.OBS_ROW_DIM))
         self._hm = np.zeros(len(envs[0]._grid))
         for i in range(n):
@@ -251,10 +254,14 @@ class BatchedTrackingEnv:
         h_len = np.minimum(pos_n + 1, hn)
         back = (tn - (h_len - 1)).tolist()
         ref_disp = self._ref_disp[:m]
+        gap = self._gap[:m]
         for j, (i, ti) in enumerate(zip(idx.tolist(), tn_l, strict=True)):
-            gp = self.envs[i]._gt_rows
+            e = self.envs[i]
+            gp = e._gt_rows
             gt[j] = gp[ti]
             ref_disp[j] = gp[ti, :2] - gp[back[j], :2]
+            gap[j] = e._est.obs_rows[ti, _ROOT_XY]
+        gap += self._root_offset[idx, :2]
         pvw, rot = body_state(rows)
         pos = pvw[:, 0]
         # pelvis xy window
@@ -265,11 +272,12 @@ class BatchedTrackingEnv:
         self._hist_len[idx] = h_len
         oldest = ring[idx, (p + 1 - h_len) % hn]
         terms = np.zeros((m, _N_TERMS))
-        terms[:, :5], sq = R.tracking_terms_rows(rows, gt, cfg.reward, cfg.align_root_xy,
-                                                 pos[:, 0, :2] - oldest, ref_disp,
-                                                 self._vel_s)  # fmt: skip
+        gap -= pos[:, 0, :2]
+        terms[:, :_TRACK], sq = R.tracking_terms_rows(rows, gt, cfg.reward, cfg.align_root_xy,
+                                                      pos[:, 0, :2] - oldest, ref_disp,
+                                                      self._vel_s, gap)  # fmt: skip
         power = rows[:, _TORQUE] * rows[:, _HQD]
-        terms[:, 5] = np.where(self._steps[idx] > cfg.reward.energy_skip_frames,
+        terms[:, _TRACK] = np.where(self._steps[idx] > cfg.reward.energy_skip_frames,
                                np.abs(power, out=power).sum(axis=1), 0.0)  # fmt: skip
         reward = np.zeros(m)
         for c, wc in enumerate(self._w.tolist()):

@@ -11,7 +11,9 @@ import numpy as np
 from grip.task.config import RewardConfig
 
 IMITATION_TERMS: tuple[str, ...] = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel")
-TERMS: tuple[str, ...] = (*IMITATION_TERMS, "root_vel", "energy", "amp")
+TERMS: tuple[str, ...] = (*IMITATION_TERMS, "root_vel", "root_pos", "energy", "amp")
+TRACKING_TERMS = 6
+"""The first terms of :data:`TERMS` that :func:`tracking_terms_rows` computes."""
 
 
 def rotation_angles(sim_rot: np.ndarray, ref_rot: np.ndarray) -> np.ndarray:
@@ -72,6 +74,25 @@ def root_velocity_term(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: floa
     return float(np.exp(-k * (e * e).sum()))
 
 
+def root_position_term(gap_xy: np.ndarray, k: float) -> float:
+    """Kernel on the horizontal distance between the simulated pelvis and the pelvis it follows,
+    in (0, 1].
+
+    Args:
+        gap_xy: ``(2,)`` followed pelvis minus simulated pelvis, horizontal, m (the estimate's
+            integrated root in training and at inference; the ground truth for a teacher).
+        k: Kernel coefficient, 1/m^2.
+
+    Returns:
+        ``exp(-k |gap|^2)``: 1 on the followed pelvis. Unlike the imitation terms (compared with
+        the pelvis moved over the reference's, ``align_root_xy``) and ``root_vel`` (a
+        velocity: a lost metre is never paid back), this term pays a body for being where it
+        is asked to be, so one that fell behind is paid for catching up (docs/pace.md).
+    """
+    g = np.asarray(gap_xy, dtype=np.float64)
+    return float(np.exp(-k * (g * g).sum()))
+
+
 def mechanical_power(torque: np.ndarray, joint_vel: np.ndarray) -> float:
     """Sum over actuated DoF of ``|tau * qdot|``, W (GRIP eq. 9 before the ``-alpha`` weight)."""
     return float(np.abs(torque * joint_vel).sum())
@@ -110,14 +131,15 @@ def root_velocity_terms(sim_disp: np.ndarray, ref_disp: np.ndarray, seconds: flo
     return np.exp(-k * (e * e).sum(axis=1))
 
 
-_K_ORDER = np.array([0, 3, 1, 2, 4])  # (pos, vel, angvel, rot, root_vel) -> TERMS[:5] order
+_K_ORDER = np.array([0, 3, 1, 2, 4, 5])  # (pos, vel, angvel, rot, root_vel, root_pos) -> TERMS
 
 
 def tracking_terms_rows(sim_rows: np.ndarray, ref_rows: np.ndarray, cfg: RewardConfig,
                         align_root_xy: bool, sim_disp: np.ndarray, ref_disp: np.ndarray,
-                        seconds: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """:func:`imitation_terms` and :func:`root_velocity_term` of B states at once, on flat
-    rows, with one ``exp`` for all (the tracking environments' step).
+                        seconds: float,
+                        root_gap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:func:`imitation_terms`, :func:`root_velocity_term` and :func:`root_position_term` of B
+    states at once, on flat rows, with one ``exp`` for all (the tracking environments' step).
 
     Args:
         sim_rows, ref_rows: ``(B, >= 432)``: ``(3, J, 3)`` world positions (m), linear (m/s) and
@@ -128,9 +150,11 @@ def tracking_terms_rows(sim_rows: np.ndarray, ref_rows: np.ndarray, cfg: RewardC
             horizontally (each joint's xy error minus the pelvis' xy error).
         sim_disp, ref_disp: ``(B, 2)`` horizontal pelvis displacements over ``seconds``, m.
         seconds: Length of the root-velocity window, s.
+        root_gap: ``(B, 2)`` followed pelvis minus simulated pelvis, horizontal, m.
 
     Returns:
-        ``(B, 5)`` terms in :data:`TERMS` order (the imitation terms, then ``root_vel``) and
+        ``(B, 6)`` terms in :data:`TERMS` order (the imitation terms, ``root_vel``,
+        ``root_pos``) and
         ``(B, 3, J)`` per-joint squared position (aligned as asked), velocity and angular
         velocity errors.
     """
@@ -143,7 +167,7 @@ def tracking_terms_rows(sim_rows: np.ndarray, ref_rows: np.ndarray, cfg: RewardC
         ep[:, :, :2] -= ep[:, :1, :2].copy()
     e *= e
     sq = e.reshape(b, 3 * j, 3).sum(axis=2).reshape(b, 3, j)
-    x = np.empty((b, 5))  # pos, vel, angvel, rot, root_vel
+    x = np.empty((b, 6))  # pos, vel, angvel, rot, root_vel, root_pos
     np.sum(sq, axis=2, out=x[:, :3])
     tr = (sim_rows[:, n : 2 * n] * ref_rows[:, n : 2 * n]).reshape(b, j, 9).sum(axis=2)
     tr -= 1.0
@@ -161,6 +185,7 @@ def tracking_terms_rows(sim_rows: np.ndarray, ref_rows: np.ndarray, cfg: RewardC
     d /= seconds
     d *= d
     np.sum(d, axis=1, out=x[:, 4])
-    x *= -np.array([cfg.k_pos, cfg.k_vel, cfg.k_angvel, cfg.k_rot, cfg.k_root_vel])
+    np.sum(root_gap * root_gap, axis=1, out=x[:, 5])
+    x *= -np.array([cfg.k_pos, cfg.k_vel, cfg.k_angvel, cfg.k_rot, cfg.k_root_vel, cfg.k_root_pos])
     np.exp(x, out=x)
     return x[:, _K_ORDER], sq

@@ -361,9 +361,11 @@ class GripTrackingEnv(gym.Env):
         # displacements over the window's frames (fewer after a reset or teleport), divided by
         # the full window's length: millimetres over the first frames are not read as velocity
         ref_disp = gt[t, :2] - gt[t - (len(hist) - 1), :2]
+        # the pelvis the policy follows (the integrated root from where the episode started)
+        gap = self._est.obs_rows[t, _ROOT][:2] + self._root_offset[:2] - row[0, :2]
         terms, sq = R.tracking_terms_rows(row, gt[t : t + 1], cfg.reward, cfg.align_root_xy,
                                           (hist[-1] - hist[0])[None], ref_disp[None],
-                                          self._vel_s)  # fmt: skip
+                                          self._vel_s, gap[None])  # fmt: skip
         values = terms[0].tolist()
         if self._steps > cfg.reward.energy_skip_frames:
             values.append(R.mechanical_power(row[0, _TORQUE], row[0, _HQD]))

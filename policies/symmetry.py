@@ -107,6 +107,9 @@ class ObservationMirror:
                 d_p, rest = _vec_rows(rest, sk.N_JOINTS, _PERM, mh)
                 p, rest = _vec_rows(rest, sk.N_JOINTS, _PERM, mh)
                 parts += [d_p, p]
+            if self.variant == "OAV_Jrel_root":  # (forward, left) of the followed pelvis
+                parts.append(rest[..., :2] * np.array([1.0, -1.0]))
+                rest = rest[..., 2:]
             out["kinematic"] = np.concatenate([*parts, rest], -1).astype(np.float32)
         if "environment" in obs:
             out["environment"] = np.asarray(obs["environment"])[..., self._hm_perm]

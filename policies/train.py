@@ -54,7 +54,15 @@ from policies.vec_env import (
     vecnorm_state,
 )
 
-INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "energy", "amp")
+INFO_TERMS = ("imit_pos", "imit_rot", "imit_vel", "imit_angvel", "root_vel", "root_pos", "energy",
+              "amp")
+
+GROWN_OBS: frozenset[tuple[str, str]] = frozenset({("OAV_Jrel", "OAV_Jrel_root")})
+"""(theirs, ours) ``env.kinematic_obs`` pairs a warm start bridges: ours is theirs with inputs
+appended to the ``kinematic`` part, which start with weights 0 (the policy acts as before) and
+a normaliser variance of :data:`GROWN_OBS_VAR`."""
+GROWN_OBS_VAR = 0.09
+"""Normaliser variance of the appended inputs: the followed pelvis' offset, (0.3 m)^2."""
 
 RESUMABLE: tuple[str, ...] = (
     "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
@@ -395,28 +403,44 @@ class PolicyTrainer:
         if list(runner.obs_keys) != list(spaces):
             raise ValueError(f"{src}: observation parts {runner.obs_keys} differ from this "
                              f"run's {list(spaces)}")  # fmt: skip
+        theirs, ours = runner.env_cfg.kinematic_obs, self.cfg.env.kinematic_obs
+        grown = (theirs, ours) in GROWN_OBS
+        if theirs != ours and not grown:  # their inputs mean different things at the same places
+            raise ValueError(f"{src}: trained with env.kinematic_obs={theirs!r}, this run has "
+                             f"{ours!r}")  # fmt: skip
+        extra = {k: space.shape[0] - runner.obs_mean[k].shape[0] for k, space in spaces.items()}
         for k, space in spaces.items():
-            if runner.obs_mean[k].shape != space.shape:
-                shape = runner.obs_mean[k].shape
+            shape = runner.obs_mean[k].shape
+            if shape != space.shape and not (grown and k == "kinematic" and len(shape) == 1
+                                             and extra[k] > 0):  # fmt: skip
                 raise ValueError(f"{src}: observation {k!r} has shape {shape}, this run's "
                                  f"{space.shape}")  # fmt: skip
+        # this run's input column of each of theirs (new inputs end their part, weights 0)
+        cols, at = [], 0
+        for k in spaces:
+            n = runner.obs_mean[k].shape[0]
+            cols += range(at, at + n)
+            at += n + extra[k]
+        cols_t = torch.as_tensor(cols)
 
         def load(mlp, body, head, what: str) -> None:
             ours, theirs = linear_layers(body, head), linear_layers(mlp)
             shapes = [tuple(m.weight.shape) for m in ours]
-            if shapes != [tuple(m.weight.shape) for m in theirs]:
+            want = [tuple(m.weight.shape) for m in theirs]
+            want[0] = (want[0][0], at)
+            if shapes != want:
                 raise ValueError(f"{src}: its {what} network has layers "
                                  f"{[tuple(m.weight.shape) for m in theirs]}, this run's "
                                  f"{shapes} (set ppo.net_arch to match)")  # fmt: skip
             with torch.no_grad():
-                for dst, s in zip(ours, theirs, strict=True):
-                    dst.weight.copy_(s.weight)
+                for i, (dst, s) in enumerate(zip(ours, theirs, strict=True)):
+                    if i == 0:
+                        dst.weight.zero_()
+                        dst.weight[:, cols_t] = s.weight
+                    else:
+                        dst.weight.copy_(s.weight)
                     dst.bias.copy_(s.bias)
 
-        theirs, ours = runner.env_cfg.kinematic_obs, self.cfg.env.kinematic_obs
-        if theirs != ours:  # their inputs mean different things at the same places
-            raise ValueError(f"{src}: trained with env.kinematic_obs={theirs!r}, this run has "
-                             f"{ours!r}")  # fmt: skip
         load(runner.actor, pol.mlp_extractor.policy_net, pol.action_net, "policy")
         if runner.critic is not None:
             load(runner.critic, pol.mlp_extractor.value_net, pol.value_net, "value")
@@ -425,7 +449,9 @@ class PolicyTrainer:
                 pol.log_std.copy_(runner.log_std)
         count = runner.obs_count if runner.obs_count is not None else 1e6
         for k, rms in self.venv.obs_rms.items():
-            rms.mean, rms.var = runner.obs_mean[k].copy(), runner.obs_var[k].copy()
+            e = extra[k]
+            rms.mean = np.concatenate([runner.obs_mean[k], np.zeros(e)])
+            rms.var = np.concatenate([runner.obs_var[k], np.full(e, GROWN_OBS_VAR)])
             rms.count = count
         if runner.disc is not None:
             try:

@@ -582,14 +582,16 @@ class WarpTrackingEnv:
         oldest = ring[ar, (p + 1 - h_len) % hn]
         back = c.offset[self.clip_index] + tn_c - (h_len - 1)
         ref_disp = c.gt_pvw[row, 0, 0, :2] - c.gt_pvw[back, 0, 0, :2]
-        terms5, sq = T.tracking_terms(pvw, rot, c.gt_pvw[row], c.gt_rot[row], cfg.reward,
+        # the pelvis the policy follows: the integrated root from where the episode started
+        gap = c.obs_rows[row][:, _ROOT][:, :2] + self._root_offset[:, :2] - pos[:, 0, :2]
+        terms6, sq = T.tracking_terms(pvw, rot, c.gt_pvw[row], c.gt_rot[row], cfg.reward,
                                       cfg.align_root_xy, pos[:, 0, :2] - oldest, ref_disp,
-                                      self._vel_s)  # fmt: skip
+                                      self._vel_s, gap)  # fmt: skip
         tau = self._act_force[:, self._act]
         qd = self._qvel[:, self._hinge_qd]
         energy = torch.where(self._steps > cfg.reward.energy_skip_frames,
                              (tau * qd).abs().sum(dim=1), torch.zeros_like(tau[:, 0]))  # fmt: skip
-        terms = torch.cat([terms5, energy[:, None], torch.zeros_like(energy[:, None])], dim=1)
+        terms = torch.cat([terms6, energy[:, None], torch.zeros_like(energy[:, None])], dim=1)
         reward = terms @ self._w
         dist = torch.sqrt(sq[:, 0])
         e_max = dist.amax(dim=1)

@@ -51,7 +51,7 @@ def observation_parts(variant: str, h: torch.Tensor, sim_pvw: torch.Tensor,
     """:func:`grip.task.observations.observation_rows`: O^kin and O^self of B states.
 
     Args:
-        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4).
+        variant: One of :data:`grip.task.config.KINEMATIC_OBS` (GRIP Table 4).
         h: ``(B, 3, 3)`` heading matrices of the simulated pelvis.
         sim_pvw, sim_rot: The simulated states.
         est_rows: ``(B, OBS_ROW_DIM)`` estimate rows (:data:`grip.task.observations.OBS_ROW`;
@@ -71,27 +71,33 @@ def observation_parts(variant: str, h: torch.Tensor, sim_pvw: torch.Tensor,
     rows = [rel[:, 1:], vel, w, est_leaf_angvel - w[:, _IMU]]
     if variant != "OA":
         rows.append(est_vel - vel[:, _VEL])
-    if variant == "OAV_Jrel":
+    if variant.startswith("OAV_Jrel"):
         rows += [est_pos - rel, est_pos]
     elif variant == "OAV_Jglo":
         rows += [(est_rows[:, None, r["est_root_pos"]] + est_pos) - pos, est_pos]
+    gap = variant == "OAV_Jrel_root"
+    if gap:  # the followed pelvis minus the simulated one, horizontal (a yaw keeps it so)
+        g = est_rows[:, r["est_root_pos"]] - pos[:, 0]
+        rows.append(torch.cat([g[:, :2], torch.zeros_like(g[:, 2:])], dim=1)[:, None])
     vecs = torch.cat(rows, dim=1) @ h
     d_rot = e_leaf @ sim_rot[:, _IMU].transpose(-1, -2)
     cols = torch.cat([sim_rot[..., :2], e_leaf[..., :2], d_rot @ h[:, None, :, :2]], dim=1)
     six = (cols.transpose(-1, -2).reshape(b, -1, 3) @ h).reshape(b, -1, 6)
     self_vec = torch.cat([pos[:, 0, 2:3], vecs[:, :_N_SELF_VEC].reshape(b, -1),
                           six[:, :nj].reshape(b, -1)], dim=1)  # fmt: skip
-    kin = torch.cat([six[:, nj + _N_IMU :].reshape(b, -1), six[:, nj : nj + _N_IMU].reshape(b, -1),
-                     vecs[:, _N_SELF_VEC:].reshape(b, -1)], dim=1)  # fmt: skip
-    return kin, self_vec
+    parts = [six[:, nj + _N_IMU :].reshape(b, -1), six[:, nj : nj + _N_IMU].reshape(b, -1),
+             vecs[:, _N_SELF_VEC : vecs.shape[1] - gap].reshape(b, -1)]
+    if gap:
+        parts.append(vecs[:, -1, :2].clamp(-O.ROOT_GAP_CLIP_M, O.ROOT_GAP_CLIP_M))
+    return torch.cat(parts, dim=1), self_vec
 
 
 def tracking_terms(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, ref_pvw: torch.Tensor,
                    ref_rot: torch.Tensor, cfg: RewardConfig, align_root_xy: bool,
-                   sim_disp: torch.Tensor, ref_disp: torch.Tensor, seconds: float
-                   ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
-    """:func:`envs.rewards.tracking_terms_rows`: the imitation terms and ``root_vel`` of B
-    states.
+                   sim_disp: torch.Tensor, ref_disp: torch.Tensor, seconds: float,
+                   root_gap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """:func:`envs.rewards.tracking_terms_rows`: the imitation terms, ``root_vel`` and
+    ``root_pos`` of B states.
 
     Args:
         sim_pvw, sim_rot: The simulated states.
@@ -101,10 +107,11 @@ def tracking_terms(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, ref_pvw: torch.
             horizontally.
         sim_disp, ref_disp: ``(B, 2)`` horizontal pelvis displacements over ``seconds``, m.
         seconds: Length of the root-velocity window, s.
+        root_gap: ``(B, 2)`` followed pelvis minus simulated pelvis, horizontal, m.
 
     Returns:
-        ``(B, 5)`` terms in :data:`envs.rewards.TERMS` order (``imit_pos, imit_rot, imit_vel,
-        imit_angvel, root_vel``) and ``(B, 3, J)`` per-joint squared position (aligned as
+        ``(B, 6)`` terms in :data:`envs.rewards.TERMS` order (``imit_pos, imit_rot, imit_vel,
+        imit_angvel, root_vel, root_pos``) and ``(B, 3, J)`` per-joint squared position (aligned as
         asked), velocity and angular-velocity errors.
     """
     e = sim_pvw - ref_pvw
@@ -122,7 +129,8 @@ def tracking_terms(sim_pvw: torch.Tensor, sim_rot: torch.Tensor, ref_pvw: torch.
     d = (sim_disp - ref_disp) / seconds
     k = torch.tensor([cfg.k_pos, cfg.k_rot, cfg.k_vel, cfg.k_angvel], dtype=x.dtype,
                      device=x.device)  # fmt: skip
-    terms = torch.cat([torch.exp(-k * x), torch.exp(-cfg.k_root_vel * (d * d).sum(dim=1))[:, None]],
+    terms = torch.cat([torch.exp(-k * x), torch.exp(-cfg.k_root_vel * (d * d).sum(dim=1))[:, None],
+                       torch.exp(-cfg.k_root_pos * (root_gap * root_gap).sum(dim=1))[:, None]],
                       dim=1)  # fmt: skip
     return terms, sq
 

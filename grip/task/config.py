@@ -7,8 +7,10 @@ from dataclasses import dataclass, field
 from grip.core.checks import check
 from grip.core.mjcf import MjcfConfig
 
-KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel")
-"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel)."""
+KINEMATIC_OBS: tuple[str, ...] = ("OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jrel_root")
+"""State-difference variants of GRIP Table 4: D(O,A), D(O,A,V), D(O,A,V,J_glo), D(O,A,V,J_rel),
+and D(O,A,V,J_rel) with the followed pelvis relative to the simulated one (not GRIP's: the
+distance already lost to the estimate, which no velocity difference shows; docs/pace.md)."""
 
 ACTION_MODES: tuple[str, ...] = ("relative", "absolute")
 REWARD_FORMS: tuple[str, ...] = ("mean_sq", "norm")
@@ -28,6 +30,7 @@ class RewardWeights:
     imit_vel: float = 0.05  # 0.5 x w_v
     imit_angvel: float = 0.05  # 0.5 x w_omega
     root_vel: float = 0.0  # not GRIP's: see RewardConfig.k_root_vel (0 = logged only)
+    root_pos: float = 0.0  # not GRIP's: see RewardConfig.k_root_pos (0 = logged only)
     energy: float = -0.0005  # -alpha (GRIP eq. 9); the raw term is the mechanical power, W
     amp: float = 0.5  # the AMP term is 0 until a wrapper fills it (policies)
 
@@ -47,6 +50,11 @@ class RewardConfig:
             pelvis velocity averaged over ``root_vel_window_frames`` against the ground
             truth's (:func:`envs.rewards.root_velocity_term`). Not one of GRIP's terms: with
             ``align_root_xy`` nothing else asks the body to cover the reference's ground.
+        k_root_pos: Kernel coefficient of the ``root_pos`` term, 1/m^2: the horizontal distance
+            between the simulated pelvis and the pelvis it follows (the estimate's integrated
+            root from where the episode started; the truth's for a teacher)
+            (:func:`envs.rewards.root_position_term`): 4 keeps 0.91 at 0.15 m, 0.37 at 0.5 m
+            and still has slope at 1 m, where the imitation kernels (100/m^2) are flat.
         root_vel_window_frames: Frames of that average. Right after a reset or a teleport the
             window holds fewer frames and its displacement is still divided by the full
             window's length (a few millimetres over one frame are not read as a velocity).
@@ -60,6 +68,7 @@ class RewardConfig:
     k_angvel: float = 0.1
     form: str = "mean_sq"
     k_root_vel: float = 10.0
+    k_root_pos: float = 4.0
     root_vel_window_frames: int = 30
     energy_skip_frames: int = 3
     weights: RewardWeights = field(default_factory=RewardWeights)

@@ -23,6 +23,11 @@ IMU_JOINTS: tuple[int, ...] = (
 
 SELF_DIM = 1 + 3 * (sk.N_JOINTS - 1) + 6 * sk.N_JOINTS + 3 * sk.N_JOINTS + 3 * sk.N_JOINTS
 
+ROOT_GAP_CLIP_M = 1.0
+"""``OAV_Jrel_root``: each axis of the followed pelvis minus the simulated one is clipped to
+this, m (a body metres behind is told "far behind", not how far: the numbers stay in the
+range training saw)."""
+
 
 def kinematic_dim(variant: str) -> int:
     """Length of the state difference for a GRIP Table 4 variant."""
@@ -31,6 +36,8 @@ def kinematic_dim(variant: str) -> int:
         n += 3 * len(sk.VELOCITY_JOINTS)  # d_v
     if variant.startswith("OAV_J"):
         n += 2 * 3 * sk.N_JOINTS  # d_p and p
+    if variant == "OAV_Jrel_root":
+        n += 2  # the followed pelvis minus the simulated one, horizontal
     return n
 
 
@@ -38,6 +45,7 @@ _IMU = np.array(IMU_JOINTS)
 _VEL = np.array(sk.VELOCITY_JOINTS)
 _N_IMU = len(IMU_JOINTS)
 _N_SELF_VEC = (sk.N_JOINTS - 1) + 2 * sk.N_JOINTS  # rows of 3-vectors in O^self
+_XY = np.array([1.0, 1.0, 0.0])
 
 
 def heading_matrix(root_rot: np.ndarray) -> np.ndarray:
@@ -82,7 +90,7 @@ def observation_parts(
     rotation by another (this runs at every control step).
 
     Args:
-        variant: ``"OA"``, ``"OAV"``, ``"OAV_Jglo"`` or ``"OAV_Jrel"`` (GRIP Table 4).
+        variant: One of :data:`grip.task.config.KINEMATIC_OBS` (GRIP Table 4).
         h: ``(3, 3)`` heading matrix of the simulated pelvis (:func:`heading_matrix`).
         sim_pvw: ``(3, J, 3)`` simulated world joint positions (m), linear (m/s) and angular
             (rad/s) velocities.
@@ -100,7 +108,9 @@ def observation_parts(
         estimated orientation, theta_leaf (4x6): estimated orientation, d_omega (4x3)] at the
         IMU bodies, then [d_v (6x3)] (not in ``OA``), then [d_p (24x3), p (24x3)] (``J``
         variants; d_p root-relative for ``J_rel``, global via the integrated root for
-        ``J_glo``; p = the estimated root-relative joints);
+        ``J_glo``; p = the estimated root-relative joints), then for ``OAV_Jrel_root`` the
+        followed pelvis (``est_root_pos``) minus the simulated pelvis, horizontal (2: forward,
+        left), each clipped to :data:`ROOT_GAP_CLIP_M`;
         ``self (SELF_DIM,)`` = [pelvis height (1), joints 1..23 minus the pelvis (69), linear
         velocities (72), angular velocities (72), rotations 6D (144)].
     """
@@ -109,11 +119,16 @@ def observation_parts(
     rows = [rel[1:], vel, w, est_leaf_angvel - w[_IMU]]
     if variant != "OA":
         rows.append(est_vel - vel[_VEL])
-    if variant == "OAV_Jrel":
+    if variant.startswith("OAV_Jrel"):
         rows += [est_pos - rel, est_pos]
     elif variant == "OAV_Jglo":
         rows += [(est_root_pos + est_pos) - pos, est_pos]
+    gap = variant == "OAV_Jrel_root"
+    if gap:  # (the heading is a yaw: a horizontal vector stays horizontal)
+        rows.append((est_root_pos - pos[0])[None] * _XY)
     vecs = np.concatenate(rows) @ h
+    if gap:
+        np.clip(vecs[-1], -ROOT_GAP_CLIP_M, ROOT_GAP_CLIP_M, out=vecs[-1])
     e_leaf = est_leaf_rot
     d_rot = e_leaf @ np.swapaxes(sim_rot[_IMU], -1, -2)
     # Only the first two columns of each rotation are needed (6D). H.T @ R[:, :2] for every R
@@ -123,7 +138,8 @@ def observation_parts(
     n = sk.N_JOINTS
     self_vec = np.concatenate([pos[0, 2:3], vecs[:_N_SELF_VEC].ravel(), six[:n].ravel()])
     kin = np.concatenate([six[n + _N_IMU :].ravel(), six[n : n + _N_IMU].ravel(),
-                          vecs[_N_SELF_VEC:].ravel()])  # fmt: skip
+                          vecs[_N_SELF_VEC : len(vecs) - gap].ravel(),
+                          vecs[-1, :2] if gap else vecs[:0, 0]])  # fmt: skip
     return kin, self_vec
 
 
@@ -162,11 +178,16 @@ def observation_parts_batch(
     rows = [rel[:, 1:], vel, w, est_leaf_angvel - w[:, _IMU]]
     if variant != "OA":
         rows.append(est_vel - vel[:, _VEL])
-    if variant == "OAV_Jrel":
+    if variant.startswith("OAV_Jrel"):
         rows += [est_pos - rel, est_pos]
     elif variant == "OAV_Jglo":
         rows += [(est_root_pos[:, None] + est_pos) - pos, est_pos]
+    gap = variant == "OAV_Jrel_root"
+    if gap:
+        rows.append((est_root_pos - pos[:, 0])[:, None] * _XY)
     vecs = np.concatenate(rows, axis=1) @ h
+    if gap:
+        np.clip(vecs[:, -1], -ROOT_GAP_CLIP_M, ROOT_GAP_CLIP_M, out=vecs[:, -1])
     e_leaf = est_leaf_rot
     d_rot = e_leaf @ np.swapaxes(sim_rot[:, _IMU], -1, -2)
     cols = np.concatenate([sim_rot[..., :2], e_leaf[..., :2], d_rot @ h[:, None, :, :2]], axis=1)
@@ -176,7 +197,9 @@ def observation_parts_batch(
                                six[:, :n].reshape(b, -1)], axis=1, out=out_self)  # fmt: skip
     kin = np.concatenate([six[:, n + _N_IMU :].reshape(b, -1),
                           six[:, n : n + _N_IMU].reshape(b, -1),
-                          vecs[:, _N_SELF_VEC:].reshape(b, -1)], axis=1, out=out_kin)  # fmt: skip
+                          vecs[:, _N_SELF_VEC : vecs.shape[1] - gap].reshape(b, -1),
+                          vecs[:, -1, :2] if gap else vecs[:, :0, 0]], axis=1,
+                         out=out_kin)  # fmt: skip
     return kin, self_vec
 
 

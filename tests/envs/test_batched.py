@@ -15,7 +15,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from envs.batched import BatchedTrackingEnv
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
-from grip.task.config import TrackingEnvConfig
+from grip.task.config import RewardConfig, RewardWeights, TrackingEnvConfig
 from policies.vec_env import BatchedVecEnv
 
 N = 3
@@ -38,14 +38,18 @@ def _batched(cfg, reference, seeds, threads):
     return BatchedVecEnv(BatchedTrackingEnv(envs, threads))
 
 
-@pytest.mark.parametrize(("repeat", "threads", "align"), [(3, 2, True), (1, 1, False)])
-def test_batched_matches_separate_envs(reference, repeat, threads, align):
+@pytest.mark.parametrize(("repeat", "threads", "align", "variant"),
+                         [(3, 2, True, "OAV_Jrel_root"), (1, 1, False, "OAV_Jrel")])
+def test_batched_matches_separate_envs(reference, repeat, threads, align, variant):
+    weights = RewardWeights(root_vel=0.05, root_pos=0.1)  # (the pace terms count)
     cfg = TrackingEnvConfig(
         action_repeat=repeat,
         termination_dist_m=0.15,
         max_episode_frames=40,
         min_episode_frames=20,
         align_root_xy=align,
+        kinematic_obs=variant,
+        reward=RewardConfig(weights=weights),
     )
     seeds = [7 + 1000 * i for i in range(N)]
     ref = DummyVecEnv([functools.partial(_single, cfg, reference, s) for s in seeds])

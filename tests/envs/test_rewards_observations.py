@@ -1,7 +1,15 @@
+import itertools
+
 import numpy as np
 import pytest
 
-from envs.rewards import imitation_terms, mechanical_power, root_velocity_term, rotation_angles
+from envs.rewards import (
+    imitation_terms,
+    mechanical_power,
+    root_position_term,
+    root_velocity_term,
+    rotation_angles,
+)
 from grip.core import skeleton as sk
 from grip.core.rotations import rot_x, rot_z
 from grip.task import observations as O
@@ -54,7 +62,7 @@ def test_heading_matrix_points_x_where_the_pelvis_faces() -> None:
     np.testing.assert_allclose(np.linalg.det(h), 1.0)
 
 
-@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel"])
+@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jrel_root"])
 def test_state_difference_vanishes_when_the_estimate_equals_the_simulation(variant) -> None:
     pvw, rot = _state()
     pos, vel, w = pvw
@@ -67,8 +75,10 @@ def test_state_difference_vanishes_when_the_estimate_equals_the_simulation(varia
     d_rot = kin[: 6 * n_imu].reshape(n_imu, 6)
     np.testing.assert_allclose(d_rot, np.tile([1, 0, 0, 0, 1, 0], (n_imu, 1)), atol=1e-12)
     diffs = kin[12 * n_imu :]  # after d_theta and theta_leaf: d_omega, d_v, d_p are zero
-    n_zero = diffs.size - (72 if variant.startswith("OAV_J") else 0)
+    p_at = diffs.size - (2 if variant == "OAV_Jrel_root" else 0)  # (the root gap ends it)
+    n_zero = p_at - (72 if variant.startswith("OAV_J") else 0)
     np.testing.assert_allclose(diffs[:n_zero], 0.0, atol=1e-12)
+    np.testing.assert_allclose(diffs[p_at:], 0.0, atol=1e-12)
     assert self_vec[0] == pos[0, 2]
 
 
@@ -101,3 +111,32 @@ def test_root_velocity_term_on_hand_computed_windows() -> None:
     e2 = (0.3 * np.sqrt(2) / 0.5) ** 2
     assert root_velocity_term(np.array([0.0, 0.3]), np.array([0.3, 0.0]), 0.5, 2.0) == (
         pytest.approx(np.exp(-2.0 * e2)))
+
+
+def test_the_root_gap_observation_is_the_followed_pelvis_in_the_heading_frame() -> None:
+    """``OAV_Jrel_root`` ends with (forward, left) of the followed pelvis seen from the
+    simulated one, clipped per axis; the rest equals ``OAV_Jrel``."""
+    pvw, rot = _state(seed=5)
+    pos, vel, w = pvw
+    imu = list(O.IMU_JOINTS)
+    h = O.heading_matrix(rot[0])
+    fwd, left = h[:, 0], h[:, 1]
+    args = (pvw, rot, pos - pos[0], rot[imu], vel[list(sk.VELOCITY_JOINTS)], w[imu])
+    base, _ = O.observation_parts("OAV_Jrel", h, *args, pos[0])
+    for ahead, side, want in ((0.4, -0.2, (0.4, -0.2)), (3.0, 0.1, (O.ROOT_GAP_CLIP_M, 0.1))):
+        followed = pos[0] + ahead * fwd + side * left + np.array([0.0, 0.0, 0.7])  # (z ignored)
+        kin, _ = O.observation_parts("OAV_Jrel_root", h, *args, followed)
+        np.testing.assert_allclose(kin[:-2], base, atol=1e-12)
+        np.testing.assert_allclose(kin[-2:], want, atol=1e-12)
+        kb, _ = O.observation_parts_batch("OAV_Jrel_root", h[None], *(a[None] for a in args),
+                                          followed[None])  # fmt: skip
+        np.testing.assert_allclose(kb[0], kin, atol=1e-12)
+
+
+def test_root_position_term_pays_for_being_where_the_pelvis_is_followed() -> None:
+    assert root_position_term(np.zeros(2), 4.0) == 1.0
+    assert root_position_term(np.array([0.15, 0.0]), 4.0) == pytest.approx(np.exp(-4 * 0.0225))
+    # a body left behind earns less the further it is, and still has slope at 1 m
+    vals = [root_position_term(np.array([d, 0.0]), 4.0) for d in (0.0, 0.15, 0.5, 1.0, 2.0)]
+    assert all(a > b for a, b in itertools.pairwise(vals))
+    assert vals[3] > 0.01

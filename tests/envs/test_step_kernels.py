@@ -33,9 +33,10 @@ def test_tracking_terms_rows_equal_the_per_state_terms(form, align) -> None:
     ref_pvw = sim_pvw + 0.05 * (ref_pvw - sim_pvw)
     rng = np.random.default_rng(2)
     sim_disp, ref_disp = rng.normal(size=(3, 2)), rng.normal(size=(3, 2))
+    gap = rng.normal(size=(3, 2)) * 0.3
     terms, sq = R.tracking_terms_rows(_rows(sim_pvw, sim_rot), _rows(ref_pvw, ref_rot)[:, :432],
-                                      cfg, align, sim_disp, ref_disp, 0.3)  # fmt: skip
-    assert terms.shape == (3, 5) and sq.shape == (3, 3, 24)
+                                      cfg, align, sim_disp, ref_disp, 0.3, gap)  # fmt: skip
+    assert terms.shape == (3, R.TRACKING_TERMS) and sq.shape == (3, 3, 24)
     for i in range(3):
         p = sim_pvw[i].copy()
         if align:
@@ -46,6 +47,8 @@ def test_tracking_terms_rows_equal_the_per_state_terms(form, align) -> None:
         np.testing.assert_allclose(sq[i], want_sq, rtol=1e-12, atol=1e-15)
         rv = R.root_velocity_term(sim_disp[i], ref_disp[i], 0.3, cfg.k_root_vel)
         np.testing.assert_allclose(terms[i, 4], rv, rtol=1e-12)
+        np.testing.assert_allclose(terms[i, 5], R.root_position_term(gap[i], cfg.k_root_pos),
+                                   rtol=1e-12)  # fmt: skip
 
 
 def test_amp_frames_equal_amp_features() -> None:

@@ -90,7 +90,7 @@ def test_reward_is_the_weighted_sum_of_its_terms(reference) -> None:
     assert energies[:3] == [0.0, 0.0, 0.0] and energies[3] > 0
 
 
-@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel"])
+@pytest.mark.parametrize("variant", ["OA", "OAV", "OAV_Jglo", "OAV_Jrel", "OAV_Jrel_root"])
 def test_ablation_flags_set_the_kinematic_observation(reference, variant) -> None:
     env = _env(reference, kinematic_obs=variant)
     obs, _ = env.reset(seed=0)
@@ -282,6 +282,33 @@ def test_root_velocity_term_asks_the_body_to_cover_the_reference_ground(walk_ref
     q[0] += 1.0
     env.teleport(q)
     assert env.step(np.zeros(69))[4]["reward/root_vel"] > 0.5
+
+
+def test_root_position_term_pays_a_body_left_behind_less_and_it_sees_the_gap(
+        walk_reference) -> None:  # fmt: skip
+    """A body held at its start while its reference walks away (issue 46): ``root_pos`` falls
+    with the distance (it stays near 1 when the pelvis is driven along the reference), and the
+    ``OAV_Jrel_root`` observation shows the followed pelvis ahead of it, up to the clip."""
+    env = _env(walk_reference, pin_root=True, random_start=False, termination_dist_m=0.0,
+               kinematic_obs="OAV_Jrel_root")  # fmt: skip
+    env.reset(seed=0)
+    pinned = [env.step(np.zeros(69))[4]["reward/root_pos"] for _ in range(100)]
+    assert min(pinned) > 0.9  # (the estimate's integrated root is near the truth's)
+    env = _env(walk_reference, random_start=False, termination_dist_m=0.0, amp_window=0,
+               kinematic_obs="OAV_Jrel_root")  # fmt: skip
+    env.reset(seed=0)
+    start = env.data.qpos[:2].copy()
+    terms, gaps = [], []
+    for _ in range(150):
+        env.data.qpos[:2] = start
+        obs, _, _, _, info = env.step(np.zeros(69))
+        terms.append(info["reward/root_pos"])
+        gaps.append(float(np.hypot(*obs["kinematic"][-2:])))
+    walked = float(np.linalg.norm(env.clip.est_root_pos[env.frame, :2]
+                                  - env.clip.est_root_pos[0, :2]))  # fmt: skip
+    assert walked > 0.5
+    assert terms[-1] < np.exp(-4.0 * (walked - 0.1) ** 2) and terms[-1] < 0.5 * terms[5]
+    assert gaps[-1] > 0.9 * min(walked, 1.0) and gaps[5] < gaps[-1]
 
 
 def test_switching_subjects_equals_a_model_compiled_for_each(reference) -> None:

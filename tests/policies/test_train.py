@@ -572,6 +572,39 @@ def test_warm_start_refuses_another_observation_variant(run, tmp_path):
         tr.train()
 
 
+def test_warm_start_grows_the_observation_by_the_root_gap(run, tmp_path):
+    """An ``OAV_Jrel`` policy starts an ``OAV_Jrel_root`` run (issue 46): the new inputs get
+    weights 0, so the run's first policy acts exactly as the file did, whatever the gap."""
+    import torch
+
+    path, _ = run
+    exported = tmp_path / "p.pt"
+    export_policy(path, exported, half=False)
+    src = PolicyRunner.load(exported)
+    cfg = _warm_cfg(0)
+    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, kinematic_obs="OAV_Jrel_root"))
+    tr = PolicyTrainer(cfg, tmp_path / "root", SAMPLE_REFERENCE, make_tracking_env, init=exported)
+    tr.venv = tr._build_env(tr.cfg.stage2)
+    tr.model = tr._new_model(tr.venv)
+    tr.warm_start(src)
+    rms = tr.venv.obs_rms["kinematic"]
+    n = src.obs_mean["kinematic"].shape[0]
+    np.testing.assert_array_equal(rms.mean[:n], src.obs_mean["kinematic"])
+    np.testing.assert_array_equal(rms.mean[n:], 0.0)
+    assert rms.mean.shape == (n + 2,) and (rms.var[n:] > 0).all()
+    env = GripTrackingEnv(cfg.env)
+    obs, _ = env.reset(seed=5)
+    old = {k: (v[:n] if k == "kinematic" else v) for k, v in obs.items()}
+    want = src.act(old)
+    for gap in ((0.0, 0.0), (0.7, -0.4)):
+        obs["kinematic"][-2:] = gap
+        x = tr.venv.normalize_obs({k: v[None] for k, v in obs.items()})
+        with torch.no_grad():
+            got = tr.model.policy.predict(x, deterministic=True)[0][0]
+        np.testing.assert_allclose(got, want, atol=1e-5)
+    tr.venv.close()
+
+
 def test_stored_configs_with_removed_settings():
     from grip.config import ConfigError
     from policies.config import REMOVED_IN, policy_config_from_dict

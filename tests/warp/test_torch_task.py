@@ -73,14 +73,15 @@ def test_tracking_terms_equal_numpy(states, align, form):
     cfg = dataclasses.replace(RewardConfig(), form=form)
     rng = np.random.default_rng(1)
     sd, rd = rng.normal(size=(B, 2)), rng.normal(size=(B, 2))
+    gap = 0.3 * rng.normal(size=(B, 2))
 
     def rows(p, r):
         return np.concatenate([p.reshape(B, -1), r.reshape(B, -1)], axis=1)
 
     want, sq = R.tracking_terms_rows(rows(pvw, rot), rows(ref_pvw, ref_rot), cfg, align, sd.copy(),
-                                     rd, 0.3)  # fmt: skip
+                                     rd, 0.3, gap)  # fmt: skip
     got, tsq = T.tracking_terms(_t(pvw), _t(rot), _t(ref_pvw), _t(ref_rot), cfg, align, _t(sd),
-                                _t(rd), 0.3)  # fmt: skip
+                                _t(rd), 0.3, _t(gap))  # fmt: skip
     np.testing.assert_allclose(got.numpy(), want, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(tsq.numpy(), sq, rtol=1e-12, atol=1e-14)
     assert (want < 1).all()  # (the inputs are off the reference: no term saturates)

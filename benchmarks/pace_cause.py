@@ -1,0 +1,187 @@
+"""Why does GRIP's humanoid fall behind the estimate it follows? (issue 46, part 2)
+
+Plays a controller on the locomotion test segments of a dataset, following KinematicsNet's
+estimate and, separately, the ground truth, and measures per segment (frames before any fall):
+
+* the horizontal distance between the humanoid's pelvis and the pelvis it follows at 1 s, 5 s
+  and the end, split into the part *along* the followed path's direction of travel (behind it:
+  positive) and *across* it;
+* the ground covered by the humanoid over the ground covered by what it follows
+  (``speed_ratio``; 1 s samples of the horizontal path);
+* the share of leg actions near the action bound (|a| > 0.9): a PD target that cannot go
+  further would cap the gait;
+* what the task's reward pays for pace: the ``imit_vel`` and ``root_vel`` kernels (the only
+  terms that see a horizontal velocity deficit with ``align_root_xy``) at the measured deficit,
+  and their weighted cost per step.
+
+    python benchmarks/pace_cause.py --data DATA --json F [--policy P] [--kin K] [--segments N]
+
+Defaults: the shipped policy and KinematicsNet, the test split, categories ``walk*,run*``,
+500-frame segments, recovery off (as ``grip policy eval``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+LEG_JOINTS = (1, 2, 4, 5, 7, 8, 10, 11)  # hips, knees, ankles, feet (SMPL order)
+LEG_HINGES = tuple(3 * (j - 1) + k for j in LEG_JOINTS for k in range(3))
+
+
+class _Recorder:
+    """Wraps a controller and keeps every action it returns (per call, the batch)."""
+
+    def __init__(self, runner) -> None:
+        self._r = runner
+        self.actions: list[np.ndarray] = []
+
+    def act(self, obs):
+        a = self._r.act(obs)
+        self.actions.append(np.asarray(a, np.float64).reshape(-1, 69))
+        return a
+
+    def __getattr__(self, name):
+        return getattr(self._r, name)
+
+
+def _path_speed(xy: np.ndarray, fps: float) -> float:
+    """Ground covered (1 s samples of the horizontal path) per second, m/s."""
+    step = max(round(fps), 1)
+    pts = xy[::step]
+    if len(pts) < 2:
+        return float("nan")
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum() / ((len(pts) - 1) * step / fps))
+
+
+def _gap_parts(sim_xy: np.ndarray, ref_xy: np.ndarray, t: int, fps: float) -> tuple[float, ...]:
+    """(distance, along, across) of ``ref - sim`` at frame ``t``: along the followed path's
+    direction of travel over the last second (positive: the humanoid is behind)."""
+    d = ref_xy[t] - sim_xy[t]
+    back = max(t - round(fps), 0)
+    v = ref_xy[t] - ref_xy[back]
+    n = float(np.linalg.norm(v))
+    along = float(d @ v / n) if n > 1e-6 else float("nan")
+    across = float(np.sqrt(max(float(d @ d) - along**2, 0.0))) if n > 1e-6 else float("nan")
+    return float(np.linalg.norm(d)), along, across
+
+
+def play(setup, segments, reference: str) -> list[dict]:
+    from grip.eval.policy import _episode, _estimates, _pipeline
+    from grip.eval.segments import SegmentReader
+    from grip.kinematics.features import ground_truth
+
+    runner, estimator = setup.build()
+    rows = []
+    read = SegmentReader()
+    for seg in segments:
+        rec = read(seg)
+        est = _estimates(estimator, [rec], 1, reference, "truth")[0]
+        rec_runner = _Recorder(runner)
+        pipe = _pipeline(rec_runner, estimator, reference, "truth")
+        ep = _episode(rec, est, "truth", estimator.cfg.features)
+        recon, _ = pipe.play(ep.est, ep.start, ep.body, ep.objects, stop_at_fall=True)
+        n = recon.n_frames
+        fps = float(est.fps)
+        gt = ground_truth(rec).head(n)
+        sim_xy = recon.root_pos[:, :2]
+        offset = ep.start.qpos[:3] - est.est_root_pos[0]
+        ref_xy = (est.est_root_pos[:n] + offset)[:, :2]
+        fell = bool(len(recon.falls))
+        acts = np.concatenate(rec_runner.actions) if rec_runner.actions else np.zeros((0, 69))
+        legs = np.abs(acts[:, list(LEG_HINGES)])
+        row = {"segment": seg.id, "category": seg.category, "frames": n, "fell": fell,
+               "ref_speed_mps": _path_speed(ref_xy, fps), "sim_speed_mps": _path_speed(sim_xy, fps),
+               "gt_speed_mps": _path_speed(gt.root_pos[:, :2], fps),
+               "leg_saturated": float((legs > 0.9).mean()) if legs.size else float("nan"),
+               "leg_abs_action": float(legs.mean()) if legs.size else float("nan")}  # fmt: skip
+        row["speed_ratio"] = row["sim_speed_mps"] / max(row["ref_speed_mps"], 1e-9)
+        for name, sec in (("1s", 1.0), ("5s", 5.0 - 1.0 / fps), ("end", None)):
+            t = n - 1 if sec is None else round(sec * fps)
+            if t >= n:
+                row[f"gap_{name}_m"] = row[f"along_{name}_m"] = row[f"across_{name}_m"] = None
+                continue
+            row[f"gap_{name}_m"], row[f"along_{name}_m"], row[f"across_{name}_m"] = _gap_parts(
+                sim_xy, ref_xy, t, fps)
+        rows.append(row)
+        print(f"{seg.id:50s} {reference:8s} fell={fell!s:5s} speed ratio "
+              f"{row['speed_ratio']:.3f} gap 5 s {row['gap_5s_m']} along {row['along_5s_m']}",
+              flush=True)  # fmt: skip
+    return rows
+
+
+def reward_cost(deficit_mps: float) -> dict:
+    """What the task reward pays for a whole body moving ``deficit_mps`` slower than the truth,
+    everything else perfect (the default reward settings)."""
+    from grip.task.config import RewardConfig
+
+    c = RewardConfig()
+    vel = float(np.exp(-c.k_vel * deficit_mps**2))  # every joint off by the deficit (mean_sq)
+    root = float(np.exp(-c.k_root_vel * deficit_mps**2))
+    w = c.weights
+    return {"deficit_mps": deficit_mps, "imit_vel": vel, "root_vel": root,
+            "cost_per_step": w.imit_vel * (1 - vel) + w.root_vel * (1 - root),
+            "max_imitation_per_step": w.imit_pos + w.imit_rot + w.imit_vel + w.imit_angvel,
+            "weights": {"imit_vel": w.imit_vel, "root_vel": w.root_vel}}  # fmt: skip
+
+
+def _median(rows: list[dict], key: str) -> float:
+    v = [r[key] for r in rows if r.get(key) is not None and np.isfinite(r[key])]
+    return float(np.median(v)) if v else float("nan")
+
+
+def main(argv: list[str] | None = None) -> None:
+    from grip.assets import SHIPPED_KIN, SHIPPED_POLICY
+    from grip.eval.policy import PolicySetup
+    from grip.eval.segments import list_segments, split_files
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--policy", default=str(SHIPPED_POLICY))
+    ap.add_argument("--kin", default=str(SHIPPED_KIN))
+    ap.add_argument("--categories", default="walk*,run*")
+    ap.add_argument("--segments", type=int, default=0, help="at most this many (0: all)")
+    ap.add_argument("--segment-frames", type=int, default=500)
+    ap.add_argument("--references", default="estimate,truth")
+    ap.add_argument("--json", required=True)
+    args = ap.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(1)
+    files = split_files(args.data, "test")
+    segs = list_segments(files, args.segment_frames, args.categories.split(","))
+    if args.segments:
+        segs = segs[: args.segments]
+    setup = PolicySetup((args.policy,), args.kin)
+    out: dict = {"policy": args.policy, "kin": args.kin, "data": args.data,
+                 "segments": len(segs), "by_reference": {}}  # fmt: skip
+    for ref in args.references.split(","):
+        rows = play(setup, segs, ref)
+        kept = [r for r in rows if not r["fell"]]
+        out["by_reference"][ref] = {
+            "rows": rows,
+            "kept": len(kept),
+            "median_without_fall": {k: _median(kept, k) for k in (
+                "gap_1s_m", "gap_5s_m", "gap_end_m", "along_5s_m", "across_5s_m", "speed_ratio",
+                "ref_speed_mps", "sim_speed_mps", "leg_saturated", "leg_abs_action")},
+            "max_gap_5s_without_fall_m": max((r["gap_5s_m"] for r in kept
+                                              if r["gap_5s_m"] is not None), default=None),
+        }  # fmt: skip
+        m = out["by_reference"][ref]["median_without_fall"]
+        deficit = m["ref_speed_mps"] - m["sim_speed_mps"]
+        out["by_reference"][ref]["reward_at_median_deficit"] = reward_cost(deficit)
+    Path(args.json).write_text(json.dumps(out, indent=1))
+    for ref, r in out["by_reference"].items():
+        print(ref, json.dumps(r["median_without_fall"]), "max gap 5 s",
+              r["max_gap_5s_without_fall_m"], json.dumps(r["reward_at_median_deficit"]))
+
+
+if __name__ == "__main__":
+    main()
