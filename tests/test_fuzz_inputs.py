@@ -212,8 +212,8 @@ def _head_lines(path: Path, n: int) -> list[str]:
 
 
 def _motion_seeds(root: Path) -> dict[str, list[Path]]:
-    """Small real clips: a CMU BVH, an HDM05 ASF/AMC pair, a DeepMimic clip (12 frames each), and
-    an AMASS-style npz."""
+    """Small real clips: a CMU BVH, an HDM05 ASF/AMC pair, a DeepMimic clip (12 frames each), an
+    AMASS-style npz and a synthetic poselib ``.npy`` (ASE's humanoid standing, 12 frames)."""
     seeds: dict[str, list[Path]] = {}
     bvh_src = SHARED / "cmu" / "bvh" / "02_01.bvh"
     if bvh_src.is_file():
@@ -254,6 +254,9 @@ def _motion_seeds(root: Path) -> dict[str, list[Path]]:
     np.savez(p, poses=rng.normal(scale=0.3, size=(12, 156)), trans=rng.normal(size=(12, 3)),
              mocap_framerate=np.array(60.0), betas=np.zeros(16), gender=np.array("neutral"))
     seeds["amass"] = [p]
+    from tests.motion.poselib_files import write_standing_clip
+
+    seeds["poselib"] = [write_standing_clip(root / "poselib" / "clip.npy")]
     return seeds
 
 
@@ -387,6 +390,11 @@ def _hostile_files(root: Path, marker: Path) -> list[tuple[Path, Callable[[Path]
         p.write_bytes(_npz_bytes({"poses.npy": buf.getvalue(), "trans.npy": buf.getvalue(),
                                   "__meta__.json.npy": buf.getvalue()}))  # fmt: skip
         out.append((p, loader))
+    from tests.motion.poselib_files import write_poselib
+
+    p = write_poselib(root / "hostile_clip.npy", {"rotation": {"arr": _Payload(marker)},
+                                                  "fps": 30.0})  # fmt: skip
+    out.append((p, _load_clip))
     import torch
 
     for name, loader in (("hostile_policy.pt", _load_policy), ("hostile_kin.pt", _load_kin)):
@@ -413,7 +421,8 @@ def _run_all(tmp_path: Path, n: int, seed: int) -> list[str]:
                                   n // 2, seed + 10, marker, work, keep_name=True,
                                   also=(amc.name,))  # fmt: skip
                 continue
-            mutators = NPZ_MUTATORS if p.suffix == ".npz" else TEXT_MUTATORS
+            mutators = {".npz": NPZ_MUTATORS, ".npy": BYTE_MUTATORS}.get(p.suffix,
+                                                                         TEXT_MUTATORS)  # fmt: skip
             problems += _fuzz(p, _load_clip, mutators, n, seed + 20 + len(problems), marker, work,
                               keep_name=kind in ("amc", "deepmimic"))  # fmt: skip
     problems += _fuzz(_reconstruction_seed(tmp_path), _load_reconstruction, NPZ_MUTATORS, n,

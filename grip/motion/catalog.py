@@ -3,7 +3,9 @@
 Supported clips: ``*.bvh``; ``*.amc`` (with their ASF, see
 :func:`grip.motion.asf_amc.find_asf_for_amc` or a ``clips.csv`` ``asf`` column); DeepMimic
 ``*.txt``/``*.json`` files that are JSON objects with a ``"Frames"`` key (character files,
-sidecars, licences and READMEs are skipped); AMASS-style ``*.npz`` holding ``poses`` and ``trans``.
+sidecars, licences and READMEs are skipped); AMASS-style ``*.npz`` holding ``poses`` and ``trans``;
+poselib ``SkeletonMotion`` ``*.npy`` (NVIDIA ASE; pickled dicts read with the restricted
+unpickler, :mod:`grip.motion.poselib`: a ``.npy`` naming any other global is reported, never run).
 
 Clip ids are ``"<top folder>/<stem>"``, the top folder being the first folder below the searched
 root (``cmu/02_01``, ``hdm05/HDM_bd_squat1Reps_001_120``,
@@ -70,6 +72,7 @@ from grip.motion.categories import (
     table_category,
 )
 from grip.motion.deepmimic import SKELETON_FILE, load_deepmimic
+from grip.motion.poselib import is_poselib_npy, load_poselib
 from grip.motion.source import MotionImportError, SourceMotion
 
 __all__ = [
@@ -129,7 +132,7 @@ class ClipRef:
     Attributes:
         clip_id: Stable id, ``"<top folder>/<stem>"``.
         path: The clip's main file.
-        fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass"``.
+        fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass" | "poselib"``.
         category: Motion category (of the :class:`CategoryMap` given to the search) or
             ``"unknown"``.
         asf_path: The skeleton of an AMC clip (``None`` for other formats, or when it could not be
@@ -301,12 +304,19 @@ def _is_amass_npz(path: Path) -> bool:
         raise _NotExamined(f"not a readable npz ({_why(e)})") from e
 
 
+def _is_poselib_npy(path: Path) -> bool:
+    try:
+        return is_poselib_npy(path)
+    except MotionImportError as e:  # a refused global, a damaged pickle: reported, never run
+        raise _NotExamined(e.problem) from e
+
+
 def _detect_format(path: Path) -> str | None:
     """The clip format of ``path``, or ``None`` when it is not a clip.
 
     Raises:
-        _NotExamined: A candidate (``.npz``, or ``.txt``/``.json`` starting with ``{``) that
-            cannot be read.
+        _NotExamined: A candidate (``.npz``, ``.npy``, or ``.txt``/``.json`` starting with
+            ``{``) that cannot be read.
     """
     suffix = path.suffix.lower()
     if suffix == ".bvh":
@@ -317,6 +327,8 @@ def _detect_format(path: Path) -> str | None:
         return "deepmimic"
     if suffix == ".npz" and _is_amass_npz(path):
         return "amass"
+    if suffix == ".npy" and _is_poselib_npy(path):
+        return "poselib"
     return None
 
 
@@ -490,7 +502,9 @@ def clip_ref(path: str | Path, categories: CategoryMap | None = None) -> ClipRef
         raise MotionImportError(path, str(e)) from e
     if fmt is None:
         raise MotionImportError(
-            path, "not a supported clip (.bvh, .amc, DeepMimic JSON with 'Frames', AMASS .npz)"
+            path,
+            "not a supported clip (.bvh, .amc, DeepMimic JSON with 'Frames', AMASS .npz, "
+            "poselib SkeletonMotion .npy)",
         )
     dataset = _dataset_root(path, None)
     top = dataset.name if dataset is not None else path.parent.name
@@ -515,4 +529,6 @@ def load_clip(ref_or_path: ClipRef | str | Path) -> SourceMotion:
         return load_deepmimic(ref.path, name=ref.clip_id, category=ref.category)
     if ref.fmt == "amass":
         return load_amass_npz(ref.path, name=ref.clip_id, category=ref.category)
+    if ref.fmt == "poselib":
+        return load_poselib(ref.path, name=ref.clip_id, category=ref.category)
     raise MotionImportError(ref.path, f"unknown clip format {ref.fmt!r}")

@@ -112,6 +112,23 @@ DEEPMIMIC_MAP: dict[str, str] = {
 }  # fmt: skip
 """DeepMimic humanoid3d (no collars, toes, separate head or hand joints)."""
 
+ASE_MAP: dict[str, str] = {
+    "Pelvis": "pelvis",
+    # As DeepMimic's (ASE's humanoid has its bodies and offsets): one torso body from the waist,
+    # whose bend Spine1-3 share; the "head" body sits at the neck joint and carries the head.
+    "Spine3": "torso",
+    "Neck": "head",
+    **_sided({
+        "Hip": ("left_thigh", "right_thigh"),
+        "Knee": ("left_shin", "right_shin"),
+        "Ankle": ("left_foot", "right_foot"),
+        "Shoulder": ("left_upper_arm", "right_upper_arm"),
+        "Elbow": ("left_lower_arm", "right_lower_arm"),
+        "Wrist": ("left_hand", "right_hand"),
+    }),
+}  # fmt: skip
+"""NVIDIA ASE's humanoid (poselib clips; its sword and shield are dropped by the importer)."""
+
 SMPL_MAP: dict[str, str] = {name: name for name in sk.JOINT_NAMES}
 """SMPL/AMASS sources and this project's own skeleton: identity."""
 
@@ -120,6 +137,7 @@ RIG_JOINT_MAPS: dict[str, dict[str, str]] = {
     "cmu_daz": CMU_DAZ_MAP,
     "asf": ASF_MAP,
     "deepmimic": DEEPMIMIC_MAP,
+    "ase": ASE_MAP,
     "smpl": SMPL_MAP,
 }
 """Fixed joint maps of the known rigs, keyed by :attr:`SourceMotion.rig`."""

@@ -1,6 +1,6 @@
 """The common in-memory type for imported motion-capture clips, plus small shared helpers.
 
-Every importer in :mod:`grip.motion` (BVH, ASF/AMC, DeepMimic, AMASS) returns a
+Every importer in :mod:`grip.motion` (BVH, ASF/AMC, DeepMimic, AMASS, poselib) returns a
 :class:`SourceMotion`: the clip as the capture rig describes it, in the source's world axes but
 already converted to metres, with world (global) joint rotations and positions for every frame.
 Retargeting onto the project's body model happens later and is not this module's business.
@@ -21,7 +21,7 @@ import numpy as np
 
 from grip.core.limits import InputLimits, LimitExceeded, check_file_size
 
-SOURCE_FORMATS = ("bvh", "asf_amc", "deepmimic", "amass")
+SOURCE_FORMATS = ("bvh", "asf_amc", "deepmimic", "amass", "poselib")
 """Values allowed in :attr:`SourceMotion.fmt`."""
 
 
@@ -71,9 +71,9 @@ class SourceMotion:
     Attributes:
         name: Clip id, e.g. ``"cmu/02_01"``.
         path: File the motion came from.
-        fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass"``.
-        rig: Joint-map key: ``"bandai"``, ``"cmu_daz"``, ``"asf"``, ``"deepmimic"``, ``"smpl"`` or
-            ``"unknown"``.
+        fmt: ``"bvh" | "asf_amc" | "deepmimic" | "amass" | "poselib"``.
+        rig: Joint-map key: ``"bandai"``, ``"cmu_daz"``, ``"asf"``, ``"deepmimic"``, ``"ase"``,
+            ``"smpl"`` or ``"unknown"``.
         joint_names: J names. BVH/ASF end sites are included as extra joints named
             ``"<parent>_end"``.
         parents: (J,) int, -1 for the root; ``parents[j] < j``.
@@ -83,7 +83,8 @@ class SourceMotion:
         rest_rot: (J, 3, 3) global rotations of the zero pose (all channels zero; ASF: the ASF
             rest pose).
         rest_pos: (J, 3) global joint positions of the zero pose, metres, root at its offset.
-        up_axis: Index of the world's up axis (1 = y for all shared formats, 2 = z for AMASS).
+        up_axis: Index of the world's up axis (1 = y for BVH, ASF/AMC and DeepMimic; 2 = z for
+            AMASS and poselib).
         unit_m: Metres per file unit that was applied (BVH cm -> 0.01; ASF length 0.45 ->
             0.05644; DeepMimic 1.0).
         rest_is_tpose: True where the zero pose is an anatomical T-pose or standing pose.

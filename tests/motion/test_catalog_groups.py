@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -104,8 +103,10 @@ def test_every_label_of_the_shared_sources_has_a_category(cmap: CategoryMap) -> 
     if not DATA.is_dir():
         pytest.skip("shared motion data not found")
     labels: set[str] = set()
-    for name in ("cmu", "hdm05"):
-        with (DATA / name / "clips.csv").open(encoding="utf-8") as fh:
+    tables = sorted(DATA.rglob("clips.csv"))
+    assert {t.parent.name for t in tables} >= {"cmu", "hdm05", "deepmimic", "ase_reallusion"}
+    for table in tables:
+        with table.open(encoding="utf-8") as fh:
             for row in csv.DictReader(fh):
                 labels.add(next(row[c] for c in cmap.label_columns if row.get(c)))
     for cfg in DATA.glob("bandai_namco/**/cfg/content_label.txt"):
@@ -210,8 +211,18 @@ def test_shared_corpus_groups_and_categories(cmap: CategoryMap) -> None:
     for r in refs:
         if r.clip_id.startswith("deepmimic/") and not r.person:
             assert r.group == r.clip_id
+    # Performers named by a clips.csv person column: one Sony performer for the sie_* DeepMimic
+    # clips, one Reallusion performer for the ASE clips (all poselib .npy files of the folder).
     sie = {r.group for r in refs if r.clip_id.startswith("deepmimic/sie_")}
-    assert len(sie) <= 1  # one studio's performer is one person
+    assert sie <= {"deepmimic/sie"}
+    ase = [r for r in refs if r.clip_id.startswith("ase_reallusion/")]
+    assert len(ase) == len(list((DATA / "ase_reallusion").glob("*.npy")))
+    assert {(r.fmt, r.person, r.group) for r in ase} <= {
+        ("poselib", "reallusion", "ase_reallusion/reallusion")}  # fmt: skip
+    # CMU's ASF/AMC subjects are their own groups, as the BVH subjects are.
+    for r in refs:
+        if r.fmt == "asf_amc" and r.clip_id.startswith("cmu/"):
+            assert r.group == f"cmu/{r.path.stem.split('_')[0]}", r.clip_id
     labels = {r.clip_id: r.label for r in refs}
     assert labels["hdm05/HDM_bd_squat1Reps_001_120"] == "squat1Reps"
     assert labels["bandai_namco/dataset-1_dash_active_001"] == "dash"
@@ -248,8 +259,12 @@ def test_a_users_category_table_overrides_labels(tmp_path: Path, capsys,
     table = load_clip_categories(table_csv)
     clips, _ = scan_motions([root], None, cmap, table)
     got = {Path(c.path).stem: (c.category, c.label) for c in clips}
-    assert got == {"a": ("run", "Running"), "b": ("sit-stand", "sit-stand"),
-                   "c": ("juggling-balls", "Juggling Balls"), "d": ("walk", "walk")}
+    assert got == {
+        "a": ("run", "Running"),
+        "b": ("sit-stand", "sit-stand"),
+        "c": ("juggling-balls", "Juggling Balls"),
+        "d": ("walk", "walk"),
+    }
     assert "1 listed clip(s) not found" in capsys.readouterr().err
     for text, why in (("clip,label\nx,walk\n", "line 2"), ("clip,category\n", "no rows"),
                       ("clip,category\nx,walk\nx,run\n", "twice")):  # fmt: skip

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from collections import Counter
-
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -526,7 +525,7 @@ def test_shared_data_catalog(shared_clips: list) -> None:
     deepmimic = [p for p in DATA.rglob("*.txt") if p.read_bytes()[:1] == b"{"
                  and b'"Frames"' in p.read_bytes()[:4096]]  # fmt: skip
     on_disk = {"bvh": len(list(DATA.rglob("*.bvh"))), "asf_amc": len(list(DATA.rglob("*.amc"))),
-               "deepmimic": len(deepmimic)}  # fmt: skip
+               "deepmimic": len(deepmimic), "poselib": len(list(DATA.rglob("*.npy")))}  # fmt: skip
     fmts = Counter(ref.fmt for ref in refs)
     for fmt, n in on_disk.items():
         assert fmts.get(fmt, 0) == n, fmt

@@ -336,6 +336,8 @@ REAL_CLIPS = {
     "cmu/bvh/12_01.bvh": 0.3,
     "hdm05/amc/HDM_bk_sneak2StepsLStart_004_120.amc": 0.3,
     "deepmimic/humanoid3d_walk.txt": 0.3,
+    "ase_reallusion/RL_Avatar_WalkRight02_Motion.npy": 0.3,  # poselib; a forward walk in the body
+    "ase_reallusion/RL_Avatar_Atk_Kick_Motion.npy": None,
     "hdm05/amc/HDM_bd_squat1Reps_001_120.amc": None,
 }
 
