@@ -29,9 +29,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="convert motion clips into a PRISM-format dataset",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
-            "Import motion clips (BVH, ASF/AMC, DeepMimic JSON, AMASS npz), retarget them onto\n"
-            "the body model at 100 Hz, synthesise the 8 IMUs and both insoles by physics, add\n"
-            "sensor noise, chunk into <=1000-frame sequences and write a train/test split.\n"
+            "Import motion clips (BVH, ASF/AMC, DeepMimic JSON, AMASS npz, poselib npy),\n"
+            "retarget them onto the body model at 100 Hz, synthesise the 8 IMUs and both\n"
+            "insoles by physics, add sensor noise, chunk into <=1000-frame sequences and write\n"
+            "a train/test split.\n"
             "Parallel, resumable (finished clips are skipped), every file written atomically.\n"
             "The settings are recorded in OUT/settings.json before the first clip; a rerun with\n"
             "options that change the clips is refused. A motion file that cannot be read or\n"
