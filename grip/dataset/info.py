@@ -109,7 +109,9 @@ def _summary_from_manifest(root: Path, manifest_path: Path) -> dict:
     split_path = root / "split.json"
     if split_path.exists():
         try:
-            summary.update(_split_summary(_read_json(split_path)))
+            split = _read_json(split_path)
+            summary.update(_split_summary(split))
+            summary["split_people"] = people_per_category(done, split)
         except (ValueError, TypeError, AttributeError):
             summary["splits"] = {"error": f"{split_path}: unreadable"}
     return summary
@@ -142,10 +144,16 @@ def props_summary(clips: list[dict]) -> dict:
         for p in props:
             e["seats" if p.get("kind") == "seat" else "steps"] += 1
         if len(examples) < 12:
-            examples.append((c.get("clip_id"), ", ".join(
-                f"{p.get('kind')} {float(p.get('height_m', 0.0)):.2f} m"
-                + (" (open underneath)" if float(p.get("bottom_m", 0.0)) > 0 else "")
-                for p in props)))
+            examples.append(
+                (
+                    c.get("clip_id"),
+                    ", ".join(
+                        f"{p.get('kind')} {float(p.get('height_m', 0.0)):.2f} m"
+                        + (" (open underneath)" if float(p.get("bottom_m", 0.0)) > 0 else "")
+                        for p in props
+                    ),
+                )
+            )
     return {"clips": with_props, "props": n_props, "by_source": dict(sorted(by_source.items())),
             "examples": examples}  # fmt: skip
 
@@ -166,6 +174,41 @@ def zmp_outside_by_source(clips: list[dict]) -> dict[str, dict]:
         n = entry["synth_frames"]
         entry["fraction"] = entry["zmp_outside_frames"] / n if n else None
     return dict(sorted(out.items()))
+
+
+def people_per_category(clips: list[dict], split: dict) -> dict[str, dict[str, list[str]]]:
+    """The people (split groups) per category on each side of a split.
+
+    A clip's person is its manifest ``group``: its performer where the source names one, else
+    the source's finest grouping (:func:`grip.motion.catalog.clip_group`; the clip id in
+    manifests written before groups). It counts for the clip's category on the side that holds
+    its sequences (``split.json``'s ``groups`` and ``members``; a split without ``members``
+    names clips as groups). Clips without sequences count nowhere. Split by clip, one person can
+    be on both sides.
+
+    Args:
+        clips: The manifest's clips.
+        split: The ``split.json`` dict.
+
+    Returns:
+        ``category -> {"train": [people], "test": [people]}``, sorted; empty for a split that
+        records no groups.
+    """
+    side_of: dict[str, str] = {}
+    members = split.get("members")
+    for part, names in (split.get("groups") or {}).items():
+        for g in names:
+            for clip_id in members.get(g, ()) if members is not None else (g,):
+                side_of[clip_id] = part
+    out: dict[str, dict[str, set[str]]] = {}
+    for c in clips:
+        part = side_of.get(str(c.get("clip_id")))
+        if c.get("status") != "done" or not c.get("sequences") or part is None:
+            continue
+        people = out.setdefault(str(c.get("category", "unknown")), {"train": set(), "test": set()})
+        people.setdefault(part, set()).add(str(c.get("group") or c.get("clip_id")))
+    return {cat: {part: sorted(v) for part, v in parts.items()}
+            for cat, parts in sorted(out.items())}  # fmt: skip
 
 
 def _split_summary(split: dict) -> dict:
@@ -347,11 +390,21 @@ def _format_split(s: dict) -> list[str]:
         lines += [f"- {part} ({len(names)}): {', '.join(names) or '-'}"
                   for part, names in groups.items()]  # fmt: skip
     splits = s.get("splits") or {}
+    people = s.get("split_people") or {}
     cats = sorted(set(splits.get("train", {}).get("categories", {}))
                   | set(splits.get("test", {}).get("categories", {})))  # fmt: skip
     if cats:
-        lines += ["", "| category | train sequences | test sequences |", "|---|---:|---:|"]
+        head = "| category | train sequences | test sequences |"
+        lines += ["", head + (" train people | test people |" if people else ""),
+                  "|---|---:|---:|" + ("---:|---:|" if people else "")]  # fmt: skip
         for c in cats:
-            lines.append(f"| {c} | {splits['train'].get('categories', {}).get(c, 0)} | "
-                         f"{splits['test'].get('categories', {}).get(c, 0)} |")  # fmt: skip
+            row = (f"| {c} | {splits['train'].get('categories', {}).get(c, 0)} | "
+                   f"{splits['test'].get('categories', {}).get(c, 0)} |")  # fmt: skip
+            if people:
+                p = people.get(c, {})
+                row += f" {len(p.get('train', ()))} | {len(p.get('test', ()))} |"
+            lines.append(row)
+        if people:
+            lines.append("(people: the split groups, i.e. performers where the source names "
+                         "them, with sequences of the category on that side)")  # fmt: skip
     return lines
