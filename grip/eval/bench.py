@@ -26,12 +26,24 @@ vGRF_N            N      vertical force error per foot vs the insole (body weigh
                          for methods without forces
 success_rate      %      segments without a detected fall; NaN for methods that cannot fall
 ms_per_frame      ms     wall time of ``reconstruct`` per frame, measured by the runner
+pace_1s_m         m      horizontal distance of the pelvis to the pelvis the method followed
+                         (``Reconstruction.ref_root_pos``: GRIP's kinematic estimate, integrated
+                         from its velocity) after the first second (frame ``fps - 1``); NaN for
+                         methods that follow none (:func:`~grip.core.metrics.measure_pace`)
+pace_5s_m         m      the same after the first 5 s (frame ``5 fps - 1``; NaN if shorter)
+pace_end_m        m      the same at the last frame
+drift_mps         m/s    least-squares slope of that distance over time (0: keeps pace)
+root_gt_1s_m      m      horizontal distance of the pelvis to the truth's after the first second
+root_gt_5s_m      m      the same after the first 5 s
+root_gt_end_m     m      the same at the last frame
 ================  =====  ==========================================================================
 
 ``results.json`` also counts ``blowups``: simulation blow-ups over the segments (a method's
 ``Reconstruction.notes["blowups"]``; GRIP recovers each like a fall, so its frames are never
 in the metrics; 0 for methods without a simulation); each segment's row carries its own. Its
-``init`` says where the method started (``"truth"`` or ``"standing"``).
+``init`` says where the method started (``"truth"`` or ``"standing"``), and its
+``pace_by_category`` the pace keys per motion category (``{category: {key: mean, "segments":
+n}}``).
 
 Output folder (``OUT``)::
 
@@ -40,7 +52,8 @@ Output folder (``OUT``)::
     recons/<label>/<segment>.npz        reconstructions (--save-recons; always the sample's)
     results.json, results.csv           {label: {metric: value}} (null / empty for NaN)
     segments.csv                        one row per method and segment
-    table.md                            the GRIP Table 1 layout, runtime, failures, categories
+    table.md                            the GRIP Table 1 layout, runtime, failures, categories,
+                                        pace and distance to the truth (overall, per category)
     per_joint.png, trajectory.png, grf.png
 
 A *label* is the method name, with ``@<sensors>`` for a sensor configuration of a sweep
@@ -64,12 +77,15 @@ from grip.eval.plots import plot_per_joint, plot_sample
 from grip.eval.report import (
     RESULT_KEYS,
     aggregate,
+    category_means,
     category_table,
     cell,
     csv_text,
     jsonable,
     markdown_table,
     method_table,
+    pace_category_table,
+    pace_table,
     results_json,
 )
 from grip.eval.runner import MethodRun
@@ -119,6 +135,7 @@ def write_outputs(
     results = results_json(summary)
     for r in runs:  # where the method started (MethodOptions.init)
         results[r.label]["init"] = r.options.init
+        results[r.label]["pace_by_category"] = jsonable(category_means(rows, r.label))
     atomic_write_text(out_dir / "results.json", json.dumps(results, indent=1) + "\n")
     atomic_write_text(out_dir / "results.csv",
                       csv_text([{"method": k, **v} for k, v in results.items()],
@@ -138,7 +155,14 @@ def write_outputs(
              "has no such output (no forces, cannot fall).", "", method_table(summary), "",
              "ms/frame: wall time of one segment's reconstruction per frame, measured with "
              "the run's worker count (other processes share the cores).", "",
-             "## MPJPE (mm) per category", "", category_table(rows, labels)]  # fmt: skip
+             "## MPJPE (mm) per category", "", category_table(rows, labels), "",
+             "## Pace and distance to the truth", "",
+             "Horizontal distance (m) of each method's pelvis to the pelvis it followed (pace; "
+             "GRIP: the kinematic estimate's; n/a: the method follows none) and to the "
+             "truth's, after the first 1 s and 5 s and at the last frame; drift: the "
+             "least-squares slope of the pace distance over time (m/s).", "",
+             pace_table(summary), "", "### Per category (means over segments)", "",
+             pace_category_table(rows, labels)]  # fmt: skip
     blown = {label: s["blowups"] for label, s in summary.items() if s["blowups"]}
     if blown:
         parts[5:5] = ["Simulation blow-ups (each recovered like a fall, its frames replaced): "

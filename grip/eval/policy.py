@@ -26,6 +26,16 @@ kinematics only. ``pelvis_min_m`` is each segment's lowest pelvis height, and
 failure, whatever the discriminator says): a lenient discriminator cannot hide a fall, and
 policies with different discriminators compare on one criterion.
 
+Pace (issue 46; :func:`grip.core.metrics.measure_pace`): ``pace_1s_m``, ``pace_5s_m`` and
+``pace_end_m`` are the horizontal distance of the humanoid's pelvis to the pelvis the policy
+followed (the estimate's integrated pelvis, or the truth's with ``reference="truth"``, where the
+episode started it: ``Reconstruction.ref_root_pos``) after the first second, after the first 5 s
+(NaN for a segment that ended sooner, e.g. at a fall) and at its last frame, m; ``drift_mps`` the
+least-squares slope of that distance over time, m/s; ``root_gt_*_m`` / ``kin_root_gt_*_m`` the
+horizontal distance of the humanoid's / kinematics only's pelvis to the truth's at the same
+times, m. These are means over segments (the others: over frames); ``segments_5s`` counts the
+segments that reached 5 s.
+
 ``blowups``: simulation blow-ups (:meth:`grip.sim.humanoid.Humanoid.blown_up`), per segment
 and summed in the summary. A blow-up ends its segment as a failure (``fell``) before the
 blown-up frame: no frame of a blown-up state enters the metrics.
@@ -66,6 +76,9 @@ METRIC_KEYS: tuple[str, ...] = (
     "root_err_m", "kin_root_err_m", "travel_ratio", "kin_travel_ratio",
 )  # fmt: skip
 _MEAN_KEYS = tuple(k for k in METRIC_KEYS if k != "success_rate")
+_KIN_ROOT_GT_KEYS = tuple(f"kin_{k}" for k in M.ROOT_GT_KEYS)
+PACE_KEYS: tuple[str, ...] = (*M.PACE_KEYS, *M.ROOT_GT_KEYS, *_KIN_ROOT_GT_KEYS)
+"""Each row's pace keys (module docstring), averaged over segments in the summary."""
 
 
 def segment_row(recon, clip, rec) -> dict:
@@ -85,6 +98,9 @@ def segment_row(recon, clip, rec) -> dict:
     row["kin_root_err_m"] = M.root_error_xy(kin_root, gt.root_pos)
     row["travel_ratio"] = M.travel_ratio(recon.root_pos, gt.root_pos, clip.fps)
     row["kin_travel_ratio"] = M.travel_ratio(kin_root, gt.root_pos, clip.fps)
+    # (the humanoid's pace keys come with bench_metrics, from recon.ref_root_pos)
+    kin_gap = M.horizontal_gap(kin_root, gt.root_pos, clip.fps).root_gt_metrics()
+    row.update({f"kin_{k}": v for k, v in kin_gap.items()})
     row["fell"] = recon.fell
     row["pelvis_min_m"] = float(recon.root_pos[:, 2].min())
     row["frames"] = t
@@ -375,6 +391,9 @@ def _play_rows(pipe: GripPipeline, chunks: Iterable[tuple[list[dict], list, list
 
 def _summary(rows: list[dict]) -> dict[str, float]:
     out: dict[str, float] = weighted_means(rows, _MEAN_KEYS)
+    pace = M.summarize([{k: r[k] for k in PACE_KEYS} for r in rows])
+    out.update({k: float(pace[k]) for k in PACE_KEYS})
+    out["segments_5s"] = int(sum(bool(np.isfinite(r["pace_5s_m"])) for r in rows))
     out["success_rate"] = M.success_rate([r["fell"] for r in rows])
     low = RecoveryConfig().fall_height_m
     out["success_rate_height"] = M.success_rate([r["fell"] or r["pelvis_min_m"] < low
@@ -402,16 +421,33 @@ _COLUMNS: tuple[tuple[str, str], ...] = (
 )  # fmt: skip
 
 
+_PACE_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("pace_1s_m", "pace 1 s m"), ("pace_5s_m", "pace 5 s m"), ("pace_end_m", "pace end m"),
+    ("drift_mps", "drift m/s"), ("root_gt_5s_m", "to truth 5 s m"),
+    ("kin_root_gt_5s_m", "kin. to truth 5 s m"), ("root_gt_end_m", "to truth end m"),
+    ("kin_root_gt_end_m", "kin. to truth end m"), ("segments_5s", "reached 5 s"),
+    ("segments", "segments"),
+)  # fmt: skip
+
+
 def _fmt(key: str, v) -> str:
-    return (f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if key in _TWO_DIGITS
+    if key in PACE_KEYS and not np.isfinite(v):
+        return "n/a"
+    return (f"{v:d}" if isinstance(v, int) else f"{v:.2f}" if key in _TWO_DIGITS + PACE_KEYS
             else f"{v:.3f}" if key == "FS_mps" else f"{v:.1f}")  # fmt: skip
 
 
 def markdown_table(summary: dict) -> str:
-    """The per-category table (and the overall row) of :func:`summarize_rows`."""
+    """The per-category tables (and the overall rows) of :func:`summarize_rows`: the metrics,
+    then the pace (module docstring; n/a: no segment has the value)."""
     items = [*summary["categories"].items(), ("**all**", summary["overall"])]
-    body = [[name, *[_fmt(k, s[k]) for k, _ in _COLUMNS]] for name, s in items]
-    lines = [table(["category", *[h for _, h in _COLUMNS]], body, ["---"] * (len(_COLUMNS) + 1))]
+    lines = []
+    for cols in (_COLUMNS, _PACE_COLUMNS):
+        body = [[name, *[_fmt(k, s[k]) for k, _ in cols]] for name, s in items]
+        lines.append(table(["category", *[h for _, h in cols]], body, ["---"] * (len(cols) + 1)))
+    lines[1:1] = ["\nPace: the pelvis' horizontal distance to the pelvis the policy followed, "
+                  "its drift rate, and the distance of the humanoid's and kinematics only's "
+                  "pelvis to the truth (means over segments):\n"]  # fmt: skip
     n = summary["overall"].get("blowups", 0)
     if n:
         lines.append(f"\n{n} simulation blow-up(s): each ended its segment as a failure "
@@ -425,7 +461,8 @@ def write_rows(rows: list[dict], summary: dict, out_dir: str | Path) -> None:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    keys = ["name", "category", "fell", "pelvis_min_m", "frames", "blowups", *_MEAN_KEYS]
+    keys = ["name", "category", "fell", "pelvis_min_m", "frames", "blowups", *_MEAN_KEYS,
+            *PACE_KEYS]  # fmt: skip
     if rows and "replay" in rows[0]:  # grip policy eval --repeats: which replay a row is of
         keys.insert(1, "replay")
     atomic_write_text(out_dir / "segments.csv", csv_text(rows, keys, lineterminator="\r\n"))

@@ -14,11 +14,12 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from grip.core import metrics as M
-from grip.eval.scoring import METRIC_KEYS
+from grip.eval.scoring import METRIC_KEYS, PACE_METRIC_KEYS
 
 __all__ = [
     "RESULT_KEYS",
     "aggregate",
+    "category_means",
     "category_summary",
     "category_table",
     "cell",
@@ -27,6 +28,8 @@ __all__ = [
     "markdown_table",
     "method_table",
     "nan_floats",
+    "pace_category_table",
+    "pace_table",
     "replay_spread",
     "results_json",
     "weighted_means",
@@ -40,6 +43,11 @@ _TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("Acc_mps2", "Acc (m/s²)", "{:.2f}"), ("FS_mps", "FS (m/s)", "{:.2f}"),
     ("FP_mm", "FP (mm)", "{:.2f}"), ("vGRF_N", "vGRF (N)", "{:.2f}"),
     ("success_rate", "Succ. (%)", "{:.2f}"), ("ms_per_frame", "ms/frame", "{:.3g}"),
+)  # fmt: skip
+_PACE_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("pace_1s_m", "pace 1 s (m)"), ("pace_5s_m", "pace 5 s (m)"), ("pace_end_m", "pace end (m)"),
+    ("drift_mps", "drift (m/s)"), ("root_gt_1s_m", "to truth 1 s (m)"),
+    ("root_gt_5s_m", "to truth 5 s (m)"), ("root_gt_end_m", "to truth end (m)"),
 )  # fmt: skip
 
 
@@ -105,6 +113,21 @@ def replay_spread(passes: list[list[dict]]) -> dict[str, object]:
             "success_rate_sd": sd}  # fmt: skip
 
 
+def category_means(rows: Sequence[dict], label: str,
+                   keys: Sequence[str] = PACE_METRIC_KEYS) -> dict[str, dict]:  # fmt: skip
+    """``{category: {key: segment mean, "segments": n}}`` of method ``label``'s finished
+    segments (means as :func:`aggregate`'s: NaN segments skipped, NaN if none), categories
+    sorted; empty when the method finished none."""
+
+    def means(group: list) -> dict:
+        ok = [r["metrics"] for r in group if r["method"] == label and r["status"] == "ok"]
+        s = M.summarize(ok) if ok else {}
+        return {**{k: float(s.get(k, float("nan"))) for k in keys}, "segments": len(ok)}
+
+    cats = category_summary(rows, means)["categories"]
+    return {c: v for c, v in cats.items() if v["segments"]}
+
+
 def aggregate(rows: Sequence[dict], labels: Sequence[str]) -> dict[str, dict]:
     """Per method label: segment means of :data:`~grip.eval.scoring.METRIC_KEYS`, ``segments``
     (finished without error), ``failed`` (segments whose method raised), and ``per_joint``
@@ -165,6 +188,33 @@ def category_table(rows: Sequence[dict], labels: Sequence[str]) -> str:
     body = [[c, *[cell(M.summarize(m[label])["MPJPE_mm"], "{:.1f}") if m[label] else "n/a"
                   for label in labels]] for c, m in cats.items()]  # fmt: skip
     return markdown_table(["category", *labels], body)
+
+
+def pace_table(summary: Mapping[str, Mapping]) -> str:
+    """The pelvis' horizontal distance to the pelvis each method followed (``pace_*``,
+    ``drift_mps``; n/a for methods that follow none) and to the truth (``root_gt_*``), one row
+    per method label (:func:`aggregate`), m and m/s."""
+    head = ["method", *[h for _, h in _PACE_COLUMNS], "segments"]
+    body = [[label, *[cell(s[k], "{:.2f}") for k, _ in _PACE_COLUMNS], str(s["segments"])]
+            for label, s in summary.items()]  # fmt: skip
+    return markdown_table(head, body)
+
+
+def pace_category_table(rows: Sequence[dict], labels: Sequence[str]) -> str:
+    """Per category (rows): the pace at the last frame and the drift rate of each method label
+    that follows a pelvis, and every label's distance to the truth at the last frame (columns),
+    m and m/s, means over segments (the last frame: defined whatever the segment length; at
+    5 s for ``grip bench``'s 500-frame segments at 100 Hz)."""
+    per = {label: category_means(rows, label) for label in labels}
+    pacing = [label for label in labels
+              if any(np.isfinite(m["drift_mps"]) for m in per[label].values())]  # fmt: skip
+    cols = [(label, "pace_end_m", f"{label} pace end (m)") for label in pacing]
+    cols += [(label, "drift_mps", f"{label} drift (m/s)") for label in pacing]
+    cols += [(label, "root_gt_end_m", f"{label} to truth end (m)") for label in labels]
+    cats = sorted({c for m in per.values() for c in m})
+    body = [[c, *[cell(per[label][c][k], "{:.2f}") if c in per[label] else "n/a"
+                  for label, k, _ in cols]] for c in cats]  # fmt: skip
+    return markdown_table(["category", *[h for _, _, h in cols]], body)
 
 
 def results_json(summary: Mapping[str, Mapping]) -> dict:

@@ -15,17 +15,21 @@ from grip.kinematics.features import GroundTruth
 __all__ = [
     "FEET",
     "METRIC_KEYS",
+    "PACE_METRIC_KEYS",
     "PER_JOINT_KEYS",
     "foot_penetration_mm",
     "foot_sliding_mps",
+    "pace_metrics",
     "segment_metrics",
     "vgrf_error_n",
 ]
 
 METRIC_KEYS: tuple[str, ...] = (
     "MPJPE_mm", "PEL_MPJPE_mm", "PA_MPJPE_mm", "MPJRE_deg", "Acc_mps2", "FS_mps", "FP_mm",
-    "vGRF_N", "success_rate", "ms_per_frame",
+    "vGRF_N", "success_rate", "ms_per_frame", *M.PACE_KEYS, *M.ROOT_GT_KEYS,
 )  # fmt: skip
+PACE_METRIC_KEYS: tuple[str, ...] = (*M.PACE_KEYS, *M.ROOT_GT_KEYS)
+"""The pace keys of :data:`METRIC_KEYS` (:func:`pace_metrics`)."""
 PER_JOINT_KEYS: tuple[str, ...] = ("MPJPE_mm", "PEL_MPJPE_mm", "MPJRE_deg")
 
 FEET = sk.FEET
@@ -63,6 +67,25 @@ def vgrf_error_n(pred_fz_n: np.ndarray | None, insole_fz_n: np.ndarray | None) -
     return M.vgrf_error(pred_fz_n, insole_fz_n)
 
 
+def pace_metrics(recon: Reconstruction, gt_root: np.ndarray, fps: float) -> dict[str, float]:
+    """The pace keys (:data:`PACE_METRIC_KEYS`) of a reconstruction.
+
+    ``pace_*`` and ``drift_mps``: its pelvis against the pelvis it followed
+    (``recon.ref_root_pos``; NaN for a method that follows none); ``root_gt_*``: its pelvis
+    against the truth's (:func:`grip.core.metrics.measure_pace`; horizontal distances, m, at
+    1 s, 5 s and the last frame; drift rate in m/s).
+
+    Args:
+        recon: The method's output.
+        gt_root: ``(T, 3)`` the ground truth's pelvis, world, m (as many frames as ``recon``).
+        fps: Frame rate, Hz.
+    """
+    if recon.ref_root_pos is None:
+        to_gt = M.horizontal_gap(recon.root_pos, gt_root, fps)
+        return dict.fromkeys(M.PACE_KEYS, float("nan")) | to_gt.root_gt_metrics()
+    return M.measure_pace(recon.root_pos, recon.ref_root_pos, fps, gt_root).metrics()
+
+
 def segment_metrics(
     recon: Reconstruction, gt: GroundTruth, can_fall: bool
 ) -> tuple[dict[str, float], dict[str, np.ndarray]]:
@@ -74,8 +97,9 @@ def segment_metrics(
         can_fall: The method can fall; otherwise ``success_rate`` is NaN.
 
     Returns:
-        ``{key: value}`` for :data:`METRIC_KEYS` except ``ms_per_frame`` (units in the module
-        docstring), and ``{key: (24,) per-joint means}`` for :data:`PER_JOINT_KEYS`.
+        ``{key: value}`` for :data:`METRIC_KEYS` except ``ms_per_frame`` (units in
+        :mod:`grip.eval.bench`; the pace keys from :func:`pace_metrics`), and ``{key: (24,)
+        per-joint means}`` for :data:`PER_JOINT_KEYS`.
     """
     if recon.n_frames != len(gt.joint_pos):
         raise ValueError(f"reconstruction has {recon.n_frames} frames, ground truth "
@@ -92,6 +116,7 @@ def segment_metrics(
         "FP_mm": foot_penetration_mm(rot, pos, gt.body),
         "vGRF_N": vgrf_error_n(None if recon.grf is None else recon.grf[..., 2], gt.insole_force_n),
         "success_rate": M.success_rate([recon.fell]) if can_fall else nan,
+        **pace_metrics(recon, gt.root_pos, fps),
     }
     per_joint = {
         "MPJPE_mm": M.mpjpe(pos, gt.joint_pos, per_joint=True),

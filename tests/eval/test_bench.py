@@ -73,7 +73,7 @@ class Oracle:
     supports_sensors = False
 
     def __init__(self, shift=(0.0, 0.0, 0.0), fail_on=(), calls=None, can_fall=True,
-                 fall=False, grf_offset_n=0.0, blowups=0) -> None:  # fmt: skip
+                 fall=False, grf_offset_n=0.0, blowups=0, lead_mps=None) -> None:  # fmt: skip
         self.shift = np.asarray(shift, dtype=float)
         self.fail_on = set(fail_on)
         self.calls = calls if calls is not None else []
@@ -81,6 +81,8 @@ class Oracle:
         self.fall = fall
         self.grf_offset_n = grf_offset_n
         self.blowups = blowups  # reported in the notes, as GRIP's simulation does
+        # a pelvis it follows that walks away along x at this speed (None: it follows none)
+        self.lead_mps = lead_mps
 
     def reconstruct(self, rec) -> Reconstruction:
         self.calls.append(rec.name)
@@ -90,9 +92,13 @@ class Oracle:
         grf = np.zeros((rec.n_frames, 2, 3))
         grf[..., 2] = gt.insole_force_n + self.grf_offset_n
         falls = np.array([[rec.n_frames - 5, rec.n_frames - 2]]) if self.fall else None
+        ref = None
+        if self.lead_mps is not None:
+            ref = gt.root_pos + self.shift
+            ref[:, 0] += self.lead_mps * np.arange(rec.n_frames) / rec.fps
         return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
                               joint_pos=gt.joint_pos + self.shift, global_rot=gt.global_rot,
-                              grf=grf, notes={"blowups": self.blowups},
+                              grf=grf, notes={"blowups": self.blowups}, ref_root_pos=ref,
                               **({"falls": falls} if self.fall else {}))  # fmt: skip
 
 
@@ -180,6 +186,21 @@ def test_hand_made_errors(seg_rec) -> None:
     assert math.isnan(scoring.segment_metrics(no_forces, gt, can_fall=True)[0]["vGRF_N"])
 
 
+def test_pace_of_a_method_that_falls_behind_the_pelvis_it_follows(seg_rec) -> None:
+    gt = F.ground_truth(seg_rec)
+    lagging = Oracle(shift=(0.3, 0.4, 0.0), lead_mps=1.2).reconstruct(seg_rec)
+    m, _ = scoring.segment_metrics(lagging, gt, can_fall=True)
+    # what it follows walks away at 1.2 m/s: 100 frames, frame 99 closes the first second
+    assert m["pace_1s_m"] == pytest.approx(1.2 * 0.99) == pytest.approx(m["pace_end_m"])
+    assert m["drift_mps"] == pytest.approx(1.2) and math.isnan(m["pace_5s_m"])
+    assert m["root_gt_1s_m"] == pytest.approx(0.5) == pytest.approx(m["root_gt_end_m"])
+    plain, _ = scoring.segment_metrics(Oracle(shift=(0.3, 0.4, 0.0)).reconstruct(seg_rec), gt,
+                                       can_fall=False)  # fmt: skip
+    assert all(math.isnan(plain[k]) for k in M.PACE_KEYS)  # follows nothing: no pace
+    assert plain["root_gt_end_m"] == pytest.approx(0.5)  # every method: the distance to truth
+    assert set(m) == set(plain) == set(scoring.METRIC_KEYS) - {"ms_per_frame"}
+
+
 def test_contacts_and_insole_force_fall_back_without_insoles(seg_rec) -> None:
     gt = F.ground_truth(seg_rec)
     np.testing.assert_array_equal(
@@ -216,7 +237,7 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
     assert summary["oracle"]["failed"] == 1 and summary["oracle"]["segments"] == 4
     assert summary["oracle"]["MPJPE_mm"] == pytest.approx(0.0, abs=1e-6)
     results = json.loads((out / "results.json").read_text())
-    assert set(results["oracle"]) == {*report.RESULT_KEYS, "failed", "init"}
+    assert set(results["oracle"]) == {*report.RESULT_KEYS, "failed", "init", "pace_by_category"}
     assert results["oracle"]["init"] == "truth"
     assert results["oracle"]["success_rate"] == 100.0 and results["oracle"]["segments"] == 4
     table = (out / "table.md").read_text()
@@ -237,6 +258,34 @@ def test_failures_are_reported_and_resume_skips_finished_segments(segments, tmp_
                         log=lambda s: None)  # fmt: skip
     assert calls == ["take1"] and {r["status"] for r in fixed} == {"ok"}
     assert R.load_rows(out, runs, segments)[2]["status"] == "ok"
+
+
+def test_pace_is_reported_per_segment_per_category_and_overall(segments, tmp_path) -> None:
+    lagging = Oracle(shift=(0.3, 0.4, 0.0), lead_mps=1.2)
+    runs = [_run("lagging", lambda o: lagging), _run("oracle", _oracle_factory)]
+    out = tmp_path / "bench"
+    rows = R.run_bench(runs, segments, out, built={"lagging": lagging}, log=lambda s: None)
+    B.write_outputs(out, rows, runs, segments, "test", plots=False)
+    results = json.loads((out / "results.json").read_text())
+    lag, exact = results["lagging"], results["oracle"]
+    assert lag["drift_mps"] == pytest.approx(1.2) and lag["pace_end_m"] == pytest.approx(1.188)
+    assert lag["root_gt_5s_m"] is None  # 100-frame segments: no 5 s value
+    assert lag["root_gt_1s_m"] == pytest.approx(0.5) and exact["root_gt_end_m"] == 0.0
+    assert exact["drift_mps"] is None and exact["pace_1s_m"] is None
+    by_cat = lag["pace_by_category"]
+    assert {c: v["segments"] for c, v in by_cat.items()} == {"run": 1, "walk": 4}
+    assert by_cat["walk"]["drift_mps"] == pytest.approx(1.2)
+    csv_head = (out / "results.csv").read_text().splitlines()[0].split(",")
+    seg_head = (out / "segments.csv").read_text().splitlines()[0].split(",")
+    keys = ["pace_1s_m", "pace_5s_m", "pace_end_m", "drift_mps", "root_gt_1s_m",
+            "root_gt_5s_m", "root_gt_end_m"]  # fmt: skip
+    assert set(keys) <= set(csv_head) and set(keys) <= set(seg_head)
+    table = (out / "table.md").read_text()
+    assert "## Pace and distance to the truth" in table
+    assert "| lagging | 1.19 | n/a | 1.19 | 1.20 | 0.50 | n/a | 0.50 | 5 |" in table
+    assert "| oracle | n/a | n/a | n/a | n/a | 0.00 | n/a | 0.00 | 5 |" in table
+    assert "| category | lagging pace end (m) | lagging drift (m/s) |" in table
+    assert "| walk | 1.19 | 1.20 | 0.50 | 0.00 |" in table
 
 
 def test_resume_refuses_other_settings(segments, tmp_path) -> None:
@@ -386,7 +435,8 @@ def test_cli_bench_kinematics_writes_results_and_resumes(dataset, tmp_path, caps
     out1 = tmp_path / "one"
     assert main([*args, "--out", str(out1), "--workers", "1", "--segments", "3"]) == 0
     res = json.loads((out1 / "results.json").read_text())
-    assert set(res["kinematics"]) == {*report.RESULT_KEYS, "failed", "init"}
+    assert set(res["kinematics"]) == {*report.RESULT_KEYS, "failed", "init",
+                                      "pace_by_category"}  # fmt: skip
     assert res["kinematics"]["init"] == "truth"
     assert "started from the ground truth at its first frame" in (out1 / "table.md").read_text()
     assert res["kinematics"]["segments"] == 3 and res["kinematics"]["failed"] == 0
