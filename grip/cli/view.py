@@ -26,7 +26,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "  - the centre of pressure and ground reaction force of each foot,\n"
             "  - play/pause, speed, a frame slider, a timeline with the fall events (frames\n"
             "    recovered from the history buffer, detection) and the vertical GRF of each\n"
-            "    foot against the insole force with a cursor at the current frame.\n"
+            "    foot against the insole force with a cursor at the current frame,\n"
+            "  - the pace: the horizontal distance of the humanoid's pelvis to the estimate's\n"
+            "    pelvis it followed (also drawn in 3D, where RECON.npz records it) and of each\n"
+            "    body's pelvis to the ground truth's (with --gt), under the timeline.\n"
             "Add #frame=N to the page's address to open it at frame N."
         ),
         epilog="example: grip view runs/rc/seq000.npz --gt data/seq000.npz \\\n"

@@ -8,8 +8,10 @@ pressure of each foot with its ground reaction force as an arrow (every method t
 the insoles). Under the 3D view: play/pause, speed and a frame slider; a timeline with one lane
 per reconstruction in which GRIP's fall events are marked (shaded: the frames replaced from the
 history buffer, i.e. recovered; red: the frame the fall was detected); and the vertical GRF of
-each foot against the insole force, with a cursor at the current frame. ``#frame=N`` in the
-page's address opens it at frame ``N``.
+each foot against the insole force, with a cursor at the current frame; under the timeline, the
+pace: the horizontal distance of the reconstruction's pelvis to the pelvis it followed (GRIP: its
+kinematic estimate, also drawn in 3D) and of each body's pelvis to the ground truth's.
+``#frame=N`` in the page's address opens it at frame ``N``.
 
 Everything is inlined: three.js (MIT; its minified ES module build and ``OrbitControls`` of the
 same release, with its licence, from the folder given to :func:`load_web_assets`), the viewer's
@@ -40,6 +42,11 @@ objects             ``[{name, vertices_mm (V*3), faces (F*3)}]``
 floor               ``center_m (2)``, ``size_m (2)`` of the floor plane at z = 0
 travel_dir,         unit vectors (x, y) along and across the first body's walk: the camera's
 side_dir            start and the offset of the side-by-side layout (``side_step_m`` apart)
+pace                ``null``, or ``series``: ``[{body, label, to, color, dist_mm (T)}]`` the
+                    horizontal distance of body ``body``'s pelvis to the pelvis it followed
+                    (``to`` = ``"followed"``, from ``Reconstruction.ref_root_pos``) or to the
+                    ground truth's (``"truth"``), and ``ref_root_mm (T*3)`` the pelvis the
+                    first body followed (``null`` if it follows none)
 ==================  ==========================================================================
 
 Imports numpy, :mod:`grip.core` and :mod:`grip.kinematics.features` (numpy only); the recording
@@ -96,6 +103,7 @@ SIDE_STEP_M = 0.9
 WEB_FILES: dict[str, str] = {
     "three_module": "three.module.min.js",
     "orbit_controls": "OrbitControls.js",
+    "pace": "pace.js",
     "viewer": "viewer.js",
     "license": "THREE_LICENSE",
 }
@@ -121,12 +129,14 @@ class WebAssets:
         three_module: three.js's minified ES module build (one self-contained module).
         orbit_controls: three.js's ``OrbitControls`` ES module of the same release; it imports
             only ``'three'``, which the page points at the inlined build.
+        pace: The pace plot and 3D marks (defines ``gripPacePlot``, ``gripPaceMarks``).
         viewer: The viewer's script (defines ``gripViewer``).
         license: three.js's licence text, inlined next to it.
     """
 
     three_module: str
     orbit_controls: str
+    pace: str
     viewer: str
     license: str
 
@@ -274,6 +284,26 @@ def _recon_body(key: str, label: str, recon: Reconstruction, bm: BodyModel, colo
     }  # fmt: skip
 
 
+def _pace(bodies: Sequence[dict[str, Any]], recons: Sequence[Reconstruction],
+          gt: GroundTruth | None) -> dict[str, Any] | None:  # fmt: skip
+    """The ``pace`` block: each reconstruction's pelvis to the pelvis it followed and to the
+    truth's (``bodies``: their page entries, in the order of ``recons``); ``None`` if there is
+    no such distance."""
+    series = []
+    for b, r in zip(bodies, recons, strict=True):
+        targets = [("followed", "to estimate", r.ref_root_pos)]
+        targets.append(("truth", "to truth", None if gt is None else gt.root_pos))
+        for to, text, other in targets:
+            if other is not None:
+                d = M.horizontal_distance(r.root_pos, other)
+                series.append({"body": b["key"], "label": f"{b['label']} {text}", "to": to,
+                               "color": b["color"], "dist_mm": _ints(d, 1000.0)})  # fmt: skip
+    if not series:
+        return None
+    ref = recons[0].ref_root_pos
+    return {"series": series, "ref_root_mm": None if ref is None else _ints(ref, 1000.0)}
+
+
 def viewer_data(
     recon: Reconstruction,
     *,
@@ -365,6 +395,7 @@ def viewer_data(
         "insole": insole,
         "objects": objects,
         "floor": _floor(points),
+        "pace": _pace([b for b in bodies if b["role"] == "reconstruction"], [recon, *compare], gt),
     }
 
 
@@ -404,6 +435,9 @@ header h1 { font-size: 14px; margin: 0; font-weight: 600; overflow-wrap: anywher
 #frame { flex: 1 1 auto; }
 #clock { font-variant-numeric: tabular-nums; min-width: 230px; text-align: right; color: #444; }
 #timeline { display: block; width: 100%; height: 52px; background: #fff; cursor: pointer; }
+#pace { display: block; width: 100%; height: 96px; background: #fff; cursor: pointer;
+  border-top: 1px solid #eee; }
+#pace[hidden] { display: none; }
 #plots { display: flex; gap: 4px; background: #f4f5f7; }
 #plots canvas { display: block; flex: 1 1 0; min-width: 0; height: 170px; background: #fff;
   cursor: pointer; }
@@ -475,6 +509,8 @@ def viewer_html(data: Mapping[str, Any], assets: WebAssets) -> str:
         'aria-label="frame"><span id="clock"></span></div>\n',
         '<canvas id="timeline" title="falls: shaded = frames replaced from the history '
         'buffer (recovered), red = fall detected"></canvas>\n',
+        '<canvas id="pace" title="horizontal pelvis distance: solid = to the pelvis the body '
+        'followed (its estimate), dashed = to the ground truth"></canvas>\n',
         '<div id="plots"><canvas id="grf-left"></canvas><canvas id="grf-right"></canvas></div>\n',
         "<footer>GRIP viewer: drag to orbit, right-drag to pan, wheel to zoom; space plays, "
         "arrow keys step. 3D rendering by three.js (MIT licence, inlined below).</footer>\n",
@@ -491,6 +527,8 @@ def viewer_html(data: Mapping[str, Any], assets: WebAssets) -> str:
         assets.orbit_controls,
         "</script>\n",
         "<script>",
+        assets.pace,
+        "\n",
         assets.viewer,
         "</script>\n",
         "<script>",

@@ -108,6 +108,37 @@ def test_data_has_every_frame_and_body(recon, rec, gt) -> None:
         assert (xy >= lo).all() and (xy <= hi).all()
 
 
+def _lagging(recon, gt, lead_mps: float = 0.4) -> Reconstruction:
+    """``recon`` following a pelvis that walks away from it along y at ``lead_mps``."""
+    ref = recon.root_pos.copy()
+    ref[:, 1] += lead_mps * np.arange(gt.n_frames) / gt.fps
+    return dataclasses.replace(recon, ref_root_pos=ref)
+
+
+def test_pace_is_the_pelvis_distance_to_what_it_followed_and_to_the_truth(recon, rec,
+                                                                         gt) -> None:  # fmt: skip
+    lagging = _lagging(recon, gt)
+    kin = _recon(gt, rec, "kinematics", shift=np.array([0.3, 0.4, 0.0]))
+    pace = viewer_data(lagging, recording=rec, compare=[kin])["pace"]
+    assert [(s["body"], s["to"]) for s in pace["series"]] == [
+        ("recon", "followed"), ("recon", "truth"), ("compare0", "truth")]  # fmt: skip
+    assert [s["label"] for s in pace["series"]] == ["grip to estimate", "grip to truth",
+                                                    "kinematics to truth"]  # fmt: skip
+    for s in pace["series"]:
+        assert len(s["dist_mm"]) == T
+    walked_mm = 400 * np.arange(T) / gt.fps  # 0.4 m/s for T frames
+    np.testing.assert_allclose(pace["series"][0]["dist_mm"], walked_mm, atol=0.5)
+    np.testing.assert_allclose(pace["series"][1]["dist_mm"], 0.0)  # shifted up only
+    np.testing.assert_allclose(pace["series"][2]["dist_mm"], 500.0)
+    np.testing.assert_allclose(np.reshape(pace["ref_root_mm"], (T, 3)),
+                               1000 * lagging.ref_root_pos, atol=0.5)  # fmt: skip
+    # without the truth: only what it followed; following nothing and no truth: no pace
+    alone = viewer_data(lagging)["pace"]
+    assert [s["to"] for s in alone["series"]] == ["followed"]
+    assert viewer_data(recon)["pace"] is None
+    assert viewer_data(recon, recording=rec)["pace"]["ref_root_mm"] is None
+
+
 def test_page_pose_is_the_posed_body_to_a_millimetre(recon, rec, gt) -> None:
     data = viewer_data(recon, recording=rec)
     _, want = posed_body(recon, gt.body)
@@ -325,7 +356,7 @@ def _body_attrs(dom: str) -> dict[str, str]:
 @needs_browser
 def test_page_builds_its_scene_in_a_browser_without_errors(recon, rec, gt, assets,
                                                            tmp_path) -> None:  # fmt: skip
-    hostile = dataclasses.replace(recon, name=HOSTILE)
+    hostile = dataclasses.replace(_lagging(recon, gt), name=HOSTILE)  # its estimate drawn too
     other = _recon(gt, rec, "kinematics", shift=np.zeros(3))
     page = write_viewer(hostile, tmp_path / "page.html", assets, recording=rec, compare=[other],
                         compare_labels=[HOSTILE]).path  # fmt: skip
@@ -337,6 +368,13 @@ def test_page_builds_its_scene_in_a_browser_without_errors(recon, rec, gt, asset
     title = re.search(r'<h1 id="title">(.*?)</h1>', dom, re.S)
     assert title is not None and html.unescape(title.group(1)) == HOSTILE
     assert re.search(r'<span id="clock">frame 160 / 239', dom)
+    assert re.search(r'<canvas id="pace"[^>]*>', dom) and not re.search(
+        r'<canvas id="pace"[^>]*hidden', dom)  # fmt: skip
+    # following nothing, without the truth: no pace plot
+    bare = write_viewer(recon, tmp_path / "bare.html", assets).path
+    dom, console = _browse(bare, tmp_path, "--dump-dom")
+    assert _body_attrs(dom).get("data-ready") == f"{T},1" and console == []
+    assert re.search(r'<canvas id="pace"[^>]*hidden', dom)
 
 
 @needs_browser

@@ -290,6 +290,15 @@ function gripViewer(THREE, OrbitControls, data, reportError) {
   seekFromPointer($("grf-left"), plotMargin.l);
   seekFromPointer($("grf-right"), plotMargin.l);
 
+  // the pace plot (pace.js) on the timeline's time axis, under it
+  const paceCanvas = $("pace");
+  const pacePlot = data.pace ? gripPacePlot(data, paceCanvas, {
+    cssSize, niceStep, left: timelineLeft, right: plotMargin.r,
+    visible: (key) => state.visible[data.bodies.findIndex((b) => b.key === key)],
+  }) : null;
+  paceCanvas.hidden = !pacePlot;
+  if (pacePlot) seekFromPointer(paceCanvas, timelineLeft);
+
   // ---------------------------------------------------------------------------- controls
   const slider = $("frame");
   slider.max = String(T - 1);
@@ -466,6 +475,9 @@ function gripViewer(THREE, OrbitControls, data, reportError) {
   // the insoles belong to the recording: drawn with the ground truth's body when there is one
   const insoleOwner = bodies.find((b) => b.data.role === "ground_truth") || bodies[0];
   const insoleMarkers = data.insole ? forceMarkers(insoleOwner.root, 0x111111) : null;
+  // the pelvis the first body followed (its estimate's), with the gap to it (pace.js)
+  const paceMarks = data.pace && data.pace.ref_root_mm
+    ? gripPaceMarks(THREE, data, bodies[0].root, bodies[0].data.color) : null;
 
   function poseBody(b, f) {
     const q = b.data.quat_wxyz;
@@ -553,6 +565,7 @@ function gripViewer(THREE, OrbitControls, data, reportError) {
     if (insoleMarkers) for (const m of insoleMarkers) m.disc.visible = m.arrow.visible = state.forces;
     propGroup.visible = state.props;
     plotCache.clear();
+    if (pacePlot) pacePlot.invalidate();
     updateFrame(true);
   }
 
@@ -560,11 +573,13 @@ function gripViewer(THREE, OrbitControls, data, reportError) {
     drawGrf(0);
     drawGrf(1);
     drawTimeline();
+    if (pacePlot) pacePlot.draw(state.frame);
   }
 
   function updateFrame(moveCamera) {
     const f = state.frame;
     for (const b of bodies) poseBody(b, f);
+    if (paceMarks) paceMarks.place(f, bodies[0].pos[0]);
     if (insoleMarkers) {
       for (const foot of [0, 1]) {
         const n = data.insole.force_n[f * 2 + foot];
