@@ -196,9 +196,10 @@ def load_poselib(
             frames x joints; default :func:`grip.core.limits.active_limits`.
 
     Returns:
-        The clip with ``fmt="poselib"``, ``rig="ase"`` for ASE's humanoid (props dropped, end
-        sites added) and ``"unknown"`` for other skeletons, ``up_axis=2``, ``unit_m=1``, the
-        skeleton tree (all rotations identity) as rest pose, frame k at ``k / fps``.
+        The clip with ``fmt="poselib"``, ``rig="ase"`` for ASE's humanoid, with or without
+        sword and shield (props dropped, end sites added), ``"unknown"`` for other skeletons,
+        ``up_axis=2``, ``unit_m=1``, the skeleton tree (all rotations identity) as rest pose,
+        frame k at ``k / fps``.
 
     Raises:
         MotionImportError: Naming the file: a refused pickle global, a damaged file, missing
@@ -231,7 +232,7 @@ def load_poselib(
     if not isinstance(is_local, bool | np.bool_):
         raise MotionImportError(path_s, "is_local must be true or false", key="is_local")
     keep = _keep_bodies(names, parents)
-    rig = "ase" if set(ASE_BODIES) <= set(names) else "unknown"
+    rig = "ase" if set(ASE_BODIES) - PROPS <= set(names) else "unknown"  # (with or without props)
     ends = [(names.index(b), np.array(off)) for b, off in ASE_END_SITES] if rig == "ase" else []
     limits.check_take(n_frames, float(fps), len(keep) + len(ends))
     check_finite(path_s, "rotation", quat)

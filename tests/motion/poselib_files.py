@@ -45,19 +45,25 @@ def _tensor(arr: np.ndarray) -> dict:
 
 
 def poselib_dict(quat_xyzw: np.ndarray, root: np.ndarray, fps: float = 30.0,
-                 offsets: np.ndarray | None = None, is_local: bool = True) -> dict:  # fmt: skip
-    """A ``SkeletonMotion`` dict of the ASE humanoid.
+                 offsets: np.ndarray | None = None, is_local: bool = True,
+                 names: list[str] | None = None,
+                 parents: np.ndarray | None = None) -> dict:  # fmt: skip
+    """A ``SkeletonMotion`` dict, by default of the ASE humanoid.
 
     Args:
-        quat_xyzw: ``(T, 17, 4)`` body rotations, (x, y, z, w).
+        quat_xyzw: ``(T, J, 4)`` body rotations, (x, y, z, w).
         root: ``(T, 3)`` pelvis positions, z-up, m.
         fps: Frame rate, Hz.
-        offsets: ``(17, 3)`` bone offsets; default :func:`ase_offsets`.
+        offsets: ``(J, 3)`` bone offsets; default :func:`ase_offsets`.
         is_local: Whether ``quat_xyzw`` are local rotations.
+        names: ``J`` body names; default ``ASE_BODIES``.
+        parents: ``(J,)`` parent indices; default ``ASE_PARENTS``.
     """
     offsets = ase_offsets() if offsets is None else offsets
-    zeros = np.zeros((quat_xyzw.shape[0], len(ASE_BODIES), 3))
-    tree = OrderedDict(node_names=list(ASE_BODIES), parent_indices=_tensor(ASE_PARENTS.copy()),
+    names = list(ASE_BODIES) if names is None else names
+    parents = ASE_PARENTS.copy() if parents is None else parents
+    zeros = np.zeros((quat_xyzw.shape[0], len(names), 3))
+    tree = OrderedDict(node_names=names, parent_indices=_tensor(parents),
                        local_translation=_tensor(offsets.astype(np.float32)))  # fmt: skip
     return OrderedDict(
         rotation=_tensor(np.asarray(quat_xyzw, dtype=np.float64)),

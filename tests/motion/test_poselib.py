@@ -87,6 +87,30 @@ def test_global_rotations_give_the_same_motion(tmp_path: Path) -> None:
     np.testing.assert_allclose(a.global_rot, b.global_rot, atol=1e-9)
 
 
+def test_ase_without_props_is_the_same_rig_and_other_skeletons_map_by_name(
+    tmp_path: Path,
+) -> None:
+    q, root = standing_quats(20), np.tile([0.0, 0.0, 0.89], (20, 1))
+    full = load_poselib(write_poselib(tmp_path / "full.npy", poselib_dict(q, root)))
+    keep = [j for j, b in enumerate(ASE_BODIES) if b not in ("sword", "shield")]
+    new = {old: k for k, old in enumerate(keep)}
+    parents = np.array([-1 if ASE_PARENTS[j] < 0 else new[ASE_PARENTS[j]] for j in keep])
+    bare = load_poselib(write_poselib(tmp_path / "bare.npy", poselib_dict(
+        q[:, keep], root, offsets=ase_offsets()[keep], names=[ASE_BODIES[j] for j in keep],
+        parents=parents)))  # fmt: skip
+    assert bare.rig == "ase" and bare.joint_names == full.joint_names
+    np.testing.assert_allclose(bare.global_pos, full.global_pos, atol=1e-6)
+    # Another skeleton (a body renamed): no rig map, no end sites; the name heuristic maps it.
+    names = [{"torso": "chest"}.get(b, b) for b in ASE_BODIES]
+    other = load_poselib(write_poselib(tmp_path / "other.npy", poselib_dict(q, root, names=names)))
+    assert other.rig == "unknown" and "chest" in other.joint_names
+    assert not any(n.endswith("_end") for n in other.joint_names)
+    out = retarget(other)
+    assert out.meta["joint_map"]["Spine3"] == "chest"
+    _, p = out.fk()
+    assert np.all(p[:, 15, 2] > p[:, 0, 2] + 0.4)
+
+
 class _Payload:
     """Unpickling it runs ``call(*args)``, which writes a marker file."""
 
