@@ -54,15 +54,27 @@ class RecoveryConfig:
         history_frames: N, KinematicsNet outputs kept in the history buffer (0.3 s at 100 Hz).
         fall_height_m: Pelvis height below which a fall is possible, m.
         fall_probability: Discriminator probability below which a low pelvis is a fall.
+        restart: Where the humanoid's root restarts after a fall (:data:`RESTARTS`):
+            ``"simulated"``, GRIP's rule (the simulated pelvis N frames before the fall plus
+            the estimated displacement since: a body that had fallen behind stays behind);
+            ``"estimate"``, the estimate's own pelvis (its root integrated from the start, the
+            pelvis the controller follows), so a fall does not inherit the distance lost
+            before it (docs/pace.md, "Recovery").
     """
 
     enabled: bool = True
     history_frames: int = 30
     fall_height_m: float = 0.30
     fall_probability: float = 0.7
+    restart: str = "simulated"
 
     def __post_init__(self) -> None:
-        check(self, (self.history_frames >= 1, "history_frames must be >= 1"))
+        check(self, (self.history_frames >= 1, "history_frames must be >= 1"),
+              (self.restart in RESTARTS, f"restart must be one of {RESTARTS}"))  # fmt: skip
+
+
+RESTARTS: tuple[str, ...] = ("simulated", "estimate")
+"""Where a recovery puts the root (:attr:`RecoveryConfig.restart`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -360,12 +372,17 @@ class Player:
     def _recover(self, s: int, t: int, s_valid: bool = True) -> None:
         """Restart the humanoid after a fall at ``t`` (history from ``s``); fill ``s..t``.
 
-        ``s_valid``: frame ``s`` holds a pose to start the root from; ``False`` (a blow-up at
-        ``s`` = ``t``, whose frame was never recorded): start from frame ``s - 1`` plus the
-        estimated root displacement."""
+        The root of the filled frames starts at frame ``s``'s simulated pelvis (GRIP) or at
+        the estimate's own pelvis (:attr:`RecoveryConfig.restart`). ``s_valid``: frame ``s``
+        holds a pose to start the root from; ``False`` (a blow-up at ``s`` = ``t``, whose frame
+        was never recorded): GRIP's rule starts from frame ``s - 1`` plus the estimated root
+        displacement."""
         est, tr = self.est, self.trace
-        root0 = tr.pos[s, 0] if s_valid else (tr.pos[s - 1, 0] + est.est_root_pos[s]
-                                              - est.est_root_pos[s - 1])  # fmt: skip
+        if self.recovery.restart == "estimate":
+            root0 = est.est_root_pos[s] + self._ref_offset
+        else:  # GRIP: p_sim(t - N) + the estimated displacement
+            root0 = tr.pos[s, 0] if s_valid else (tr.pos[s - 1, 0] + est.est_root_pos[s]
+                                                  - est.est_root_pos[s - 1])  # fmt: skip
         pos, rot = kinematic_frames(est, root0, s, t)
         tr.replace(s, t, pos, rot)
         qvel = np.zeros(75)

@@ -7,7 +7,12 @@ import os
 import time
 from pathlib import Path
 
-from grip.cli.recordings import add_init_argument, add_limit_arguments, limits_from_args
+from grip.cli.recordings import (
+    add_init_argument,
+    add_limit_arguments,
+    add_restart_argument,
+    limits_from_args,
+)
 
 
 def shipped_methods() -> list[str]:
@@ -80,6 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "TransPose's root, PIP's learned initialisation and its physics' first "
                       "state)", "; a folder resumes only with the --init it was written "
                       "with")  # fmt: skip
+    add_restart_argument(p)
     from grip.cli.cluster import add_ray_argument
 
     add_ray_argument(p, "units of work (a method on a segment, or on --batch N of them)")
@@ -129,7 +135,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
                                 policy_checkpoint=args.policy,
                                 transpose_checkpoint=args.transpose, pip_checkpoint=args.pip,
-                                init=args.init)  # fmt: skip
+                                init=args.init, restart=args.restart)  # fmt: skip
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         for f, why in unreadable:

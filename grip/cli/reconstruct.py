@@ -68,9 +68,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
     from grip.cli.cluster import add_ray_argument
-    from grip.cli.recordings import add_init_argument, add_limit_arguments
+    from grip.cli.recordings import add_init_argument, add_limit_arguments, add_restart_argument
 
     add_init_argument(p, "KinematicsNet and the humanoid")
+    add_restart_argument(p)
     add_ray_argument(p, "shares of the recordings (--batch N each)")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
@@ -268,12 +269,15 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     if args.fill_gaps < 0:
         raise CliError("--fill-gaps must be >= 0")
     policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
-    recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history)
+    recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history,
+                              restart=args.restart)  # fmt: skip
     settings = {"max_frames": args.max_frames, "recovery": recovery.enabled,
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
                 "policy_sha256": file_digest(policy), "kin_sha256": file_digest(kin)}  # fmt: skip
     if args.init != "truth":  # (absent from the settings of runs before --init: their start)
         settings["init"] = args.init
+    if recovery.enabled and args.restart != "simulated":  # (absent before --restart: GRIP's)
+        settings["restart"] = args.restart
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "summary.json"
     old: dict = {}

@@ -193,6 +193,20 @@ def add_init_argument(parser, what: str = "KinematicsNet", note: str = "") -> No
     )  # fmt: skip
 
 
+def add_restart_argument(parser) -> None:
+    """The ``--restart simulated|estimate`` option of the commands that play GRIP with fall
+    recovery (:attr:`grip.player.RecoveryConfig.restart`)."""
+    from grip.player import RESTARTS, RecoveryConfig
+
+    parser.add_argument(
+        "--restart", default=RecoveryConfig().restart, choices=RESTARTS,
+        help="where the humanoid's root restarts after a fall: 'simulated', GRIP's rule (its "
+        "pelvis 0.3 s before the fall plus the estimated displacement since: distance lost "
+        "before the fall stays lost), or 'estimate', the estimate's own pelvis (default "
+        f"{RecoveryConfig().restart!r}; docs/pace.md)",
+    )  # fmt: skip
+
+
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
                                  categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence

@@ -82,6 +82,8 @@ class MethodOptions:
         init: Where every method starts (:data:`grip.kinematics.features.INITS`): the ground
             truth of the segment's first frame (``"truth"``, the GRIP protocol) or the standing
             calibration (``"standing"``, no ground-truth pose read).
+        restart: Where GRIP's humanoid restarts after a fall
+            (:attr:`grip.player.RecoveryConfig.restart`).
 
     Raises:
         ValueError: ``init`` is not one of :data:`grip.kinematics.features.INITS`.
@@ -94,12 +96,17 @@ class MethodOptions:
     transpose_checkpoint: Path | None = None
     pip_checkpoint: Path | None = None
     init: str = "truth"
+    restart: str = "simulated"
 
     def __post_init__(self) -> None:
         from grip.kinematics.features import INITS
 
         if self.init not in INITS:
             raise ValueError(f"init must be one of {list(INITS)}, got {self.init!r}")
+        from grip.player import RESTARTS
+
+        if self.restart not in RESTARTS:
+            raise ValueError(f"restart must be one of {list(RESTARTS)}, got {self.restart!r}")
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""
@@ -266,7 +273,10 @@ def grip_method(options: MethodOptions) -> Grip:
     for what, p in (("policy", policy), ("KinematicsNet", kin)):
         if not p.is_file():
             raise ValueError(f"{p}: no such {what} checkpoint")
-    return Grip(GripReconstructor.from_files(policy, kin), options.init)
+    from grip.player import RecoveryConfig
+
+    recovery = RecoveryConfig(restart=options.restart)
+    return Grip(GripReconstructor.from_files(policy, kin, recovery), options.init)
 
 
 # ------------------------------------------------------------------ PIP physics on KinematicsNet

@@ -362,6 +362,7 @@ def _check_method_settings(out_dir: Path, run: MethodRun) -> None:
         if isinstance(have, dict) and isinstance(have.get("options"), dict):
             # (written before MethodOptions.init existed: those runs started from the truth)
             have["options"].setdefault("init", "truth")
+            have["options"].setdefault("restart", "simulated")  # (GRIP's, before --restart)
         if have != want:
             raise BenchError(f"{path.parent}: results of {run.label} with other settings "
                              f"({have} vs now {want}); use another output folder")  # fmt: skip
