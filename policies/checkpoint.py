@@ -28,8 +28,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from grip.core.limits import active_limits, safe_json_loads
-from grip.core.loaderrors import describe_load_error
+from grip.core.limits import (
+    LimitExceeded,
+    active_limits,
+    check_file_size,
+    check_npz,
+    check_zip,
+    safe_json_loads,
+)
+from grip.nn.weights import load_torch_file
 
 PPO_COUNTERS: tuple[str, ...] = ("num_timesteps", "_n_updates", "_episode_num")
 """The attributes a resumed model takes from the ``data`` JSON (plain integers); the first is
@@ -70,12 +77,10 @@ class PPOCheckpoint:
 
 
 def _torch_member(archive: zipfile.ZipFile, name: str, path: Path) -> dict:
-    """Member ``name`` of the zip, loaded with ``torch.load(weights_only=True)``: a dict."""
-    try:
-        obj = torch.load(io.BytesIO(archive.read(name)), map_location="cpu", weights_only=True)
-    except Exception as e:  # corrupt or hostile members raise many types
-        raise ValueError(f"{path}: its {name} is not a state dict: "
-                         f"{describe_load_error(e)}") from e  # fmt: skip
+    """Member ``name`` of the zip (its size already checked), loaded with
+    :func:`grip.nn.weights.load_torch_file` (``weights_only=True``, its expansion bounded):
+    a dict."""
+    obj = load_torch_file(archive.read(name), "state dict", f"{path}: its {name}")
     if not isinstance(obj, dict):
         raise ValueError(f"{path}: its {name} is not a state dict ({type(obj).__name__})")
     return obj
@@ -93,6 +98,13 @@ def read_ppo_zip(path: str | os.PathLike) -> PPOCheckpoint:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such PPO checkpoint")
+    try:
+        check_file_size(path, active_limits())
+        check_zip(path, active_limits(), "PPO checkpoint")
+    except LimitExceeded as e:
+        raise ValueError(f"{path}: {e}") from None
+    except zipfile.BadZipFile as e:
+        raise ValueError(f"{path}: not a PPO checkpoint (not a readable zip: {e})") from e
     try:
         with zipfile.ZipFile(path) as archive:
             names = set(archive.namelist())
@@ -132,14 +144,10 @@ def load_weights(path: str | os.PathLike, what: str) -> object:
     Raises:
         FileNotFoundError: No such file.
         ValueError: ``"{path}: not a {what}: ..."`` for a corrupt file or one holding pickled
-            Python objects (never executed).
+            Python objects (never executed); ``"{path}: ... the limit NAME=..."`` for one that
+            would expand beyond the input limits (:func:`grip.nn.weights.load_torch_file`).
     """
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise
-    except Exception as e:  # corrupt or hostile files raise many types
-        raise ValueError(f"{path}: not a {what}: {describe_load_error(e)}") from e
+    return load_torch_file(path, what)
 
 
 def read_vecnorm(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -153,6 +161,12 @@ def read_vecnorm(path: str | os.PathLike) -> dict[str, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such normaliser file")
+    try:
+        check_npz(path, active_limits())
+    except LimitExceeded as e:
+        raise ValueError(f"{path}: {e}") from None
+    except ValueError as e:
+        raise ValueError(f"{path}: not a normaliser file ({str(e)[:200]})") from e
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
@@ -206,6 +220,7 @@ def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> d
         ValueError: naming the file, for a corrupt checkpoint; ``out_dir`` is ``run_dir``.
     """
     from grip.core.rundir import CHECKPOINT_DIR, CONFIG_FILE, STATE_FILE, RunDir
+
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     ck_dir = run_dir / CHECKPOINT_DIR
     names = ("model.zip", "amp.pt", "vecnorm.npz", STATE_FILE)

@@ -23,7 +23,8 @@ import torch
 from torch import nn
 
 from grip.core.atomic import atomic_write
-from grip.core.limits import read_json_file
+from grip.core.limits import active_limits, read_json_file, safe_json_loads
+from grip.nn.weights import check_declared_network
 from grip.task.amp import FRAME_DIM
 from grip.task.config import TrackingEnvConfig
 from policies.amp import Discriminator
@@ -102,6 +103,26 @@ def pack_disc(state: dict, precision: str) -> dict:
     net = {k: v for k, v in state.items() if k.startswith(_DISC_NET)}
     return {**{k: v for k, v in state.items() if k not in net},
             **pack_weights(unpack_weights(net), precision)}  # fmt: skip
+
+
+def _declared_sizes(ck: dict, part: str, path: Path, activation: str) -> list[int]:
+    """The layer sizes a policy member declares for ``part`` (``"actor"``, ``"critic"``),
+    checked against the weights it holds before anything is built
+    (:func:`grip.nn.weights.check_declared_network`).
+
+    Raises:
+        ValueError: naming ``path``: not a list of positive integers, or sizes that do not fit
+            the weights (a file declaring 12,000-wide layers around small weights).
+    """
+    raw = ck[f"{part}_sizes"]
+    ok = isinstance(raw, list | tuple) and len(raw) >= 2
+    if not ok or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in raw):
+        raise ValueError(f"{path}: {part}_sizes = {str(raw)[:100]} is not a list of layer "
+                         "sizes (positive integers)")  # fmt: skip
+    sizes = [int(v) for v in raw]
+    check_declared_network(lambda: _mlp(sizes, activation), ck[part], str(path),
+                           f"{part}_sizes {sizes}", {f"{part}_sizes": len(sizes) - 1})  # fmt: skip
+    return sizes
 
 
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
@@ -200,18 +221,31 @@ class PolicyRunner:
         if missing:
             raise ValueError(f"{path}: policy file lacks {missing}")
         try:
-            cfg = policy_config_from_dict(json.loads(ck["config"]), f"{path}: config")
-            actor = _load_mlp(ck["actor_sizes"], ck["actor"], cfg.ppo.activation)
+            stored = safe_json_loads(ck["config"], active_limits(), "its config")
+            cfg = policy_config_from_dict(stored, f"{path}: config")
+            act = cfg.ppo.activation
+            sizes = _declared_sizes(ck, "actor", path, act)
+            actor = _load_mlp(sizes, ck["actor"], act)
             critic = None
             if "critic" in ck:  # files written since the value network is exported
-                critic = _load_mlp(ck["critic_sizes"], ck["critic"], cfg.ppo.activation)
+                critic = _load_mlp(_declared_sizes(ck, "critic", path, act), ck["critic"], act)
             log_std = ck["log_std"].float() if "log_std" in ck else None
             disc = None
             if "disc" in ck:
-                disc = Discriminator(cfg.amp.window * int(ck["amp_frame_dim"]), cfg.amp.hidden,
-                                     cfg.amp.loss)  # fmt: skip
+                in_dim = cfg.amp.window * int(ck["amp_frame_dim"])
+                hidden = [int(h) for h in cfg.amp.hidden]
+                check_declared_network(
+                    lambda: Discriminator(in_dim, hidden, cfg.amp.loss), ck["disc"], str(path),
+                    f"its config's amp.window = {cfg.amp.window} x amp_frame_dim = "
+                    f"{ck['amp_frame_dim']} inputs, amp.hidden = {hidden}",
+                    {"amp.hidden": len(hidden)})  # fmt: skip
+                disc = Discriminator(in_dim, hidden, cfg.amp.loss)
                 disc.load_state_dict(_disc_state(ck["disc"]))
-        except (KeyError, RuntimeError, ValueError, TypeError) as e:
+        except ValueError as e:
+            if str(e).startswith(str(path)):
+                raise
+            raise ValueError(f"{path}: inconsistent policy file ({e})") from e
+        except (KeyError, RuntimeError, TypeError, AttributeError) as e:
             raise ValueError(f"{path}: inconsistent policy file ({e})") from e
         env_cfg = dataclasses.replace(cfg.env, amp_window=cfg.amp.window)
         count = float(ck["obs_count"]) if "obs_count" in ck else None

@@ -315,8 +315,8 @@ def check_zip(source: str | os.PathLike | bytes | Any, limits: InputLimits,
         limits.check("max_array_bytes", info.file_size,
                      f"{what} member {info.filename!r} (uncompressed size)", " bytes")  # fmt: skip
         total += info.file_size
-        limits.check("max_total_bytes", total, f"sum of the {what}'s members (uncompressed)",
-                     " bytes")  # fmt: skip
+        limits.check("max_total_bytes", total, f"sum of the {what}'s members up to "
+                     f"{info.filename!r} (uncompressed)", " bytes")  # fmt: skip
     return infos
 
 

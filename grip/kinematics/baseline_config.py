@@ -11,6 +11,7 @@ import numpy as np
 
 from grip.config import ConfigError, apply_dict
 from grip.core.checks import check
+from grip.core.limits import active_limits, safe_json_loads
 from grip.kinematics.features import DEFAULT_SITES, FeatureConfig
 
 METHODS: tuple[str, ...] = ("transpose", "pip")
@@ -214,7 +215,11 @@ def config_from_json(text: str, where: str) -> RunConfig:
     Raises:
         ValueError: Not a baseline configuration, or unknown keys (the message names ``where``).
     """
-    d = json.loads(text)
+    try:
+        d = safe_json_loads(text, active_limits(), "its config")
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{where}: not a TransPose/PIP baseline checkpoint (its config: "
+                         f"{str(e)[:200]})") from None  # fmt: skip
     method = d.pop("method", None) if isinstance(d, dict) else None
     if method not in METHODS:
         raise ValueError(f"{where}: not a TransPose/PIP baseline checkpoint (method {method!r})")

@@ -84,7 +84,7 @@ from grip.kinematics.features import (
     targets,
 )
 from grip.kinematics.train import export_for_inference
-from grip.nn.weights import load_checkpoint, unpack_weights
+from grip.nn.weights import check_declared_network, load_checkpoint, unpack_weights
 
 
 def export_baseline(src: str | os.PathLike, dst: str | os.PathLike, precision: str = "fp16") -> int:
@@ -139,6 +139,9 @@ class BaselineEstimator:
         """Load a training or exported checkpoint (``weights_only``; fp16 weights are cast)."""
         ck = load_checkpoint(path)
         cfg = config_from_json(ck["config"], str(path))
+        check_declared_network(lambda: build_nets(cfg), ck["model"], str(path),
+                               f"its config ({cfg.method}: {cfg.net})",
+                               {"layers": cfg.net.layers})  # fmt: skip
         nets = build_nets(cfg)
         try:
             nets.load_state_dict(unpack_weights(ck["model"]))

@@ -7,7 +7,6 @@ inference never imports the trainer (:mod:`grip.kinematics.train`).
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 
@@ -16,6 +15,7 @@ import torch
 
 from grip.core.body import build_body
 from grip.core.fk import integrate_root, joints_from_global
+from grip.core.limits import active_limits, safe_json_loads
 from grip.core.rotations import sixd_to_matrix
 from grip.kinematics.config import run_config_from_dict
 from grip.kinematics.dataset import TARGET_KEYS, Normalizer
@@ -35,7 +35,7 @@ from grip.nn.symmetry import (
     rotate_targets,
     yaw_matrices,
 )
-from grip.nn.weights import load_checkpoint, unpack_weights
+from grip.nn.weights import check_declared_network, load_checkpoint, unpack_weights
 
 _OUT_SLICES: tuple[tuple[str, int, int], ...] = tuple(
     (k, sum(STAGE_DIMS[s] for s in STAGES[:i]), sum(STAGE_DIMS[s] for s in STAGES[: i + 1]))
@@ -181,8 +181,17 @@ class KinematicsEstimator:
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike, tta: str = "none") -> KinematicsEstimator:
         ck = load_checkpoint(path)
-        cfg = run_config_from_dict(json.loads(ck["config"]))
-        model = KinematicsNet(cfg.net_config())
+        try:
+            cfg = run_config_from_dict(safe_json_loads(ck["config"], active_limits()))
+        except (TypeError, ValueError, KeyError, AttributeError) as e:
+            raise ValueError(f"{path}: not a KinematicsNet checkpoint: its config is not "
+                             f"readable ({str(e)[:200]})") from e  # fmt: skip
+        net = cfg.net_config()
+        check_declared_network(lambda: KinematicsNet(net), ck["model"], str(path),
+                               f"its config (n_inputs={net.n_inputs}, hidden={net.hidden}, "
+                               f"layers={net.layers}, init_hidden={net.init_hidden})",
+                               {"layers": net.layers})  # fmt: skip
+        model = KinematicsNet(net)
         model.load_state_dict(unpack_weights(ck["model"]))
         norm = Normalizer(ck["norm_mean"].float().numpy(), ck["norm_std"].float().numpy())
         return cls(model, norm, cfg, tta)

@@ -37,13 +37,17 @@ class DeviceFileError(RecordingError):
 def read_text_lines(path: str | os.PathLike[str], limits: InputLimits | None = None) -> list[str]:
     """The lines of a text export, without line ends, bounded by the input limits.
 
-    The file size is checked against ``limits.max_file_bytes`` before it is read and the line
-    count against ``limits.max_frames``. UTF-8 (a byte-order mark is dropped), with Latin-1 as
-    the fallback for exports written in a Windows code page (``N/cm²`` in cp1252).
+    The file size is checked against ``limits.max_file_bytes`` before it is read; it is then
+    read in blocks of 1 MiB, and a line longer than ``max_line_bytes``, more lines than
+    ``max_frames`` or more text than ``max_total_bytes`` is refused as soon as it is seen (one
+    1 GB line is never held whole). Lines end at ``\n``, ``\r\n`` or ``\r``. UTF-8 (a
+    byte-order mark is dropped), with Latin-1 as the fallback for exports written in a Windows
+    code page (``N/cm²`` in cp1252).
 
     Raises:
         FileNotFoundError: ``path`` does not exist (the message names it).
-        DeviceFileError: Too large, unreadable, or with a NUL byte (a binary file).
+        DeviceFileError: Too large, a line too long (named by its number), unreadable, or with
+            a NUL byte (a binary file).
     """
     path = Path(path)
     if not path.is_file():
@@ -51,23 +55,75 @@ def read_text_lines(path: str | os.PathLike[str], limits: InputLimits | None = N
     limits = limits or active_limits()
     try:
         check_file_size(path, limits)
-        data = path.read_bytes()
+        raw = _read_lines(path, limits)
     except LimitExceeded as e:
         raise DeviceFileError(f"{path}: {e}") from None
     except OSError as e:
         raise DeviceFileError(f"{path}: cannot read ({e.strerror or e})") from None
-    if b"\0" in data:
-        raise DeviceFileError(f"{path}: not a text file (it holds NUL bytes)")
+    if isinstance(raw, tuple):  # (line number, reason)
+        raise DeviceFileError(f"{path}: {raw[1]}" if raw[0] == 0 else
+                              f"{path}: line {raw[0]}: {raw[1]}")  # fmt: skip
     try:
-        text = data.decode("utf-8-sig")
+        lines = [b.decode("utf-8") for b in raw]
+        if lines and lines[0].startswith("\ufeff"):
+            lines[0] = lines[0][1:]
     except UnicodeDecodeError:
-        text = data.decode("latin-1")
-    lines = text.splitlines()
-    try:
-        limits.check("max_frames", len(lines), "lines")
-    except LimitExceeded as e:
-        raise DeviceFileError(f"{path}: {e}") from None
+        lines = [b.decode("latin-1") for b in raw]
     return lines
+
+
+_BLOCK_BYTES = 2**20
+
+
+def _read_lines(path: Path, limits: InputLimits) -> list[bytes] | tuple[int, str]:
+    """The lines of ``path`` as bytes (line ends removed), or ``(line number, reason)`` of the
+    first refused one (0: the file as a whole).
+
+    Raises:
+        LimitExceeded: More lines than ``max_frames`` or more bytes than ``max_total_bytes``.
+    """
+    lines: list[bytes] = []
+    carry, total = b"", 0
+
+    def add(line: bytes) -> str | None:
+        nonlocal total
+        if len(line) > limits.max_line_bytes:
+            return _line_too_long(len(line), limits)
+        lines.append(line)
+        total += len(line)
+        limits.check("max_frames", len(lines), "lines")
+        limits.check("max_total_bytes", total, "text read", " bytes")
+        return None
+
+    with path.open("rb") as f:
+        while block := f.read(_BLOCK_BYTES):
+            if b"\0" in block:
+                return 0, "not a text file (it holds NUL bytes)"
+            parts = (carry + block).splitlines(keepends=True)
+            last = parts[-1]
+            # an unfinished line (or a "\r" whose "\n" may start the next block) waits for more
+            carry = last if not last.endswith(b"\n") else b""
+            for part in parts[:-1] if carry else parts:
+                bad = add(part.rstrip(b"\r\n"))
+                if bad:
+                    return len(lines) + 1, bad
+            if len(carry) > limits.max_line_bytes + 1:
+                return len(lines) + 1, _line_too_long(len(carry), limits, at_least=True)
+    if carry:
+        bad = add(carry.rstrip(b"\r\n"))
+        if bad:
+            return len(lines) + 1, bad
+    return lines
+
+
+def _line_too_long(n: int, limits: InputLimits, at_least: bool = False) -> str:
+    """The refusal of a line of ``n`` bytes (``at_least``: read so far)."""
+    try:
+        limits.check("max_line_bytes", n, "a line of" + (" at least" if at_least else ""),
+                     " bytes")  # fmt: skip
+    except LimitExceeded as e:
+        return str(e)
+    return ""
 
 
 def parse_float(text: str, where: str) -> float:
