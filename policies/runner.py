@@ -30,6 +30,7 @@ from grip.task.config import TrackingEnvConfig
 from policies.amp import Discriminator
 from policies.checkpoint import load_weights
 from policies.config import policy_config_from_dict
+from policies.settings_check import check_observations, check_policy_settings
 
 FORMAT = "grip-policy"
 VERSION = 2
@@ -214,7 +215,16 @@ class PolicyRunner:
 
     @classmethod
     def from_payload(cls, ck: object, path: str | os.PathLike) -> PolicyRunner:
-        """The policy of one member of a policy file (``path`` names it in errors)."""
+        """The policy of one member of a policy file (``path`` names it in errors).
+
+        Its settings are checked against the ranges the body and the controller were built
+        for, its observation parts against what inference provides
+        (:mod:`policies.settings_check`), and the network sizes it declares against its
+        weights before anything is built.
+
+        Raises:
+            ValueError: naming ``path``, for any of these or an inconsistent file.
+        """
         if not isinstance(ck, dict):
             raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
         missing = [k for k in MEMBER_KEYS if k not in ck]
@@ -223,8 +233,14 @@ class PolicyRunner:
         try:
             stored = safe_json_loads(ck["config"], active_limits(), "its config")
             cfg = policy_config_from_dict(stored, f"{path}: config")
+            check_policy_settings(cfg, str(path))
             act = cfg.ppo.activation
             sizes = _declared_sizes(ck, "actor", path, act)
+            if not isinstance(ck["obs_mean"], dict) or not isinstance(ck["obs_var"], dict):
+                raise ValueError(f"{path}: obs_mean/obs_var are not per-part statistics")
+            widths = {k: int(v.numel()) for k, v in ck["obs_mean"].items()
+                      if isinstance(k, str) and torch.is_tensor(v)}  # fmt: skip
+            check_observations(ck["obs_keys"], widths, sizes[0], cfg.env, str(path))
             actor = _load_mlp(sizes, ck["actor"], act)
             critic = None
             if "critic" in ck:  # files written since the value network is exported
@@ -288,6 +304,7 @@ def export_policy(run_dir: str | os.PathLike, out: str | os.PathLike, half: bool
         cfg = policy_config_from_dict(cfg_d, str(cfg_path))
     except (TypeError, KeyError, AttributeError) as e:
         raise ValueError(f"{cfg_path}: not a 'grip policy train' run config ({e})") from e
+    check_policy_settings(cfg, str(cfg_path))
     ppo = read_ppo_zip(ck_dir / "model.zip")  # (never unpickled: policies.checkpoint)
     act, zpath = cfg.ppo.activation, ppo.path
     sizes, actor = _mlp_from_state(ppo.policy, "mlp_extractor.policy_net.", "action_net.", act,
