@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from grip.core.runs import exit_with_parent
 from grip.motion.catalog import ClipRef, find_clips, load_clip
 from grip.motion.quality import foot_metrics, summarize
 from grip.motion.retarget import RetargetConfig, retarget
@@ -113,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     jobs = [(r, cfg) for r in refs]
     if args.workers > 1:
-        with ProcessPoolExecutor(args.workers) as pool:
+        with ProcessPoolExecutor(args.workers, initializer=exit_with_parent) as pool:
             rows = list(pool.map(_one, jobs, chunksize=4))
     else:
         rows = [_one(j) for j in jobs]

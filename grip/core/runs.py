@@ -7,7 +7,8 @@ what every run folder records (:func:`git_hash`, :func:`history_wall_s`).
 outputs were made with and refuses to go on with other ones, except those it lets change
 (:func:`changed_settings`, :func:`require_same_settings`, :func:`record_settings`), so a folder
 never mixes outputs of two settings. Worker pools start every worker with
-:func:`exit_with_parent`, and every pool of calls offers :class:`CallPool`.
+:func:`exit_with_parent` (``fork``) or :func:`exit_with_process` (``forkserver``, ``spawn``),
+and every pool of calls offers :class:`CallPool`.
 """
 
 from __future__ import annotations
@@ -232,7 +233,10 @@ def exit_with_parent() -> None:
     whose write end they hold themselves). On Linux the kernel sends SIGKILL on the parent's
     death (``prctl(PR_SET_PDEATHSIG)``); everywhere, a daemon thread checks every
     :data:`PARENT_POLL_S` seconds whether the parent process changed and exits if so.
-    Pass it as ``initializer=`` of :class:`concurrent.futures.ProcessPoolExecutor`.
+    Pass it as ``initializer=`` of :class:`concurrent.futures.ProcessPoolExecutor` with the
+    ``fork`` start method; with ``forkserver`` or ``spawn`` a worker's parent is not the
+    process that made the pool: use :func:`exit_with_process` (:class:`grip.eval.pool.
+    WorkerPool` does).
     """
     parent = os.getppid()
     if sys.platform.startswith("linux"):
@@ -249,4 +253,58 @@ def _watch_parent(parent: int) -> None:
     while True:
         time.sleep(PARENT_POLL_S)
         if os.getppid() != parent:
+            os._exit(1)
+
+
+def process_start(pid: int) -> str | None:
+    """When process ``pid`` started (clock ticks since boot, from ``/proc``): with its pid,
+    what names one process even after the pid is reused. ``None`` without ``/proc`` or when
+    no such process runs."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return fields[19] if len(fields) > 19 and fields[0] not in "ZX" else None
+
+
+def process_alive(pid: int, start: str | None = None) -> bool:
+    """Whether process ``pid`` (started at ``start``, :func:`process_start`; ``None``: any)
+    still runs; a zombie does not."""
+    if start is not None or Path("/proc/self/stat").is_file():
+        now = process_start(pid)
+        return now is not None and (start is None or now == start)
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def exit_with_process(owner: int, owner_start: str | None = None) -> None:
+    """Initializer of a worker process: end it as soon as process ``owner`` ends.
+
+    The process that made a pool is not its workers' parent with the ``forkserver`` or
+    ``spawn`` start methods (the forkserver is), so :func:`exit_with_parent` watches the wrong
+    process: after ``kill -9`` of the command, its workers and the forkserver (which lives as
+    long as a worker holds its pipe) lived on for hours. A daemon thread checks every
+    :data:`PARENT_POLL_S` seconds that ``owner`` (the same process: ``owner_start``) still
+    runs, and ends this worker when not.
+
+    Args:
+        owner: The process whose end ends this worker (the command's, ``os.getpid()`` where
+            the pool is made).
+        owner_start: Its :func:`process_start`, taken there (tells a reused pid).
+    """
+    if not process_alive(owner, owner_start):
+        os._exit(1)
+    threading.Thread(target=_watch_process, args=(owner, owner_start), daemon=True,
+                     name="exit-with-owner").start()  # fmt: skip
+
+
+def _watch_process(owner: int, owner_start: str | None) -> None:
+    while True:
+        time.sleep(PARENT_POLL_S)
+        if not process_alive(owner, owner_start):
             os._exit(1)

@@ -17,6 +17,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 
+from grip.core.runs import exit_with_process, process_start
+
 __all__ = ["THREAD_VARS", "WorkerPool", "one_torch_thread", "run_pool", "start_method"]
 
 THREAD_VARS: tuple[str, ...] = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -47,7 +49,9 @@ def one_torch_thread() -> Iterator[None]:
 class WorkerPool:
     """Up to ``workers`` worker processes, kept from one :meth:`run` to the next (what a worker
     built, such as its models, stays built), started when first needed. A context manager: the
-    workers end, and the thread variables are restored, on leaving it.
+    workers end, and the thread variables are restored, on leaving it. Each worker also ends
+    within :data:`grip.core.runs.PARENT_POLL_S` seconds of the process that made the pool (a
+    command killed with SIGKILL leaves no worker and, with them, no forkserver behind).
 
     Args:
         workers: Processes, >= 1.
@@ -100,8 +104,11 @@ class WorkerPool:
         """
         if self._pool is None:
             ctx = mp.get_context(start_method())
+            me = os.getpid()
+            init = (me, process_start(me), self.initializer)
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx,
-                                             initializer=self.initializer)  # fmt: skip
+                                             initializer=_start_worker,
+                                             initargs=init)  # fmt: skip
         futures = {self._pool.submit(fn, *args): k for k, (fn, args) in enumerate(calls)}
         lost: list[int] = []
         try:
@@ -122,6 +129,15 @@ class WorkerPool:
         if lost:
             self._close(wait=True)  # (broken: no further call would run)
         return sorted(lost)
+
+
+def _start_worker(owner: int, owner_start: str | None,
+                  initializer: Callable[[], object] | None) -> None:  # fmt: skip
+    """Every worker's initializer: end with the process that made the pool (its parent is the
+    forkserver: :func:`grip.core.runs.exit_with_process`), then ``initializer``."""
+    exit_with_process(owner, owner_start)
+    if initializer is not None:
+        initializer()
 
 
 def run_pool(calls: Sequence[tuple[Callable, tuple]], workers: int,
