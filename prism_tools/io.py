@@ -50,6 +50,7 @@ from grip.core.limits import (
     safe_json_loads,
 )
 from grip.core.safe_pickle import RefusedGlobal, RestrictedUnpickler, restricted_loads
+from grip.core.text import clean_strings, clean_text
 from prism_tools.errors import RecordingError
 from prism_tools.gaps import fill_gaps as _fill_gaps
 from prism_tools.prism_dict import recording_from_prism_dict
@@ -180,12 +181,15 @@ def load_prism_dict(
             :func:`grip.core.limits.active_limits`.
 
     Returns:
-        The nested dict, not validated.
+        The nested dict, not validated. Its strings (keys, values, text arrays) are cleaned
+        (:func:`grip.core.text.clean_strings`): a code point UTF-8 cannot encode, such as a lone
+        surrogate, is U+FFFD, so a category or name never breaks a writer downstream.
 
     Raises:
         FileNotFoundError: ``path`` does not exist (the message starts with the path).
         RecordingError: Unknown suffix, refused pickle global, corrupt/truncated file, a size
-            above ``limits``, or the content is not a dict; the message starts with the path.
+            above ``limits``, the content is not a dict, or two of its keys differ only in
+            unencodable characters; the message starts with the path.
     """
     path = Path(path)
     fmt = _format_of(path, None)
@@ -195,7 +199,10 @@ def load_prism_dict(
     d = _read_pickle(path, limits) if fmt == "pkl" else _read_npz(path, limits)
     if not isinstance(d, dict):
         raise RecordingError(f"{path}: expected a dict at the top level, got {type(d).__name__}")
-    return d
+    try:
+        return clean_strings(d)
+    except ValueError as e:
+        raise RecordingError(f"{path}: {e}") from None
 
 
 _TAKE_RE = re.compile(r"^(?P<subj>subj\d+)_(?P<take>.+)$")
@@ -208,15 +215,18 @@ def take_name_from_path(path: str | os.PathLike[str]) -> str:
         path: File path.
 
     Returns:
-        ``"subj001_take002"`` for both layouts; the bare file stem when neither pattern matches.
+        ``"subj001_take002"`` for both layouts; the bare file stem when neither pattern matches;
+        cleaned (:func:`grip.core.text.clean_text`: the undecodable bytes of a file name are
+        U+FFFD).
     """
     p = Path(path)
-    if _TAKE_RE.match(p.stem):
-        return p.stem
-    parent = p.parent.name
+    stem = clean_text(p.stem)
+    if _TAKE_RE.match(stem):
+        return stem
+    parent = clean_text(p.parent.name)
     if re.fullmatch(r"subj\d+", parent):
-        return f"{parent}_{p.stem}"
-    return p.stem
+        return f"{parent}_{stem}"
+    return stem
 
 
 def load_recording(

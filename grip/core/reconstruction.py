@@ -42,6 +42,7 @@ from grip.core import skeleton as sk
 from grip.core.atomic import atomic_write
 from grip.core.limits import InputLimits, LimitExceeded, active_limits, load_checked_npz
 from grip.core.metrics import global_to_local_rot
+from grip.core.text import clean_strings
 
 FORMAT = "grip-reconstruction"
 VERSION = 1
@@ -188,13 +189,19 @@ class Reconstruction(PoseTrack):
         Member sizes are checked from the npy headers before any array is loaded, the JSON
         metadata's depth and integer digits before it is parsed, the frame rate and duration
         before the reconstruction is built (``limits``, default
-        :func:`grip.core.limits.active_limits`)."""
+        :func:`grip.core.limits.active_limits`). The name, method and notes are cleaned
+        (:func:`grip.core.text.clean_strings`: a code point UTF-8 cannot encode is U+FFFD), so
+        every writer downstream can print or store them."""
         path = Path(path)
         limits = limits or active_limits()
         data, meta = load_checked_npz(path, limits, ReconstructionError)
         if (not isinstance(meta, dict) or meta.get("format") != FORMAT
                 or meta.get("version") != VERSION):  # fmt: skip
             raise ReconstructionError(f"{path}: not a {FORMAT} file of version {VERSION}")
+        try:
+            meta = clean_strings(meta)
+        except ValueError as e:
+            raise ReconstructionError(f"{path}: '__meta__': {e}") from None
         try:
             fps = float(meta["fps"])
             n = int(np.shape(data.get("joint_pos"))[0]) if np.ndim(data.get("joint_pos")) else 0

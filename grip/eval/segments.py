@@ -36,7 +36,8 @@ class Segment:
     """Frames ``[start, stop)`` of one recording file.
 
     Attributes:
-        id: ``<file stem>_f<start>`` (unique within a dataset, safe as a file name).
+        id: ``<file stem>_f<start>`` (unique within a dataset, safe as a file name; the stem
+            cleaned as names are, :func:`grip.core.text.clean_text`).
         path: Recording file.
         start, stop: Frame range.
         category: The recording's motion category (``"unknown"`` when it has none).
@@ -94,6 +95,7 @@ def list_segments(
         BenchError: A file cannot be read and ``errors`` is ``None`` (the message names it), or
             no segment results.
     """
+    from grip.core.text import clean_text
     from prism_tools.chunking import segments
     from prism_tools.io import load_recording
 
@@ -114,7 +116,8 @@ def list_segments(
             continue
         cuts = segments(rec.n_frames, segment_frames, stride=stride,
                         min_length=segment_frames if min_frames is None else min_frames)
-        out += [Segment(f"{path.stem}_f{sl.start:06d}", path, sl.start, sl.stop, cat)
+        stem = clean_text(path.stem)  # (an undecodable byte of a file name: U+FFFD)
+        out += [Segment(f"{stem}_f{sl.start:06d}", path, sl.start, sl.stop, cat)
                 for sl in cuts]  # fmt: skip
         if limit and len(out) >= limit:
             return out[:limit]
