@@ -146,17 +146,19 @@ def instrument(timer: PartTimer) -> None:
     w(pt.TrainingCallback, "_on_rollout_end", "callbacks, logging")
 
 
-def profile_training(overrides: Sequence[str], rollouts: int) -> dict:
-    """Train ``rollouts`` rollouts of the default recipe with ``overrides``; returns the
-    breakdown (seconds and shares per part, env steps/s)."""
+def profile_training(overrides: Sequence[str], rollouts: int, config: Path | None = None,
+                     reference: Path | None = None) -> dict:  # fmt: skip
+    """Train ``rollouts`` rollouts of the recipe ``config`` (default ``configs/policy/
+    default.toml``) with ``overrides`` on ``reference`` (default: the bundled sample); returns
+    the breakdown (seconds and shares per part, env steps/s)."""
     from envs.factory import make_tracking_env
     from envs.tracking_env import SAMPLE_REFERENCE
     from grip.config import load_config
     from policies.config import PolicyRunConfig
     from policies.train import PolicyTrainer
 
-    cfg = load_config(ROOT / "configs" / "policy" / "default.toml", PolicyRunConfig(),
-                      list(overrides))  # fmt: skip
+    config = config or ROOT / "configs" / "policy" / "default.toml"
+    cfg = load_config(config, PolicyRunConfig(), list(overrides))
     steps = rollouts * cfg.ppo.n_steps * cfg.ppo.n_envs
     cfg = dataclasses.replace(
         cfg, stage1=dataclasses.replace(cfg.stage1, timesteps=steps, categories=()),
@@ -165,7 +167,7 @@ def profile_training(overrides: Sequence[str], rollouts: int) -> dict:
     run = Path(tempfile.mkdtemp(prefix="grip_prof_"))
     timer = PartTimer()
     try:
-        tr = PolicyTrainer(cfg, run, SAMPLE_REFERENCE, make_tracking_env)
+        tr = PolicyTrainer(cfg, run, reference or SAMPLE_REFERENCE, make_tracking_env)
         instrument(timer)
         t0 = time.perf_counter()
         tr.train()
@@ -191,14 +193,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--rollouts", type=int, default=4, help="PPO rollouts to time (default 4)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="override one setting of the default recipe (repeatable)")  # fmt: skip
+    ap.add_argument(
+        "--config", type=Path, default=None, help="recipe (default configs/policy/default.toml)"
+    )
+    ap.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        help="training reference set (default: the bundled sample)",
+    )
     ap.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     args = ap.parse_args(argv)
     if args.rollouts < 1:
         ap.error("--rollouts must be >= 1")
-    res = profile_training(args.overrides, args.rollouts)
-    print(f"{res['vec_env']}:{res['n_envs']}, action repeat {res['action_repeat']}: "
-          f"{res['decisions']} decisions in {res['wall_s']:.1f} s, "
-          f"{res['env_steps_per_s']:.0f} env steps/s, {res['ms_per_decision']:.2f} ms/decision")
+    res = profile_training(args.overrides, args.rollouts, args.config, args.reference)
+    print(
+        f"{res['vec_env']}:{res['n_envs']}, action repeat {res['action_repeat']}: "
+        f"{res['decisions']} decisions in {res['wall_s']:.1f} s, "
+        f"{res['env_steps_per_s']:.0f} env steps/s, {res['ms_per_decision']:.2f} ms/decision"
+    )
     print(f"{'part':24s} {'share':>7s} {'ms/decision':>12s}")
     for p, s in res["share"].items():
         print(f"{p:24s} {100 * s:6.1f}% {res['ms_per_decision_by_part'][p]:12.3f}")
@@ -210,4 +223,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-

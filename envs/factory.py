@@ -11,6 +11,7 @@ from __future__ import annotations
 import gymnasium as gym
 
 from envs.batched import BatchedTrackingEnv
+from envs.clip_cache import ClipCache
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.core.reference_sets import load_reference, select_clips
@@ -47,9 +48,9 @@ def make_batched_tracking_env(
     ``make_tracking_env(env_cfg, categories, seeds[i])`` for each. ``threads``: physics threads
     (0: the cores this process may use)."""
     ref = select_clips(load_reference(env_cfg.reference), categories)
-    envs, compiled = [], {}
+    envs, compiled, clips = [], {}, ClipCache()
     for seed in seeds:
-        env = GripTrackingEnv(env_cfg, ref, compiled_models=compiled)
+        env = GripTrackingEnv(env_cfg, ref, compiled_models=compiled, clip_cache=clips)
         env.reset(seed=seed)
         envs.append(env)
     return BatchedTrackingEnv(envs, threads)

@@ -23,6 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs import rewards as R
+from envs.clip_cache import GT_DIM, ClipArrays, ClipCache
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
@@ -40,20 +41,6 @@ _INFO_KEYS = tuple(f"reward/{k}" for k in R.TERMS)
 _HINGES = slice(ROW["hinge_q"].start, ROW["hinge_qd"].stop)  # (of a state row)
 _TORQUE, _HQD = ROW["torque"], ROW["hinge_qd"]
 _ROOT = O.OBS_ROW["est_root_pos"]
-_GT_DIM = 2 * 9 * sk.N_JOINTS  # a ground-truth row: pvw (3, J, 3) then rot (J, 3, 3), flat
-
-
-CLIP_CACHE = 8
-"""Clips whose per-clip arrays an environment keeps (a few MB each, rebuilt in milliseconds):
-a learner's 16 environments drawing from a thousand clips hit a cache of 64 per environment
-6 % of the time and held 6 GB in it (the teacher run of docs/teacher_student.md)."""
-
-
-def _clip_cache_put(cache: dict, key, value) -> None:
-    """Keep at most :data:`CLIP_CACHE` clips' arrays (the oldest go first)."""
-    if len(cache) >= CLIP_CACHE:
-        cache.pop(next(iter(cache)))
-    cache[key] = value
 
 
 class GripTrackingEnv(gym.Env):
@@ -66,6 +53,8 @@ class GripTrackingEnv(gym.Env):
             ``MUJOCO_GL=egl``).
         compiled_models: A cache of compiled models shared with environments of the same
             settings and reference (:class:`envs.scenes.HumanoidScenes`); ``None``: its own.
+        clip_cache: The per-clip arrays, shared likewise (:class:`envs.clip_cache.ClipCache`);
+            ``None``: its own.
 
     Observation: ``spaces.Dict`` with ``"sensor"`` (the KinematicsNet inputs of the next frame),
     ``"kinematic"`` (State Difference) and ``"self"`` (both
@@ -86,7 +75,8 @@ class GripTrackingEnv(gym.Env):
     def __init__(self, cfg: TrackingEnvConfig | None = None,
                  reference: ReferenceSource | None = None,
                  render_mode: str | None = None,
-                 compiled_models: dict | None = None) -> None:  # fmt: skip
+                 compiled_models: dict | None = None,
+                 clip_cache: ClipCache | None = None) -> None:  # fmt: skip
         self.cfg = cfg = cfg or TrackingEnvConfig()
         if reference is None:
             reference = ReferenceSet.load(cfg.reference or SAMPLE_REFERENCE)
@@ -133,9 +123,9 @@ class GripTrackingEnv(gym.Env):
         self._last_obs: dict[str, np.ndarray] | None = None
         self._renderer = None
         self._renderer_model = None
-        # per clip index: (humanoid, EstimateFrames, (T, _GT_DIM) ground-truth rows, gain)
-        self._clip_arrays: dict[int, tuple] = {}
-        self._gt_rows = np.zeros((0, _GT_DIM))  # the episode's clip: ground-truth rows
+        self._clips = clip_cache if clip_cache is not None else ClipCache()
+        self._arrays: ClipArrays | None = None  # the episode's clip's
+        self._gt_rows = np.zeros((0, GT_DIM))  # the episode's clip: ground-truth rows
         self._est = O.EstimateFrames()  # the estimate laid out for the step
         self._truth: O.EstimateFrames | None = None  # the ground truth so (teacher_obs)
         self._root_offset_truth = np.zeros(3)  # (as _root_offset, for the truth)
@@ -145,7 +135,6 @@ class GripTrackingEnv(gym.Env):
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)  # (reused by every step)
-        self._amp_ref: dict[int, np.ndarray] = {}  # clip index -> ground-truth AMP frames
         self._weights = tuple(float(getattr(cfg.reward.weights, k)) for k in R.TERMS)
         self._relative = cfg.action_mode == "relative"
         self._vel_s = cfg.reward.root_vel_window_frames * cfg.control_dt_s
@@ -256,11 +245,7 @@ class GripTrackingEnv(gym.Env):
         info = {"clip": clip.name, "clip_index": i, "frame": start,
                 "root_height_m": float(pvw[0, 0, 2])}  # fmt: skip
         if self._amp is not None:
-            ref = self._amp_ref.get(i)
-            if ref is None:
-                if len(self._amp_ref) >= CLIP_CACHE:
-                    self._amp_ref.pop(next(iter(self._amp_ref)))
-                ref = self._amp_ref[i] = A.reference_amp_features(clip)
+            ref = self._arrays.amp
             self._amp.reset(ref[max(0, start - self._amp.window + 1) : start + 1])
             info["amp_obs"] = self._amp.vector()
         return obs, info
@@ -271,23 +256,14 @@ class GripTrackingEnv(gym.Env):
         return A.amp_frame(pvw, rot, sim.hinge_angles(), sim.hinge_velocities(), self._amp_buf)
 
     def _per_clip_arrays(self, clip: ReferenceClip, i: int) -> None:
-        """Per-clip arrays laid out for the step (gathered once per clip and humanoid, not
-        per episode or step)."""
+        """Per-clip arrays laid out for the step (built once per clip and subject, kept in
+        the cache shared with the other environments of a batch)."""
         sim, cfg = self._sim, self.cfg
-        got = self._clip_arrays.get(i)
-        if got is None or got[0] is not sim or got[1].est is not clip:
-            t = clip.n_frames
-            gt = np.empty((t, _GT_DIM))
-            gt[:, : _GT_DIM // 2] = np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel],
-                                             axis=1).reshape(t, -1)  # fmt: skip
-            gt[:, _GT_DIM // 2 :] = clip.gt_rot.reshape(t, -1)
-            truth = O.EstimateFrames() if cfg.teacher_obs else None
-            if truth is not None:
-                truth.update(clip.oracle(), sim.kd_over_kp, cfg.velocity_feedforward, key=sim)
-            got = (sim, O.EstimateFrames(), gt, cfg.action_scale * sim.half, truth)
-            _clip_cache_put(self._clip_arrays, i, got)
-        _, self._est, self._gt_rows, self._action_gain, self._truth = got
-        self._est.update(clip, sim.kd_over_kp, cfg.velocity_feedforward, key=sim)
+        got = self._clips.get(i, sim.key, clip, sim.kd_over_kp, cfg.velocity_feedforward,
+                              cfg.teacher_obs)  # fmt: skip
+        self._arrays = got
+        self._est, self._gt_rows, self._truth = got.est, got.gt, got.truth
+        self._action_gain = cfg.action_scale * sim.half
 
     def _observe(self, pvw: np.ndarray, rot: np.ndarray,
                  h: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip

@@ -13,6 +13,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from envs.batched import BatchedTrackingEnv
+from envs.clip_cache import ClipCache
 from envs.tracking_env import GripTrackingEnv
 from envs.wrappers import ActionRepeat
 from grip.task.config import RewardConfig, RewardWeights, TrackingEnvConfig
@@ -30,9 +31,9 @@ def _single(cfg, reference, seed):
 
 
 def _batched(cfg, reference, seeds, threads):
-    envs, compiled = [], {}
+    envs, compiled, clips = [], {}, ClipCache()  # (shared as the factory shares them)
     for s in seeds:
-        e = GripTrackingEnv(cfg, reference, compiled_models=compiled)
+        e = GripTrackingEnv(cfg, reference, compiled_models=compiled, clip_cache=clips)
         e.reset(seed=s)
         envs.append(e)
     return BatchedVecEnv(BatchedTrackingEnv(envs, threads))
