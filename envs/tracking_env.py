@@ -27,7 +27,7 @@ from envs.clip_cache import GT_DIM, ClipArrays, ClipCache
 from envs.scenes import humanoid_scenes
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceClip, ReferenceSet, ReferenceSource
-from grip.core.reference_sets import clip_probabilities
+from grip.core.reference_sets import clip_probabilities, start_bin_probabilities
 from grip.sim.humanoid import ROW, ROW_DIM, Humanoid, body_state
 from grip.task import amp as A
 from grip.task import observations as O
@@ -149,6 +149,8 @@ class GripTrackingEnv(gym.Env):
                                 for k, n, e in zip(names, sizes, ends, strict=True))  # fmt: skip
         self._obs_size = int(ends[-1])
         self.termination_dist_m = cfg.termination_dist_m
+        self._clip_tau: np.ndarray | None = None  # (set_clip_termination_dists)
+        self._start_bins: tuple[int, list] | None = None  # (set_start_bin_weights)
 
     def set_termination_dist(self, dist_m: float) -> None:
         """Change the early-termination distance (m, 0 = off) from the next step on: the
@@ -162,6 +164,43 @@ class GripTrackingEnv(gym.Env):
         ``weights[i]`` from the next reset on (all ones: by length, the default). The trainer's
         hard-clip mining (:class:`policies.mining.ClipFailureStats`) sets them."""
         self._clip_p = clip_probabilities(self._clip_len, weights)
+
+    def set_start_bin_weights(self, bin_frames: int, weights) -> None:
+        """Random starts within clip ``i`` pick a bin of ``bin_frames`` frames with probability
+        its start frames times ``weights[i][b]``, then a frame uniformly in it
+        (:func:`grip.core.reference_sets.start_bin_probabilities`), from the next reset on;
+        ``weights`` ``None`` (the default) or a clip's ``None``: every start frame equally. The
+        trainer's failure-weighted starts (:class:`policies.mining.StartBinStats`) set them."""
+        if weights is not None and len(weights) != len(self.reference):
+            raise ValueError(f"start bin weights: one entry per clip ({len(self.reference)}), "
+                             f"got {len(weights)}")  # fmt: skip
+        self._start_bins = None if weights is None else (int(bin_frames), list(weights))
+
+    def set_clip_termination_dists(self, dists) -> None:
+        """A termination distance per clip (m, 0 = off; ``None``: the env's one distance): the
+        episode on clip ``i`` ends when a joint is farther than ``dists[i]``, from now on (the
+        trainer's per-category termination, :class:`policies.curriculum.CategoryTermination`).
+        """
+        if dists is None:
+            self._clip_tau = None
+            return
+        d = np.asarray(dists, dtype=np.float64)
+        if d.shape != (len(self.reference),) or not (d >= 0).all():
+            raise ValueError(f"clip termination distances must be {len(self.reference)} "
+                             f"values >= 0 m, got shape {d.shape}")  # fmt: skip
+        self._clip_tau = d
+        self.termination_dist_m = float(d[self._clip_i])
+
+    def _random_start(self, i: int, last_start: int) -> int:
+        """A random start frame in ``0 .. last_start`` of clip ``i`` (by bin weight when
+        :meth:`set_start_bin_weights` gave the clip some)."""
+        w = None if self._start_bins is None else self._start_bins[1][i]
+        if w is None:
+            return int(self.np_random.integers(0, last_start + 1))
+        f = self._start_bins[0]
+        p = start_bin_probabilities(last_start, f, w)
+        b = int(self.np_random.choice(len(p), p=p))
+        return int(self.np_random.integers(b * f, min((b + 1) * f, last_start + 1)))
 
     # ------------------------------------------------------------------ models
     def _humanoid_for(self, clip: ReferenceClip, i: int) -> Humanoid:
@@ -223,10 +262,12 @@ class GripTrackingEnv(gym.Env):
             if not 0 <= start < clip.n_frames - 1:
                 raise ValueError(f"start frame {start} outside 0..{clip.n_frames - 2}")
         elif cfg.random_start:
-            start = int(self.np_random.integers(0, last_start + 1))
+            start = self._random_start(i, last_start)
         else:
             start = 0
         self._clip, self._clip_i = clip, i
+        if self._clip_tau is not None:
+            self.termination_dist_m = float(self._clip_tau[i])
         self._sim = self._humanoid_for(clip, i)
         self._t = start
         self._steps = 0

@@ -27,6 +27,23 @@ def load_reference(path: str) -> ReferenceSet:
     return ref
 
 
+def select_clip_indices(ref: ReferenceSet, patterns: tuple[str, ...]) -> list[int]:
+    """The indices in ``ref`` of the clips :func:`select_clips` keeps, in its order.
+
+    Raises:
+        ValueError: naming the set and the categories it has, when no clip matches.
+    """
+    if not patterns:
+        return list(range(len(ref.clips)))
+    keep = [i for i, c in enumerate(ref.clips)
+            if any(fnmatch.fnmatch(c.category, p) for p in patterns)]  # fmt: skip
+    if not keep:
+        cats = sorted({c.category for c in ref.clips})
+        raise ValueError(f"{ref.source}: no clip matches categories {list(patterns)} "
+                         f"(categories present: {cats})")  # fmt: skip
+    return keep
+
+
 def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
     """The clips whose category matches one of the glob ``patterns`` (all when empty).
 
@@ -35,11 +52,7 @@ def select_clips(ref: ReferenceSet, patterns: tuple[str, ...]) -> ReferenceSet:
     """
     if not patterns:
         return ref
-    clips = [c for c in ref.clips if any(fnmatch.fnmatch(c.category, p) for p in patterns)]
-    if not clips:
-        cats = sorted({c.category for c in ref.clips})
-        raise ValueError(f"{ref.source}: no clip matches categories {list(patterns)} "
-                         f"(categories present: {cats})")  # fmt: skip
+    clips = [ref.clips[i] for i in select_clip_indices(ref, patterns)]
     return ReferenceSet(clips, ref.sensor_sites, ref.insoles, ref.source)
 
 
@@ -57,4 +70,41 @@ def clip_probabilities(lengths: np.ndarray, weights) -> np.ndarray:
     p = lengths * w
     if p.sum() <= 0:
         raise ValueError("clip weights are all zero: no clip could be picked")
+    return p / p.sum()
+
+
+def start_bin_probabilities(last_start: int, bin_frames: int, weights) -> np.ndarray:
+    """The probability of starting an episode in each bin of ``bin_frames`` frames of a clip
+    whose random starts are frames ``0 .. last_start``: the bin's start frames times its
+    weight, normalised (the environments' ``set_start_bin_weights``; failure-weighted starts,
+    :class:`policies.mining.StartBinStats`). All weights equal: every start frame equally
+    likely, as without bins.
+
+    Args:
+        last_start: The last frame an episode may start at (>= 0).
+        bin_frames: Frames per bin (> 0).
+        weights: ``(>= B,)`` finite values >= 0, one per bin of the clip from its frame 0
+            (``B = ceil((last_start + 1) / bin_frames)`` bins hold start frames; the rest are
+            ignored).
+
+    Returns:
+        ``(B,)`` probabilities.
+
+    Raises:
+        ValueError: ``weights`` is too short, not finite or negative, or zero on every bin
+            that holds a start frame.
+    """
+    if last_start < 0 or bin_frames < 1:
+        raise ValueError(f"need last_start >= 0 and bin_frames >= 1, got {last_start}, "
+                         f"{bin_frames}")  # fmt: skip
+    n = last_start + 1
+    nb = -(-n // bin_frames)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.ndim != 1 or w.size < nb or not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError(f"start bin weights must be >= {nb} finite values >= 0, got shape "
+                         f"{w.shape}")  # fmt: skip
+    counts = np.minimum(bin_frames, n - bin_frames * np.arange(nb))
+    p = counts * w[:nb]
+    if p.sum() <= 0:
+        raise ValueError("start bin weights are all zero where episodes can start")
     return p / p.sum()
