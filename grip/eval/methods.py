@@ -12,8 +12,10 @@ no ground-truth pose (only its frame-0 horizontal pelvis position, the gauge tha
 trajectories a common origin).
 
 Adding a method is one factory function ``factory(options) -> Method`` and one line in
-:data:`METHODS`. Factories load their models (the expensive part) once; ``grip bench`` calls a
-factory once per worker process and then ``reconstruct`` once per segment.
+:data:`METHODS` (and, when it reads a model file by default, one in :data:`MODEL_OPTIONS`, so
+that a resumed benchmark notices that file changing). Factories load their models (the
+expensive part) once; ``grip bench`` calls a factory once per worker process and then
+``reconstruct`` once per segment.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ __all__ = [
     "UnknownMethodError",
     "kinematics_method",
     "make_method",
+    "model_files",
     "parse_method_names",
     "sensor_set",
     "sweep_checkpoint",
@@ -441,6 +444,45 @@ METHODS: dict[str, MethodFactory] = {
     "grip": grip_method,
 }
 """Method name -> factory. The baselines (``pip``, ``transpose``) and ``grip`` register here."""
+
+MODEL_OPTIONS: dict[str, tuple[str, ...]] = {
+    "kinematics": ("kin_checkpoint",),
+    "kin+pip": ("kin_checkpoint",),
+    "transpose": ("transpose_checkpoint",),
+    "pip": ("pip_checkpoint",),
+    "grip": ("policy_checkpoint", "kin_checkpoint"),
+}
+"""Method name -> the :class:`MethodOptions` model fields it reads, the shipped file when unset."""
+
+
+def model_files(name: str, options: MethodOptions) -> dict[str, Path]:
+    """The model files whose contents the results of method ``name`` with ``options`` depend on.
+
+    Every model file ``options`` names (all of them are part of a run's settings), the shipped
+    file of each field in :data:`MODEL_OPTIONS` ``[name]`` left unset, and with
+    ``options.sensors`` the sweep folder's checkpoint (``"sweep_checkpoint"``, where it exists).
+
+    Returns:
+        ``{field: resolved path}``; the files need not exist.
+    """
+    from grip.assets import SHIPPED_BASELINES, SHIPPED_POLICY
+
+    shipped = {"kin_checkpoint": _shipped_kin_checkpoint(), "policy_checkpoint": SHIPPED_POLICY,
+               "transpose_checkpoint": SHIPPED_BASELINES["transpose"],
+               "pip_checkpoint": SHIPPED_BASELINES["pip"]}  # fmt: skip
+    files: dict[str, Path] = {}
+    for key, default in shipped.items():
+        given = getattr(options, key)
+        if given is not None or key in MODEL_OPTIONS.get(name, ()):
+            files[key] = Path(given if given is not None else default).resolve()
+    if options.sensors:
+        try:
+            ck = sweep_checkpoint(options.sweep_dir, options.sensors)
+        except ValueError:  # (no checkpoint: the method cannot be built either)
+            ck = None
+        if ck is not None:
+            files["sweep_checkpoint"] = ck.resolve()
+    return files
 
 
 def make_method(

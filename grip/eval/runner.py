@@ -29,9 +29,17 @@ import numpy as np
 from grip.core.atomic import atomic_write_text
 from grip.core.reconstruction import Reconstruction
 from grip.core.runs import CallPool
-from grip.eval.methods import METHODS, Method, MethodFactory, MethodOptions, make_method
+from grip.eval.methods import (
+    METHODS,
+    Method,
+    MethodFactory,
+    MethodOptions,
+    make_method,
+    model_files,
+)
 from grip.eval.pool import one_torch_thread, run_pool
 from grip.eval.report import jsonable, nan_floats
+from grip.eval.resume import check_inputs, check_method
 from grip.eval.scoring import segment_metrics
 from grip.eval.segments import BenchError, Segment, SegmentReader
 from grip.kinematics.features import ground_truth
@@ -104,8 +112,13 @@ class MethodRun:
     options: MethodOptions = field(default_factory=MethodOptions)
 
     def describe(self) -> dict:
-        """What identifies this run's results (stored in ``method.json``)."""
+        """What identifies this run's results (stored in ``method.json``), besides the contents
+        of its model files (:meth:`model_files`, compared by :mod:`grip.eval.resume`)."""
         return {"label": self.label, "name": self.name, "options": self.options.to_dict()}
+
+    def model_files(self) -> dict[str, Path]:
+        """The model files its results depend on (:func:`grip.eval.methods.model_files`)."""
+        return model_files(self.name, self.options)
 
     def build(self) -> Method:
         return make_method(self.name, self.options, {self.name: self.factory})
@@ -351,25 +364,6 @@ def _run_task(run: MethodRun, segs: Sequence[Segment], out_dir: Path, saves: Seq
     return rows
 
 
-def _check_method_settings(out_dir: Path, run: MethodRun) -> None:
-    path = out_dir / "segments" / run.label / "method.json"
-    want = jsonable(run.describe())
-    if path.is_file():
-        try:
-            have = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as e:
-            raise BenchError(f"{path}: unreadable ({e})") from e
-        if isinstance(have, dict) and isinstance(have.get("options"), dict):
-            # (written before MethodOptions.init existed: those runs started from the truth)
-            have["options"].setdefault("init", "truth")
-            have["options"].setdefault("restart", "simulated")  # (GRIP's, before --restart)
-        if have != want:
-            raise BenchError(f"{path.parent}: results of {run.label} with other settings "
-                             f"({have} vs now {want}); use another output folder")  # fmt: skip
-    else:
-        atomic_write_text(path, json.dumps(want, indent=1) + "\n")
-
-
 def run_bench(
     runs: Sequence[MethodRun],
     segments: Sequence[Segment],
@@ -409,7 +403,8 @@ def run_bench(
         One row per (run, segment), in segment-major order.
 
     Raises:
-        BenchError: Results in ``out_dir`` from other settings, or workers that keep dying.
+        BenchError: Results in ``out_dir`` from other settings, other model or recording
+            contents (:mod:`grip.eval.resume`), or workers that keep dying.
     """
     out_dir = Path(out_dir)
     if not runs or not segments:
@@ -418,7 +413,9 @@ def run_bench(
     if len(set(labels)) != len(labels):
         raise BenchError(f"method labels given twice: {labels}")
     for run in runs:
-        _check_method_settings(out_dir, run)
+        check_method(out_dir, run, log)
+    check_inputs(out_dir, [s.path for s in segments], log)
+    for run in runs:
         for m in (out_dir / "segments" / run.label).glob("*.running"):
             m.unlink(missing_ok=True)  # left by an interrupted run
     sample = segments[0].id
