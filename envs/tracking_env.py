@@ -205,8 +205,11 @@ class GripTrackingEnv(gym.Env):
     # ------------------------------------------------------------------ models
     def _humanoid_for(self, clip: ReferenceClip, i: int) -> Humanoid:
         """The humanoid of the clip's subject in the clip's scene (:class:`envs.scenes.
-        HumanoidScenes`: one model per scene, subjects switched in)."""
-        return self._scenes.get(clip.body, clip.objects, i)
+        HumanoidScenes`: one model per scene, subjects switched in). The task reads none of
+        its sensors: they are off (bit-identical physics, cheaper steps)."""
+        h = self._scenes.get(clip.body, clip.objects, i)
+        h.sensors = False
+        return h
 
     @property
     def humanoid(self) -> Humanoid:

@@ -43,6 +43,7 @@ _UNSTABLE = np.array([int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
 also zeroes the counters, and counts the warning: a second blow-up leaves the count at 1)."""
 _W_QPOS, _W_QVEL, _W_QACC = (int(w) for w in _UNSTABLE)
 _C1, _C2 = np.array([1, 2, 0]), np.array([2, 0, 1])  # index permutations of a cross product
+_NO_SENSORS = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 
 _NJ = sk.N_JOINTS
 ROW_PARTS: tuple[tuple[str, int], ...] = (
@@ -404,13 +405,33 @@ class Humanoid:
         """``(69,)`` actuator torques, SMPL order, N m (a view: copy to keep)."""
         return self.act_force[self.act]
 
+    @property
+    def sensors(self) -> bool:
+        """Whether the physics step computes the model's sensors (IMU, insole touch and foot
+        force sensors; on by default). They never act on the motion: a task that reads none
+        of them turns them off, about 7 % of a training step's physics
+        (``benchmarks/physics_settings.py``); :meth:`foot_forces` works either way."""
+        return not self.model.opt.disableflags & _NO_SENSORS
+
+    @sensors.setter
+    def sensors(self, on: bool) -> None:
+        opt = self.model.opt
+        opt.disableflags = (opt.disableflags & ~_NO_SENSORS) | (0 if on else _NO_SENSORS)
+
     def foot_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """``grf (2, 3)`` ground reaction force on the left, right foot (N, world) and ``cop
         (2, 3)`` centre of pressure (m, NaN without contact): :class:`grip.sim.model.
-        FootContacts` (does not change the simulation)."""
+        FootContacts` (does not change the simulation; the sensors it reads are computed for
+        the call when :attr:`sensors` are off)."""
         if self._feet is None:
             self._feet = FootContacts(self.model, self.index)
-        return self._feet(self.data)
+        if self.sensors:
+            return self._feet(self.data)
+        self.sensors = True
+        try:
+            return self._feet(self.data)
+        finally:
+            self.sensors = False
 
     def heights_around(self, center_xy: np.ndarray, rot2: np.ndarray, grid: np.ndarray,
                        out: np.ndarray | None = None) -> np.ndarray:  # fmt: skip

@@ -67,3 +67,36 @@ def test_absurd_rows_agree_with_blown_up() -> None:
         assert absurd_rows(h.gather(np.empty(ROW_DIM))[None], cfg, z)[0]
         assert h.blown_up()
         h.data.qvel[adr] = keep
+
+
+def test_sensors_off_keep_the_physics_and_the_foot_forces() -> None:
+    """Sensors never act on the motion: off, the steps are bit for bit those with them on, and
+    foot_forces still reads its sensors (computed for the call); the env turns them off."""
+    on, off = _moving_humanoid(), _moving_humanoid()
+    off.sensors = False
+    assert on.sensors and not off.sensors
+    mujoco.mj_resetDataKeyframe(on.model, on.data, on.model.key("stand").id)
+    mujoco.mj_resetDataKeyframe(off.model, off.data, off.model.key("stand").id)
+    for h in (on, off):
+        h.data.qpos[h.index.root_qpos_adr + 2] -= 0.05  # (feet pressed into the floor)
+        mujoco.mj_forward(h.model, h.data)
+    for _ in range(20):
+        on.step()
+        off.step()
+    np.testing.assert_array_equal(off.data.qpos, on.data.qpos)
+    np.testing.assert_array_equal(off.data.qvel, on.data.qvel)
+    assert not off.data.sensordata.any() and on.data.sensordata.any()
+    grf_on, cop_on = on.foot_forces()
+    grf_off, cop_off = off.foot_forces()
+    assert grf_on[:, 2].sum() > 100.0  # (standing: the feet carry the body)
+    np.testing.assert_array_equal(grf_off, grf_on)
+    np.testing.assert_array_equal(cop_off, cop_on)
+    assert not off.sensors
+
+
+def test_the_tracking_env_turns_sensors_off() -> None:
+    from envs.tracking_env import GripTrackingEnv
+
+    env = GripTrackingEnv()
+    env.reset(seed=0)
+    assert not env.humanoid.sensors
