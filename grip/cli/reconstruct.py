@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import hashlib
 import json
 import os
 import sys
@@ -129,13 +128,49 @@ def output_stems(files: Sequence[Path], reserved: Mapping[str, str] | None = Non
     return stems
 
 
-def file_digest(path: Path) -> str:
-    """SHA-256 of a file's contents (hex), to tell whether a model changed between runs."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+def check_inputs(rows: Mapping[str, dict], inputs: Sequence[Path], where: Path) -> int:
+    """Refuse to resume when an input was replaced since its output was written.
+
+    Each summary row records its input's contents (``"input"``, a
+    :data:`grip.core.digests.Record`); a file whose size and times still match its record is
+    not read again. A row without one (written by an older version) has nothing to compare:
+    it gets the input's record now and is counted.
+
+    Args:
+        rows: ``{resolved input: summary row}`` of the outputs kept (updated in place).
+        inputs: This run's inputs, resolved.
+        where: The summary file (named in the message).
+
+    Returns:
+        How many rows had no record.
+
+    Raises:
+        CliError: An input's contents differ from its row's record (the message names it).
+    """
+    from grip.cli.errors import CliError
+    from grip.core.digests import FileDigests, change_text, same_contents
+
+    digests = FileDigests()
+    changed: list[str] = []
+    unrecorded = 0
+    for f in inputs:
+        row = rows.get(str(f))
+        if row is None:
+            continue
+        old = row.get("input")
+        rec = digests.record(f, known=old)
+        if old is None:
+            unrecorded += 1
+        elif not same_contents(old, rec):
+            changed.append(change_text(f, old, rec))
+            continue
+        row["input"] = rec
+    if changed:
+        more = f" (and {len(changed) - 1} other input(s))" if len(changed) > 1 else ""
+        raise CliError(f"{where}: {changed[0]}{more} since it was reconstructed in "
+                       f"{where.parent}; a resume would keep outputs of the old contents: use "
+                       "--overwrite to redo them, or another --out to start afresh")  # fmt: skip
+    return unrecorded
 
 
 def _row_formats(row: Mapping) -> set[str]:
@@ -171,6 +206,7 @@ def _work(job: tuple) -> list[dict]:
     torch.set_num_threads(1)
     from grip.cli.errors import CliError
     from grip.cli.recordings import load_recordings
+    from grip.core.digests import FileDigests
     from grip.eval.reconstruct import GripReconstructor
 
     key = (policy, kin, recovery)
@@ -180,7 +216,10 @@ def _work(job: tuple) -> list[dict]:
         g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
     caught = (CliError, KeyError, ValueError, OSError)
     loaded: list = []  # (f, stem, recording or the error reading it)
+    digests = FileDigests()
+    inputs = {}  # what each file held when it was read (the resume check's record)
     for f, stem in files:
+        inputs[f] = digests.record(f)
         try:
             (rec,) = load_recordings([f], max_frames=max_frames, fill_gaps=fill_gaps)
         except caught as e:
@@ -201,7 +240,8 @@ def _work(job: tuple) -> list[dict]:
         dst = Path(out) / f"{stem}.npz"
         recon.save(dst)
         written, failed = _exports(recon, rec, Path(out), formats, stem)
-        rows.append({"file": str(f), "name": rec.name, "stem": stem, "formats": formats,
+        rows.append({"file": str(f), "input": inputs[f], "name": rec.name, "stem": stem,
+                     "formats": formats,
                      "frames": recon.n_frames,
                      "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
                      "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *written],
@@ -245,6 +285,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from grip.cli.errors import CliError
     from grip.cli.recordings import kin_checkpoint, limits_from_args
     from grip.core.atomic import atomic_write_text
+    from grip.core.digests import file_sha256
     from grip.core.runs import (
         SettingsMismatch,
         exit_with_parent,
@@ -273,7 +314,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                               restart=args.restart)  # fmt: skip
     settings = {"max_frames": args.max_frames, "recovery": recovery.enabled,
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
-                "policy_sha256": file_digest(policy), "kin_sha256": file_digest(kin)}  # fmt: skip
+                "policy_sha256": file_sha256(policy), "kin_sha256": file_sha256(kin)}  # fmt: skip
     if args.init != "truth":  # (absent from the settings of runs before --init: their start)
         settings["init"] = args.init
     if recovery.enabled and args.restart != "simulated":  # (absent before --restart: GRIP's)
@@ -305,6 +346,11 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     reserved = {r.get("stem") or Path(r["written"][0]).stem: f for f, r in old.items()}
     stems = output_stems(inputs, reserved)
     done = dict(old)
+    unrecorded = check_inputs(done, inputs, summary_path)
+    if unrecorded:
+        print(f"note: {summary_path}: no record of the contents of {unrecorded} input(s) "
+              "(outputs of an older version): they are kept, their inputs assumed unchanged; "
+              "a change is refused from now on")  # fmt: skip
 
     def finished(f: Path) -> bool:
         r = done.get(str(f))
@@ -331,6 +377,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     from grip.pipeline import usable_cores
 
+    if unrecorded and not todo:
+        save()  # (the records, so that the next resume compares them)
     pooled = (command_pool(args, args.workers if len(todo) > 1 else 1, exit_with_parent)
               if todo else contextlib.nullcontext())  # fmt: skip
     with pooled as pool, tqdm(total=len(todo), unit="rec", desc="reconstruct") as bar:

@@ -4,6 +4,7 @@ rest is reported per recording and the others are still reconstructed."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import pickle
 from pathlib import Path
@@ -130,6 +131,39 @@ def test_resume_with_other_settings_is_refused(takes, tmp_path, capsys):
     assert main([*base[:-1], "12", "--overwrite"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["max_frames"] == 12 and summary["recordings"][0]["frames"] == 12
+
+
+def test_a_recording_replaced_in_place_is_refused(tmp_path, capsys):
+    from prism_tools.io import save_recording
+
+    rec = load_recording(SAMPLE)
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    save_recording(rec.slice_frames(0, 20), a)
+    save_recording(rec.slice_frames(20, 40), b)
+    out = tmp_path / "out"
+    base = ["reconstruct", str(a), str(b), "--out", str(out)]
+    assert main(base) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["input"]["sha256"] for r in summary["recordings"]] == [
+        hashlib.sha256(p.read_bytes()).hexdigest() for p in (a, b)]  # fmt: skip
+    before = (out / "b.npz").read_bytes()
+    save_recording(rec.slice_frames(40, 60), b)  # another take written over b.npz
+    capsys.readouterr()
+    assert main(base) == 2
+    err = capsys.readouterr().err
+    assert str(b.resolve()) in err and "contents changed" in err
+    assert "--overwrite" in err and "another --out" in err
+    assert (out / "b.npz").read_bytes() == before  # nothing redone, nothing mixed
+    assert main([*base, "--overwrite"]) == 0
+    # a summary written before the inputs were recorded: nothing to compare, it resumes
+    summary = json.loads((out / "summary.json").read_text())
+    for r in summary["recordings"]:
+        del r["input"]
+    (out / "summary.json").write_text(json.dumps(summary))
+    capsys.readouterr()
+    assert main(base) == 0
+    printed = capsys.readouterr().out
+    assert "2 already done" in printed and "no record of the contents of 2" in printed
 
 
 def test_a_recording_without_ground_truth_is_reconstructed(tmp_path, capsys):
