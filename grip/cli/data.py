@@ -333,6 +333,10 @@ def cmd_build(args: argparse.Namespace) -> int:
         print(f"{counts['resumed']} clip(s) were finished before and not built again "
               f"({counts['relabelled']} relabelled), {counts['built']} built in this run; "
               f"split.json written anew (split by {cfg.split_by})")  # fmt: skip
+    if counts.get("unrecorded"):
+        print(f"note: no record of the sources of {counts['unrecorded']} finished clip(s) "
+              "(built by an older version): they are kept, their sources assumed unchanged; "
+              "recorded now, a change is refused from now on")  # fmt: skip
     if short:
         print(f"{len(short)} built clip(s) gave no sequence (shorter than "
               f"{cfg.min_chunk_frames} frames at 100 Hz; 'note' in manifest.json)")  # fmt: skip

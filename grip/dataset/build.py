@@ -17,8 +17,9 @@ Every file is written atomically, a clip is complete only when its ``done`` mark
 re-run skips complete clips, so an interrupted build resumes where it stopped. The settings are
 recorded in ``settings.json`` before the first clip is written, and a re-run with settings that
 change the clips is refused, so even a build killed before its manifest never mixes two
-settings. Temporary files of a killed build are removed when it resumes, and its worker
-processes end with it.
+settings. Each ``done`` marker records what the clip's source files held, and a re-run refuses a
+source replaced in place (:mod:`grip.dataset.resume`). Temporary files of a killed build are
+removed when it resumes, and its worker processes end with it.
 
 The split is computed from the finished clips at the end of every build, so a re-run with only
 other split settings (:data:`SPLIT_SETTINGS`) splits the dataset again without building a clip.
@@ -160,6 +161,9 @@ class ClipResult:
     label: str = ""  # the source's own label of the motion
     group: str = ""  # its group in a split by person ("": the clip itself)
     props: list[dict] = field(default_factory=list)  # boxes it stands or sits on (variant 0)
+    # what its source files held when it was built ({"clip"|"skeleton": {"path", sha256, ...}},
+    # grip.dataset.resume): a resume refuses a source replaced in place
+    inputs: dict[str, dict] = field(default_factory=dict)
 
 
 def clip_seed(clip_id: str, base: int) -> int:
@@ -186,6 +190,7 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
     The recordings and the motion file carry ``clip.category`` (recordings also
     ``extras["label"]``), whatever a search of the clip's file alone would say.
     """
+    from grip.dataset.resume import source_records
     from grip.dataset.zmp_filter import inferred_ground, zmp_filter
     from grip.motion.catalog import clip_ref, load_clip
     from grip.motion.retarget import retarget
@@ -202,6 +207,7 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
                      label=clip.label, group=clip.group)  # fmt: skip
     try:
         ref = replace(clip_ref(clip.path), clip_id=clip_id, category=clip.category)
+        res.inputs = source_records({"clip": ref.path, "skeleton": ref.asf_path})
         src = load_clip(ref)
         variants: list[tuple[str, bool, int]] = [
             (f"v{k}", True, k) for k in range(cfg.noise_variants)
@@ -250,8 +256,9 @@ def process_clip(clip: ClipSpec, out_dir: str, cfg: BuildConfig) -> ClipResult:
 
 
 def _write_done(out: Path, res: ClipResult) -> None:
-    atomic_write_text(out / "done" / f"{safe_name(res.clip_id)}.json",
-                      json.dumps(asdict(res), indent=1))  # fmt: skip
+    from grip.dataset.resume import done_marker
+
+    atomic_write_text(done_marker(out, res.clip_id), json.dumps(asdict(res), indent=1))
 
 
 def relabel_clip(out_dir: str | os.PathLike, res: ClipResult, category: str,
@@ -432,7 +439,9 @@ def build_dataset(
         skipped_files: ``(path, reason)`` of files the clip search could not read; listed in
             the manifest as ``skipped_files``.
         counts: Optional dict that receives how many clips were ``"built"`` (or tried) in this
-            run, ``"resumed"`` (finished before) and, of those, ``"relabelled"``.
+            run, ``"resumed"`` (finished before) and, of those, ``"relabelled"`` and
+            ``"unrecorded"`` (their markers, of an older version, had no record of the sources'
+            contents: :mod:`grip.dataset.resume`).
         pool: Runs the clips instead of ``workers`` local processes (a
             :class:`grip.cluster.RayPool`: ``grip data build --ray``; its workers write into
             ``out_dir``, so on several machines it must be a shared folder).
@@ -442,7 +451,8 @@ def build_dataset(
 
     Raises:
         ValueError: Other settings than the folder's (a
-            :class:`grip.core.runs.SettingsMismatch`), or a corrupt manifest/settings file.
+            :class:`grip.core.runs.SettingsMismatch`), a corrupt manifest/settings file, or a
+            finished clip's source replaced in place (:func:`grip.dataset.resume.check_sources`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -450,6 +460,12 @@ def build_dataset(
     remove_stale_temps(out)  # of a killed build: atomic writes that never finished
     specs = [c if isinstance(c, ClipSpec) else ClipSpec(*c) for c in clips]
     done = _load_done(out)
+    from grip.dataset.resume import check_sources
+
+    # (before anything is changed: a source replaced in place refuses the whole resume)
+    updated, unrecorded = check_sources(out, [(s, done[s.clip_id]) for s in specs
+                                              if s.clip_id in done])  # fmt: skip
+    done.update(updated)
     results: dict[str, ClipResult] = {}
     unchanged = relabelled = 0
     for spec in specs:
@@ -474,7 +490,8 @@ def build_dataset(
         progress(unchanged)
     todo = [c for c in specs if c.clip_id not in results]
     if counts is not None:
-        counts.update(built=len(todo), resumed=len(results), relabelled=relabelled)
+        counts.update(built=len(todo), resumed=len(results), relabelled=relabelled,
+                      unrecorded=unrecorded)
     n_workers = workers or os.cpu_count() or 1
     if todo and pool is not None:
         calls = [(process_clip, (spec, str(out.absolute()), cfg)) for spec in todo]

@@ -130,3 +130,46 @@ def test_malformed_motion_files_are_reported_and_the_others_built(tmp_path: Path
     assert bad["status"] == "failed" and str(motions / "fuzzed.bvh") in bad["error"]
     line = next(ln for ln in err.splitlines() if ln.startswith("FAILED mixed/fuzzed: "))
     assert str(motions / "fuzzed.bvh") in line
+
+
+def test_a_clip_replaced_in_place_is_refused_not_kept(tmp_path: Path, capsys) -> None:
+    """A finished clip whose source (or AMC skeleton) now holds other contents would keep
+    recordings of the old motion: the resume is refused, naming the file (issue 50, item 1)."""
+    motions = tmp_path / "motions" / "mine"
+    motions.mkdir(parents=True)
+    shutil.copy(DEEPMIMIC / "humanoid3d_run.txt", motions / "a.txt")
+    shutil.copy(DEEPMIMIC / "humanoid3d_backflip.txt", motions / "b.txt")
+    cmu = MOTIONS / "cmu" / "asf_amc"
+    amc = (cmu / "131_04.amc").read_text().splitlines(keepends=True)
+    (motions / "131_04.amc").write_text("".join(amc[: amc.index("60\n")]))  # 59 frames
+    shutil.copy(cmu / "131.asf", motions / "131.asf")
+    out = tmp_path / "ds"
+    argv = ["data", "build", "--out", str(out), "--motions", str(motions.parent),
+            "--workers", "1"]  # fmt: skip
+    assert main(argv) == 0
+    done = json.loads((out / "done" / "mine__131_04.json").read_text())
+    assert set(done["inputs"]) == {"clip", "skeleton"}
+    # the same bytes written anew: nothing changed
+    b = motions / "b.txt"
+    text = b.read_bytes()
+    b.unlink()
+    b.write_bytes(text)
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "3 clip(s) were finished before" in capsys.readouterr().out
+    for changed in (b, motions / "131.asf"):
+        before = changed.read_bytes()
+        changed.write_bytes(before.replace(b"0", b"1", 1))  # replaced in place
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert str(changed.resolve()) in err and "contents changed" in err
+        assert "another --out" in err and "done" in err and "Traceback" not in err
+        changed.write_bytes(before)
+    # markers written before the records existed: nothing to compare, it resumes with a note
+    for marker in (out / "done").glob("*.json"):
+        d = json.loads(marker.read_text())
+        del d["inputs"]
+        marker.write_text(json.dumps(d))
+    assert main(argv) == 0
+    assert "no record of the sources of 3 finished clip(s)" in capsys.readouterr().out
+    assert all("inputs" in json.loads(m.read_text()) for m in (out / "done").glob("*.json"))
