@@ -37,8 +37,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "OUT/results.csv, OUT/segments.csv, OUT/table.md (the GRIP Table 1 layout plus\n"
             "runtime and failures) and plots (per-joint errors, the trajectory and the ground\n"
             "reaction force of a sample segment). Finished segments are kept in OUT/segments:\n"
-            "running the same command again resumes. A method that raises on a segment is\n"
-            "counted as a failure of that segment."
+            "running the same command again resumes; a resume is refused when a model file or\n"
+            "a recording has other contents than those results were computed from (compared by\n"
+            "SHA-256; use another --out). A method that raises on a segment is counted as a\n"
+            "failure of that segment."
         ),
         epilog="example: grip bench --data data/prism_synth --methods kinematics --out runs/bench\n"
         "         grip bench --data data/prism_synth --methods kinematics --out runs/bench_s "

@@ -47,7 +47,9 @@ n}}``).
 
 Output folder (``OUT``)::
 
-    segments/<label>/method.json        the method's name and options (checked on resume)
+    segments/<label>/method.json        the method's name and options, and its model files'
+                                        contents (SHA-256; checked on resume)
+    inputs.json                         the recordings' contents (SHA-256; checked on resume)
     segments/<label>/<segment>.json     one finished segment (written atomically)
     recons/<label>/<segment>.npz        reconstructions (--save-recons; always the sample's)
     results.json, results.csv           {label: {metric: value}} (null / empty for NaN)
@@ -58,10 +60,11 @@ Output folder (``OUT``)::
 
 A *label* is the method name, with ``@<sensors>`` for a sensor configuration of a sweep
 (``kinematics@imu4_press``). Finished segments are kept: running the same command again only
-runs what is missing. A segment whose method raised is finished with ``"status": "error"``
-(shown as a failure in the table; ``retry_failed`` runs it again). A worker process that dies
-(segfault, out of memory) is replaced; a segment that kills its worker when run alone is
-recorded as an error.
+runs what is missing, and is refused when a model file or a recording has other contents than
+the finished segments were computed from (:mod:`grip.eval.resume`). A segment whose method
+raised is finished with ``"status": "error"`` (shown as a failure in the table; ``retry_failed``
+runs it again). A worker process that dies (segfault, out of memory) is replaced; a segment that
+kills its worker when run alone is recorded as an error.
 """
 
 from __future__ import annotations
