@@ -423,6 +423,44 @@ class LiveEstimate:
                 self.est_hinge_vel[0] = self.est_hinge_vel[1]
         return i
 
+    def append_held(self, n: int) -> int:
+        """Add ``n`` frames that hold the newest frame's pose standing still (zero velocity,
+        its features): what ``n`` calls of :meth:`append` with that pose would give, in one
+        step (a stream's long dropout). Returns the index of the last frame.
+
+        Raises:
+            ReferenceError: No frame to hold.
+        """
+        if n <= 0:
+            return self._n - 1
+        if self._n == 0:
+            raise ReferenceError(f"clip {self.name!r}: no frame to hold")
+        last, i0 = self._n - 1, self._n
+        end = i0 + n
+        rows = self.capacity
+        while rows < end:
+            rows *= 2
+        if rows != self.capacity:
+            self._alloc(rows)
+        for k in ("est_pos", "est_rot6d", "est_rot", "est_hinge", "sensor"):
+            arr = getattr(self, k)
+            arr[i0:end] = arr[last]
+        self.est_vel[i0:end] = 0.0
+        self.est_hinge_vel[i0:end] = 0.0
+        self.est_angvel[i0:end] = 0.0
+        # root: the newest frame's velocity moves it once, then it stands (forward Euler)
+        self._disp = self._disp + self.est_vel[last, -1] / self.fps
+        self.est_root_pos[i0:end] = self._disp + self.root0
+        self._n = end
+        # the held frame's derivatives turn central (its successor is the same pose)
+        h, fps = self.est_hinge, self.fps
+        self.est_angvel[last] = angular_velocity_at(self.est_rot[: i0 + 1], last, fps)
+        if last > 0:
+            self.est_hinge_vel[last] = (h[i0] - h[last - 1]) / 2.0 * fps
+        else:
+            self.est_hinge_vel[0] = self.est_hinge_vel[1]
+        return end - 1
+
 
 class ReferenceSource(Protocol):
     """What the environment needs from a collection of reference clips."""

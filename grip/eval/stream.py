@@ -28,7 +28,10 @@ frame refused for its values) are filled when the next frame arrives: up to ``ma
 slerp; as :func:`prism_tools.gaps.fill_gaps` does offline) and simulating them as usual; a
 longer gap is not simulated: its frames hold the last simulated pose (forces NaN), the pipeline
 restarts at the next frame and the humanoid is put at the kinematic estimate there. Each gap is
-a :class:`StreamEvent` in :attr:`GripStream.events` and in the reconstruction's notes.
+a :class:`StreamEvent` in :attr:`GripStream.events` and in the reconstruction's notes. A frame
+whose index would make the stream longer than the input limits (``max_frames``,
+``max_duration_s``: a wall clock that jumped 10,000 s) is refused, and the stream goes on with the
+next frame that is not.
 """
 
 from __future__ import annotations
@@ -39,8 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grip.core import skeleton as sk
 from grip.core.body import build_body
+from grip.core.limits import InputLimits, LimitExceeded, active_limits
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import LiveEstimate
 from grip.core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
@@ -127,6 +130,9 @@ class GripStream:
         capacity: Frames allocated at first (the buffers double when a stream runs longer).
         max_gap_frames: Longest run of missing frames filled by interpolation (longer ones are
             gaps, see the module docstring).
+        limits: Bound the stream's length (``max_frames``, ``max_duration_s``): a frame whose
+            index or timestamp lies beyond is refused (default
+            :func:`grip.core.limits.active_limits`).
 
     Attributes:
         events: The :class:`StreamEvent` s so far (filled frames, gaps, blow-ups), in order.
@@ -140,9 +146,11 @@ class GripStream:
     """
 
     def __init__(self, runner, estimator, calibration, recovery: RecoveryConfig | None = None,
-                 capacity: int = 1024, max_gap_frames: int = MAX_GAP_FRAMES) -> None:  # fmt: skip
+                 capacity: int = 1024, max_gap_frames: int = MAX_GAP_FRAMES,
+                 limits: InputLimits | None = None) -> None:  # fmt: skip
         if max_gap_frames < 0:
             raise ValueError(f"max_gap_frames must be >= 0, got {max_gap_frames}")
+        self._limits = limits or active_limits()
         cfg = estimator.cfg.features
         self._cfg, self.max_gap_frames = cfg, int(max_gap_frames)
         recovery = recovery or RecoveryConfig()
@@ -188,10 +196,11 @@ class GripStream:
 
         Raises:
             ValueError: A malformed or non-finite frame (named), a duplicate or an earlier
-                index, a missing frame 0 or 1, both ``index`` and ``timestamp_s``, or a push
-                after :meth:`finish`. A refused frame changes nothing (without an index it
-                still takes its number, except frames 0 and 1: the next frame is the one after
-                it, and the refused one is filled as missing).
+                index, an index beyond the input limits (a clock jump), a missing frame 0 or 1,
+                both ``index`` and ``timestamp_s``, or a push after :meth:`finish`. A refused
+                frame changes nothing (without an index it still takes its number, except
+                frames 0 and 1: the next frame is the one after it, and the refused one is
+                filled as missing; a frame beyond the limits takes none).
         """
         if self._finished:
             raise ValueError(f"{self.clip.name}: push after finish()")
@@ -227,6 +236,7 @@ class GripStream:
             i = operator.index(index)
         else:
             i = self._next_in
+        self._check_span(i, at)
         if i <= self._last_in:
             what = ("was already pushed (a duplicate)" if i == self._last_in
                     else f"is earlier than frame {self._last_in}, pushed before")  # fmt: skip
@@ -235,6 +245,19 @@ class GripStream:
             raise ValueError(f"{self.clip.name}: frame {i}{at}: a stream starts with frames 0 and "
                              f"1 (its calibration); frame {self._last_in + 1} is missing")
         return i
+
+    def _check_span(self, i: int, at: str) -> None:
+        """Refuse an index that makes the stream longer than the input limits allow (a clock
+        jump of 10,000 s asked to hold a million frames)."""
+        lim = self._limits
+        try:
+            lim.check("max_duration_s", (i + 1) / self.clip.fps,
+                      f"frame {i}{at}: a stream of", " s")  # fmt: skip
+            lim.check("max_frames", i + 1, f"frame {i}{at}: a stream of", " frames")
+        except LimitExceeded as e:
+            gap = i - self._last_in - 1
+            raise ValueError(f"{self.clip.name}: {e}; {gap} frames after frame {self._last_in}"
+                             " (a clock jump?): refused") from None  # fmt: skip
 
     def _refused(self, i: int) -> None:
         """Frame ``i``'s values were refused: it still takes its number (the next frame pushed
@@ -288,10 +311,8 @@ class GripStream:
         """Frames ``first..last`` are missing, too many to fill: finish the frames before, hold
         the last pose over the gap and restart the pipeline after it."""
         self._flush()
-        p, (pos, rot, row) = self.player, self._est
-        zero = np.zeros((len(sk.VELOCITY_JOINTS), 3))
-        for _ in range(first, last + 1):  # the estimate held, standing still
-            self.clip.append(pos, rot, zero, row)
+        p = self.player
+        self.clip.append_held(last + 1 - self.clip.n_frames)  # the estimate held, standing still
         tr, k = p.trace, p.last
         tr.ensure(last)
         tr.pos[first : last + 1], tr.rot[first : last + 1] = tr.pos[k], tr.rot[k]
@@ -313,6 +334,7 @@ class GripStream:
         out = [self._next(row)] if row is not None else []
         player = self.player
         if self._resume is not None and self.clip.n_frames - 1 >= self._resume:
+            player.refresh(self._resume)  # (the estimate grew over the gap: observe it)
             self._place()
             out.append(self._frame_out())
         while not player.done:

@@ -75,6 +75,33 @@ def test_live_estimate_grows_to_the_offline_clip_frame_by_frame(clip) -> None:
         live.append(full.est_pos[0], full.est_rot[0], full.est_vel[0], full.sensor[0, :5])
 
 
+@pytest.mark.parametrize(("frames", "n"), [(1, 3), (7, 1), (7, 200)])
+def test_held_frames_equal_frames_appended_one_by_one(frames, n) -> None:
+    """A stream's long dropout holds the newest pose n frames in one step (issue 50)."""
+    from grip.core.reference import LiveEstimate
+
+    full = oracle_reference_clip(make_recording(20, seed=3))
+    one, held = (LiveEstimate(full.name, full.fps, full.gt_qpos[0, :3], full.sensor.shape[1],
+                              capacity=4) for _ in range(2))  # fmt: skip
+    for live in (one, held):
+        for i in range(frames):
+            live.append(full.est_pos[i], full.est_rot[i], full.est_vel[i], full.sensor[i])
+    k = frames - 1
+    for _ in range(n):
+        one.append(full.est_pos[k], full.est_rot[k], np.zeros((6, 3)), full.sensor[k])
+    assert held.append_held(n) == frames + n - 1 == one.n_frames - 1 == held.n_frames - 1
+    for live in (one, held):  # and the next frame after it
+        live.append(full.est_pos[k + 1], full.est_rot[k + 1], full.est_vel[k + 1],
+                    full.sensor[k + 1])  # fmt: skip
+    for key in _EST:
+        np.testing.assert_allclose(getattr(held, key)[: held.n_frames],
+                                   getattr(one, key)[: one.n_frames], atol=1e-9,
+                                   err_msg=key)  # fmt: skip
+    empty = LiveEstimate("x", 100.0, np.zeros(3), 70)
+    with pytest.raises(ReferenceError, match="no frame to hold"):
+        empty.append_held(3)
+
+
 def test_live_clip_unwraps_hinge_angles_as_numpy_does() -> None:
     from grip.core.reference import _unwrap_step
 

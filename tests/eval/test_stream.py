@@ -8,6 +8,8 @@ models check the whole stack against ``GripReconstructor``.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -299,3 +301,64 @@ def test_a_blow_up_is_recovered_and_the_stream_goes_on(rec, qvel) -> None:
     live = stream.reconstruction()
     assert live.n_frames == rec.n_frames and live.notes["blowups"] == 1
     assert np.linalg.norm(live.joint_pos - targets(rec).root_pos[:, None], axis=-1).max() < 3
+
+
+# ------------------------------------------------------------------ clock jumps (issue 50)
+def test_a_clock_jump_beyond_the_limits_is_refused_at_once(rec, full) -> None:
+    """10,000 s between two frames (a wall clock set by NTP): a million frames to hold, which
+    blocked the stream for minutes; refused in milliseconds, and the stream goes on."""
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    stream = _stream(rec)
+    for i in range(60):
+        stream.push(frames[i], timestamp_s=1000.0 + i / 100)
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"frame 1000060 \(t = 11000\.6000 s\).*max_duration_s"):
+        stream.push(frames[60], timestamp_s=11000.6)
+    assert time.perf_counter() - t0 < 1.0
+    with pytest.raises(ValueError, match=r"frame 2000000.*max_duration_s"):
+        stream.push(frames[60], index=2_000_000)
+    stream._limits = stream._limits.with_overrides(["max_duration_s=inf"])
+    with pytest.raises(ValueError, match=r"frame 2000000.*max_frames"):
+        stream.push(frames[60], index=2_000_000)
+    outs = _push_all(stream, {i: frames[i] for i in range(60, rec.n_frames)}, key="timestamp_s")
+    _numbered(outs)
+    live = stream.reconstruction()
+    assert live.n_frames == rec.n_frames and stream.events == []
+    np.testing.assert_allclose(live.joint_pos, full.joint_pos, atol=1e-9)
+
+
+def test_a_long_gap_within_the_limits_is_held_quickly(rec) -> None:
+    """300 s of dropout (30,000 frames at 100 Hz) took 18 s to hold frame by frame."""
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    stream = _stream(rec)
+    for i in range(60):
+        stream.push(frames[i], timestamp_s=i / 100)
+    t0 = time.perf_counter()
+    for k, i in enumerate(range(60, 70)):
+        stream.push(frames[i], timestamp_s=300.0 + k / 100)
+    assert time.perf_counter() - t0 < 5.0
+    tail = stream.finish()
+    assert tail[-1].frame == 30_009
+    assert [(e.kind, e.first, e.last) for e in stream.events] == [("gap", 60, 29_999)]
+    live = stream.reconstruction()
+    assert live.n_frames == 30_010 and np.isnan(live.torques[60:30_000]).all()
+    np.testing.assert_allclose(live.joint_pos[60:30_000], np.broadcast_to(
+        live.joint_pos[59], (29_940, 24, 3)))  # fmt: skip
+
+
+@pytest.mark.parametrize("after", [0, 1, 5])
+def test_finish_after_a_dropout_longer_than_the_buffer(rec, after) -> None:
+    """The stream's buffers hold 64 frames; a dropout of 140 frames, then ``after`` more
+    frames, then the end: ``finish`` raised IndexError."""
+    frames = list(sensor_frames(rec, FeatureConfig()))
+    stream = _stream(rec)
+    for i in range(60):
+        stream.push(frames[i], index=i)
+    for k in range(after + 1):
+        stream.push(frames[60 + k], index=200 + k)
+    tail = stream.finish()
+    assert tail and tail[-1].frame == 200 + after
+    assert [(e.kind, e.first, e.last) for e in stream.events] == [("gap", 60, 199)]
+    live = stream.reconstruction()
+    assert live.n_frames == 201 + after
+    assert np.isfinite(live.joint_pos).all()
