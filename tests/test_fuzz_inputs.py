@@ -1,13 +1,14 @@
 """Seeded fuzzing of every kind of file a user hands the toolkit.
 
 Valid files (a recording as ``.npz`` and ``.pkl``, motion clips in each import format, a
-reconstruction, a policy file, a KinematicsNet checkpoint) are mutated by a seeded generator:
-bytes flipped, cut, repeated or inserted; numbers in text formats replaced by extreme values;
-arrays of ``.npz`` members replaced by non-finite, huge, reshaped or retyped ones; JSON metadata
-nested deeply or given absurd integers; hostile pickles planted. Each mutant is loaded through the
-public loader and must either load or be refused with a clean error (a ``ValueError`` or
-``OSError``) whose message names the file. No other exception (no traceback), no hang (each load
-is bounded by an alarm) and no marker file written by a planted payload.
+reconstruction, a policy file, a KinematicsNet checkpoint) are mutated by a seeded generator: bytes
+flipped, cut, repeated or inserted; numbers in text formats replaced by extreme values; arrays of
+``.npz`` members replaced by non-finite, huge, reshaped or retyped ones; JSON metadata nested deeply
+or given absurd integers; a lone surrogate put into a string of a recording or a reconstruction (the
+names they expose must come back encodable); hostile pickles planted. Each mutant is loaded through
+the public loader and must either load or be refused with a clean error (a ``ValueError`` or
+``OSError``) whose message names the file. No other exception (no traceback), no hang (each load is
+bounded by an alarm) and no marker file written by a planted payload.
 
 The default suite runs a bounded number of mutants per kind (about a minute in all); the ``slow``
 test runs ten times as many with other seeds.
@@ -189,7 +190,49 @@ def _npz_structured(rng: np.random.Generator, b: bytes) -> bytes:
     return _npz_bytes(members)
 
 
-NPZ_MUTATORS = (*BYTE_MUTATORS, _npz_structured, _npz_structured, _npz_structured)
+def _surrogate_in(rng: np.random.Generator, tree):
+    """``tree`` (JSON-like) with a lone surrogate (``os.fsdecode(b"\\xff")``) put into one of its
+    strings, a value or a key."""
+    spots = []  # (container, key, whether the key itself is the string)
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        pairs = node.items() if isinstance(node, dict) else enumerate(node)
+        for k, v in list(pairs):
+            if isinstance(node, dict) and isinstance(k, str):
+                spots.append((node, k, True))
+            if isinstance(v, str):
+                spots.append((node, k, False))
+            elif isinstance(v, dict | list):
+                stack.append(v)
+    if spots:
+        node, k, is_key = spots[int(rng.integers(len(spots)))]
+        if is_key:
+            node[k[:1] + "\udcff" + k[1:]] = node.pop(k)
+        else:
+            node[k] = node[k][:1] + "\udcff" + node[k][1:]
+    return tree
+
+
+def _npz_surrogates(rng: np.random.Generator, b: bytes) -> bytes:
+    """A lone surrogate in one string of the JSON metadata (as a ``"\\udcff"`` escape)."""
+    members = _npz_members(b)
+    meta = next((n for n in members if "meta" in n), None)
+    if meta is None:  # (an AMASS clip: no strings of ours)
+        return _npz_structured(rng, b)
+    arr = np.load(io.BytesIO(members[meta]), allow_pickle=False)
+    members[meta] = _npy(np.array(json.dumps(_surrogate_in(rng, json.loads(str(arr))))))
+    return _npz_bytes(members)
+
+
+def _pickle_surrogates(rng: np.random.Generator, b: bytes) -> bytes:
+    """A lone surrogate in one string of a (trusted, seed) pickle."""
+    return pickle.dumps(_surrogate_in(rng, pickle.loads(b)), protocol=4)
+
+
+NPZ_MUTATORS = (*BYTE_MUTATORS, _npz_structured, _npz_structured, _npz_structured,
+                _npz_surrogates)  # fmt: skip
+PKL_MUTATORS = (*BYTE_MUTATORS, _pickle_surrogates)
 
 
 # --------------------------------------------------------------------------- seeds
@@ -278,10 +321,21 @@ def _reconstruction_seed(root: Path) -> Path:
 
 
 # --------------------------------------------------------------------------- loaders
+def _encodable(p: Path, *texts: str) -> None:
+    """Names a loader exposes must be writable anywhere (cleaned where read: U+FFFD)."""
+    for t in texts:
+        try:
+            t.encode("utf-8")
+        except UnicodeEncodeError:
+            raise AssertionError(f"{p}: unencodable string {t!r} loaded") from None
+
+
 def _load_recording(p: Path) -> None:
     from prism_tools.io import load_recording
 
-    load_recording(p)
+    rec = load_recording(p)
+    _encodable(p, rec.name, rec.category or "", rec.take_name,
+               json.dumps(rec.extras, ensure_ascii=False, default=str))  # fmt: skip
 
 
 def _load_clip(p: Path) -> None:
@@ -293,7 +347,8 @@ def _load_clip(p: Path) -> None:
 def _load_reconstruction(p: Path) -> None:
     from grip.core.reconstruction import Reconstruction
 
-    Reconstruction.load(p)
+    r = Reconstruction.load(p)
+    _encodable(p, r.name, r.method, json.dumps(r.notes, ensure_ascii=False, default=str))
 
 
 def _load_policy(p: Path) -> None:
@@ -411,7 +466,7 @@ def _run_all(tmp_path: Path, n: int, seed: int) -> list[str]:
     problems: list[str] = []
     for i, p in enumerate(_recording_seeds(tmp_path)):
         problems += _fuzz(p, _load_recording, NPZ_MUTATORS if p.suffix == ".npz"
-                          else BYTE_MUTATORS, n, seed + i, marker, work)  # fmt: skip
+                          else PKL_MUTATORS, n, seed + i, marker, work)  # fmt: skip
     motions = _motion_seeds(tmp_path)
     for kind, paths in motions.items():
         for p in paths:
