@@ -460,7 +460,8 @@ def model_files(name: str, options: MethodOptions) -> dict[str, Path]:
 
     Every model file ``options`` names (all of them are part of a run's settings), the shipped
     file of each field in :data:`MODEL_OPTIONS` ``[name]`` left unset, and with
-    ``options.sensors`` the sweep folder's checkpoint (``"sweep_checkpoint"``, where it exists).
+    ``options.sensors`` the sweep folder's checkpoint (``"sweep_checkpoint"``, where it exists)
+    instead of the shipped KinematicsNet.
 
     Returns:
         ``{field: resolved path}``; the files need not exist.
@@ -473,6 +474,8 @@ def model_files(name: str, options: MethodOptions) -> dict[str, Path]:
     files: dict[str, Path] = {}
     for key, default in shipped.items():
         given = getattr(options, key)
+        if given is None and key == "kin_checkpoint" and options.sensors:
+            continue  # (the sweep's checkpoint takes the shipped KinematicsNet's place)
         if given is not None or key in MODEL_OPTIONS.get(name, ()):
             files[key] = Path(given if given is not None else default).resolve()
     if options.sensors:

@@ -154,7 +154,7 @@ def test_a_folder_from_before_the_records_resumes_with_a_note(dataset, tmp_path)
         R.run_bench([run], segs, out, log=lambda s: None)
 
 
-def test_model_files_are_the_files_each_method_reads() -> None:
+def test_model_files_are_the_files_each_method_reads(tmp_path) -> None:
     shipped = MethodOptions()
     assert model_files("grip", shipped) == {"policy_checkpoint": SHIPPED_POLICY.resolve(),
                                             "kin_checkpoint": SHIPPED_KIN.resolve()}  # fmt: skip
@@ -166,6 +166,11 @@ def test_model_files_are_the_files_each_method_reads() -> None:
     assert model_files("pip", given) == {"pip_checkpoint": Path("/x/pip.pt"),
                                          "kin_checkpoint": Path("k.pt").resolve()}  # fmt: skip
     assert model_files("custom", shipped) == {}
+    ck = tmp_path / "sweep" / "imu4_press" / "best.pt"
+    ck.parent.mkdir(parents=True)
+    ck.write_bytes(b"net")
+    sweep = MethodOptions(sensors="imu4_press", sweep_dir=tmp_path / "sweep")
+    assert model_files("kinematics", sweep) == {"sweep_checkpoint": ck.resolve()}
 
 
 def test_cli_refuses_a_resume_over_changed_data(dataset, tmp_path, capsys) -> None:
