@@ -204,7 +204,45 @@ def _packed_zip(src: Path, dst: Path) -> None:
             zout.writestr(info.filename, data)
 
 
-def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> dict[str, int]:
+def _progress(state: object) -> tuple[int, int]:
+    """``(stage_index, stage_done)`` of a run's ``state.json`` (``(-1, -1)``: unreadable)."""
+    if not isinstance(state, dict):
+        return -1, -1
+    got = [state.get(k) for k in ("stage_index", "stage_done")]
+    ok = all(isinstance(v, int) and not isinstance(v, bool) for v in got)
+    return (int(got[0]), int(got[1])) if ok else (-1, -1)
+
+
+def _refuse_foreign(run_dir: Path, out_dir: Path, state: dict) -> None:
+    """Refuse to pack over a folder holding another run's resume state (its ``config.json``
+    differs or is missing) or a later state of this run (packing would roll it back).
+
+    Raises:
+        ValueError: naming ``out_dir``, why, and the way out (another folder, ``--overwrite``).
+    """
+    from grip.core.rundir import CONFIG_FILE, RunDir
+
+    target = RunDir(out_dir)
+    if not target.has_checkpoint():
+        return
+    hint = "choose another --out, or pass --overwrite to replace it"
+    theirs = out_dir / CONFIG_FILE
+    if not theirs.is_file() or theirs.read_bytes() != (run_dir / CONFIG_FILE).read_bytes():
+        raise ValueError(f"{out_dir}: holds the resume state of another run (its {CONFIG_FILE} "
+                         f"differs from {run_dir}'s); packing would overwrite it: {hint}")  # fmt: skip
+    try:
+        old = _progress(target.read_state())
+    except ValueError:
+        old = (-1, -1)
+    new = _progress(state)
+    if old > new:
+        raise ValueError(f"{out_dir}: holds this run's resume state from further on (stage "
+                         f"{old[0]}, {old[1]} steps; {run_dir} is at stage {new[0]}, {new[1]}): "
+                         f"packing would roll it back: {hint}")  # fmt: skip
+
+
+def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                    overwrite: bool = False) -> dict[str, int]:  # fmt: skip
     """Write the resume state of a ``grip policy train`` run (``config.json`` and
     ``checkpoint/``) to ``out_dir`` with the Adam moments of the policy's and of the
     discriminator's optimiser in bfloat16 (:data:`PACKED_MOMENTS`) and ``model.zip``
@@ -215,9 +253,15 @@ def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> d
     Returns:
         Bytes per file written (``checkpoint/model.zip``, ...), and ``"total"``.
 
+    ``out_dir`` may hold an earlier packed copy of the same run (the same ``config.json``,
+    not further on), which is replaced; another run's resume state there is refused unless
+    ``overwrite``.
+
     Raises:
         FileNotFoundError: ``run_dir`` has no ``checkpoint/`` or ``config.json``.
-        ValueError: naming the file, for a corrupt checkpoint; ``out_dir`` is ``run_dir``.
+        ValueError: naming the file, for a corrupt checkpoint; ``out_dir`` is ``run_dir``, or
+            holds another run's resume state or this run's from further on (without
+            ``overwrite``).
     """
     from grip.core.rundir import CHECKPOINT_DIR, CONFIG_FILE, STATE_FILE, RunDir
 
@@ -236,6 +280,9 @@ def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> d
         raise ValueError(f"{ck_dir / 'amp.pt'}: not a discriminator checkpoint (no 'opt')")
     amp = {**amp, "opt": _moments_packed(amp["opt"])}
     state_text = (ck_dir / STATE_FILE).read_text()
+    state = safe_json_loads(state_text, active_limits(), str(STATE_FILE))
+    if not overwrite:
+        _refuse_foreign(run_dir, out_dir, state)
 
     def write(tmp: Path) -> None:
         _packed_zip(ck_dir / "model.zip", tmp / "model.zip")
@@ -244,7 +291,7 @@ def pack_checkpoint(run_dir: str | os.PathLike, out_dir: str | os.PathLike) -> d
 
     out_dir.mkdir(parents=True, exist_ok=True)
     rundir = RunDir(out_dir)
-    rundir.save_checkpoint(write, safe_json_loads(state_text, active_limits(), str(STATE_FILE)))
+    rundir.save_checkpoint(write, state)
     (out_dir / CONFIG_FILE).write_bytes((run_dir / CONFIG_FILE).read_bytes())
     sizes = {f"{CHECKPOINT_DIR}/{n}": (out_dir / CHECKPOINT_DIR / n).stat().st_size
              for n in names}  # fmt: skip

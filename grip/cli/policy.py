@@ -199,6 +199,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "model.zip deflated (0.6 of the size; weights, normaliser, counters, miner "
                    "and history exact): what a long run commits between sessions; copy it to a "
                    "run folder and rerun 'grip policy train' to resume")  # fmt: skip
+    x.add_argument("--overwrite", action="store_true",
+                   help="with --checkpoint: replace the resume state of another run (or a "
+                   "later one of this run) already in --out (refused without it)")  # fmt: skip
     x.set_defaults(func=cmd_export)
 
     c = psub.add_parser(
@@ -368,7 +371,7 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
     from policies.checkpoint import pack_checkpoint
 
     try:
-        sizes = pack_checkpoint(args.run, args.out)
+        sizes = pack_checkpoint(args.run, args.out, overwrite=args.overwrite)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e)) from e
     before = sum(f.stat().st_size for f in (args.run / "checkpoint").iterdir() if f.is_file())
@@ -386,6 +389,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.precision is not None:
             raise CliError("--precision is for a policy file, not with --checkpoint")
         return _export_checkpoint(args)
+    if args.overwrite:
+        raise CliError("--overwrite is for --checkpoint (a policy file is replaced atomically)")
     onnx = args.out.suffix.lower() == ".onnx"
     if not args.run.exists():
         raise CliError(f"{args.run}: no such run folder or policy file")

@@ -95,3 +95,30 @@ def test_pack_refuses_a_folder_without_a_checkpoint_and_the_run_itself(trained, 
     assert main(["policy", "export", str(run), "--checkpoint", "--precision", "fp32", "--out",
                  str(tmp_path / "p")]) == 2  # fmt: skip
     assert "--precision" in capsys.readouterr().err and not (tmp_path / "p").exists()
+
+
+def test_pack_never_overwrites_another_runs_resume_state(trained, tmp_path, capsys):
+    """``--out`` naming another run's folder replaced its resume state (issue 50); the same
+    run's earlier packed copy is updated as before, and ``--overwrite`` says so explicitly."""
+    _, run = trained
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    cfg = json.loads((other / "config.json").read_text())
+    cfg["config"]["seed"] = cfg["config"]["seed"] + 1
+    (other / "config.json").write_text(json.dumps(cfg))
+    before = (other / "checkpoint" / "model.zip").read_bytes()
+    argv = ["policy", "export", str(run), "--checkpoint", "--out", str(other)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert str(other) in err and "another run" in err and "--overwrite" in err, err
+    assert (other / "checkpoint" / "model.zip").read_bytes() == before
+    ahead = tmp_path / "ahead"
+    assert main(["policy", "export", str(run), "--checkpoint", "--out", str(ahead)]) == 0
+    assert main(["policy", "export", str(run), "--checkpoint", "--out", str(ahead)]) == 0
+    state = json.loads((ahead / "checkpoint" / "state.json").read_text())
+    state["stage_done"] = state["stage_done"] + 10_000
+    (ahead / "checkpoint" / "state.json").write_text(json.dumps(state))
+    assert main(["policy", "export", str(run), "--checkpoint", "--out", str(ahead)]) == 2
+    assert "further" in capsys.readouterr().err
+    assert main([*argv, "--overwrite"]) == 0
+    assert (other / "config.json").read_bytes() == (run / "config.json").read_bytes()
