@@ -111,23 +111,72 @@ class Discriminator(nn.Module):
         return p.numpy()
 
 
+def real_clip_probabilities(p, clip_len: np.ndarray) -> np.ndarray:
+    """``p (C,)`` checked and normalised, zero on clips without frames (``clip_len (C,)``).
+
+    Raises:
+        ValueError: ``p`` is not one finite value >= 0 per clip, or puts no weight on a clip
+            with frames.
+    """
+    q = np.asarray(p, dtype=np.float64)
+    if q.shape != clip_len.shape or not np.isfinite(q).all() or (q < 0).any():
+        raise ValueError(f"real clip probabilities must be {clip_len.size} finite values >= 0, "
+                         f"got shape {q.shape}")  # fmt: skip
+    q = np.where(clip_len > 0, q, 0.0)
+    if q.sum() <= 0:
+        raise ValueError("real clip probabilities are all zero")
+    return q / q.sum()
+
+
 class RealSampler:
-    """Random windows of ground-truth AMP frames from several clips (never across clips)."""
+    """Random windows of ground-truth AMP frames from several clips (never across clips).
+
+    The window's last frame is drawn uniformly over every frame of every clip (the default,
+    ``amp.real_sampling = "frames"``), or, once :meth:`set_clip_probabilities` was called, a
+    clip is drawn with the given probabilities and the frame uniformly within it
+    (``"episodes"``: the clips' probabilities of the environments' episodes).
+
+    Args:
+        clip_frames: ``(T_c, FRAME_DIM)`` ground-truth AMP frames of each clip.
+        window: Frames per window.
+
+    Attributes:
+        frames: ``(F, FRAME_DIM)`` float32, every clip's frames concatenated.
+        clip_start: ``(F,)`` the first row of each frame's clip.
+        clip_offset, clip_len: ``(C,)`` each clip's first row and frames.
+        clip_p: ``(C,)`` the clip probabilities, or ``None`` (by frame).
+    """
 
     def __init__(self, clip_frames: Sequence[np.ndarray], window: int) -> None:
         if not clip_frames:
             raise ValueError("RealSampler needs at least one clip")
         self.frames = np.concatenate(clip_frames).astype(np.float32)
-        starts = np.concatenate([[0], np.cumsum([len(f) for f in clip_frames])[:-1]])
-        self.clip_start = np.repeat(starts, [len(f) for f in clip_frames])
+        self.clip_len = np.array([len(f) for f in clip_frames], dtype=np.int64)
+        self.clip_offset = np.concatenate([[0], np.cumsum(self.clip_len)[:-1]]).astype(np.int64)
+        self.clip_start = np.repeat(self.clip_offset, self.clip_len)
         self.window = window
+        self.clip_p: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.frames)
 
+    def set_clip_probabilities(self, p: np.ndarray | None) -> None:
+        """Draw clips with probabilities ``p (C,)`` (finite, >= 0, normalised here; zero on
+        clips without frames), then a frame uniformly within; ``None``: every frame equally.
+
+        Raises:
+            ValueError: ``p`` is not one finite value >= 0 per clip, or puts no weight on a
+                clip with frames.
+        """
+        self.clip_p = None if p is None else real_clip_probabilities(p, self.clip_len)
+
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``(n, window * FRAME_DIM)`` float32."""
-        t = rng.integers(0, len(self.frames), n)
+        if self.clip_p is None:
+            t = rng.integers(0, len(self.frames), n)
+        else:
+            c = rng.choice(len(self.clip_p), size=n, p=self.clip_p)
+            t = self.clip_offset[c] + rng.integers(0, self.clip_len[c])
         idx = t[:, None] + np.arange(-self.window + 1, 1)[None, :]
         idx = np.maximum(idx, self.clip_start[t][:, None])
         return self.frames[idx].reshape(n, -1)
@@ -190,15 +239,40 @@ def discriminator_step(disc: Discriminator, opt: torch.optim.Optimizer, cfg: Amp
     return loss.detach(), gp.detach(), d_real.detach(), d_fake.detach()
 
 
-class AmpTrainer:
-    """Discriminator, optimiser, real sampler and replay buffer; one :meth:`update` per rollout."""
+def blank_head(disc: Discriminator) -> None:
+    """Zero the discriminator's output layer: its score is 0 on every window, so its style
+    reward is a constant and its probability of "real" exactly 0.5 (both losses), under the
+    fall detector's threshold (0.7): GRIP's fall rule becomes the pelvis height alone, as for
+    a policy file without a discriminator. For a run without AMP (:class:`AmpTrainer`,
+    ``active`` false), whose discriminator is never trained."""
+    with torch.no_grad():
+        disc.head.weight.zero_()
+        disc.head.bias.zero_()
 
-    def __init__(self, cfg: AmpConfig, real: RealSampler, seed: int = 0) -> None:
+
+class AmpTrainer:
+    """Discriminator, optimiser, real sampler and replay buffer; one :meth:`update` per rollout.
+
+    Args:
+        cfg: The AMP settings.
+        real: The real windows.
+        seed: Seeds the initial weights and the draws.
+        active: ``False`` for a run without the style reward (``env.reward.weights.amp = 0``):
+            :meth:`reward` is 0 without running the discriminator, :meth:`update` neither keeps
+            the policy's windows nor trains, and the discriminator's output layer is blank
+            (:func:`blank_head`) unless a warm start loads another.
+    """
+
+    def __init__(self, cfg: AmpConfig, real: RealSampler, seed: int = 0,
+                 active: bool = True) -> None:  # fmt: skip
         self.cfg = cfg
+        self.active = bool(active)
         dim = cfg.window * A.FRAME_DIM
         # the initial weights come from the run's seed (the same seed: the same discriminator)
         gen = torch.Generator().manual_seed(int(seed))
         self.disc = Discriminator(dim, cfg.hidden, cfg.loss, generator=gen)
+        if not self.active:
+            blank_head(self.disc)
         self.opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr,
                                     weight_decay=cfg.weight_decay)  # fmt: skip
         self.real = real
@@ -206,21 +280,30 @@ class AmpTrainer:
         self.rng = np.random.default_rng(seed)
         self.disc.norm.update(torch.as_tensor(real.sample(min(len(real), 20000), self.rng)))
 
+    def set_real_clip_probabilities(self, p: np.ndarray | None) -> None:
+        """The real windows' clip probabilities (:meth:`RealSampler.set_clip_probabilities`)."""
+        self.real.set_clip_probabilities(p)
+
     def reward(self, x: np.ndarray) -> np.ndarray:
+        if not self.active:
+            return np.zeros(len(x))
         return self.cfg.reward_scale * self.disc.reward(x)
 
     def update(self, fake: np.ndarray) -> dict[str, float]:
-        """Add the rollout's policy windows to the replay buffer and train the discriminator.
+        """Add the rollout's policy windows to the replay buffer and train the discriminator
+        (neither when not :attr:`active`: all statistics 0).
 
         Returns mean loss, gradient penalty, accuracy on real and fake samples and the mean
         score of each (for TensorBoard).
         """
         cfg = self.cfg
+        stats = {"loss": 0.0, "grad_penalty": 0.0, "acc_real": 0.0, "acc_fake": 0.0,
+                 "score_real": 0.0, "score_fake": 0.0}  # fmt: skip
+        if not self.active:
+            return stats
         if len(fake):
             self.replay.add(fake)
             self.disc.norm.update(torch.as_tensor(fake))
-        stats = {"loss": 0.0, "grad_penalty": 0.0, "acc_real": 0.0, "acc_fake": 0.0,
-                 "score_real": 0.0, "score_fake": 0.0}  # fmt: skip
         if len(self.replay) == 0:
             return stats
         n = cfg.updates_per_rollout

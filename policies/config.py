@@ -15,6 +15,8 @@ from grip.task.config import TrackingEnvConfig
 
 ACTIVATIONS: tuple[str, ...] = ("silu", "relu", "tanh", "elu")
 AMP_LOSSES: tuple[str, ...] = ("lsgan", "bce")
+REAL_SAMPLING: tuple[str, ...] = ("frames", "episodes")
+"""How the discriminator's real windows are drawn (:attr:`AmpConfig.real_sampling`)."""
 VEC_ENVS: tuple[str, ...] = ("subproc", "dummy", "batched")
 FOLLOW: tuple[str, ...] = ("estimate", "truth", "both")
 """What a run's controller follows (:attr:`PolicyRunConfig.follow`)."""
@@ -42,6 +44,15 @@ class AmpConfig:
         updates_per_rollout: Discriminator updates after each PPO rollout.
         replay_size: Policy samples kept for the discriminator (oldest replaced first).
         reward_scale: Multiplies the AMP reward before its weight (PHC: 2 with BCE).
+        real_sampling: How real windows are drawn (:data:`REAL_SAMPLING`): ``"frames"``, every
+            frame of every clip of the run's reference set equally (the AMP paper); or
+            ``"episodes"``, a clip with the probability the environments start episodes on it
+            (the stage's categories, the clips' lengths and hard-clip mining's weights,
+            :func:`grip.core.reference_sets.clip_probabilities`, updated with them), then a
+            frame uniformly within it (PHC draws its demonstrations as its episodes), so a
+            category the policy plays often is as common among the real windows.
+        A run without AMP sets ``env.reward.weights.amp = 0``: the discriminator is then
+        neither run nor trained (:class:`policies.amp.AmpTrainer`, ``active``).
     """
 
     window: int = 10
@@ -55,6 +66,7 @@ class AmpConfig:
     updates_per_rollout: int = 8
     replay_size: int = 20000
     reward_scale: float = 1.0
+    real_sampling: str = "frames"
 
 
 @dataclass(frozen=True)
@@ -143,7 +155,28 @@ class StageConfig:
             (0 = off, 1 = all).
         mining_decay: Per-rollout decay of the mining counts (memory ``1 / (1 - decay)``
             rollouts).
-        mining_prior: Episodes' worth of the overall failure rate in each clip's estimate.
+        mining_prior: Episodes' worth of the overall failure rate in each clip's estimate
+            (and of a clip's rate in each of its bins' estimates, ``mining_bins_mix``).
+        mining_bins_mix: Failure-weighted starts within each clip
+            (:class:`policies.mining.StartBinStats`): share of episode starts drawn in
+            proportion to the recent failure rate of the clip's 1-second bins instead of
+            uniformly over its frames (0 = off, 1 = all).
+        mining_bins_memory: Episodes through an average bin that its failure estimate
+            remembers: the bins' counts decay after each rollout by ``1 - v / memory``, ``v``
+            the rollout's episodes per bin (the decay follows the number of environments and
+            of bins).
+        termination_category_min_m: Per-category termination distance
+            (:class:`policies.curriculum.CategoryTermination`; 0 = off, the stage's one
+            distance): each category's distance, kept within ``[min, max]``, tightens by
+            ``termination_category_step`` after a rollout where most of its episodes reached
+            their length limit and loosens where most ended early (PBHC, ASAP). It starts at
+            the stage's distance (``termination_start_m`` or ``termination_dist_m``, the max
+            when that is 0) and replaces the stage's distance and its curriculum.
+        termination_category_max_m: The loosest per-category distance, m.
+        termination_category_band: ``(low, high)`` share of a category's episodes that reach
+            their limit (decayed over the last rollouts): below ``low`` the distance loosens,
+            above ``high`` it tightens.
+        termination_category_step: Relative change of a category's distance per rollout.
     """
 
     timesteps: int = 0
@@ -157,6 +190,28 @@ class StageConfig:
     mining_mix: float = 0.0
     mining_decay: float = 0.995
     mining_prior: float = 2.0
+    mining_bins_mix: float = 0.0
+    mining_bins_memory: float = 8.0
+    termination_category_min_m: float = 0.0
+    termination_category_max_m: float = 1.0
+    termination_category_band: tuple[float, float] = (0.5, 0.8)
+    termination_category_step: float = 0.02
+
+    def __post_init__(self) -> None:
+        lo_hi = self.termination_category_band
+        check(
+            self,
+            (0.0 <= self.mining_bins_mix <= 1.0, "mining_bins_mix must be in [0, 1]"),
+            (self.mining_bins_memory > 0, "mining_bins_memory must be > 0 episodes"),
+            (self.termination_category_min_m >= 0,
+             "termination_category_min_m must be >= 0 (0 = off)"),
+            (self.termination_category_max_m >= self.termination_category_min_m,
+             "termination_category_max_m must be >= termination_category_min_m"),
+            (len(lo_hi) == 2 and 0.0 <= lo_hi[0] < lo_hi[1] <= 1.0,
+             "termination_category_band must be (low, high) with 0 <= low < high <= 1"),
+            (0.0 < self.termination_category_step < 1.0,
+             "termination_category_step must be in (0, 1)"),
+        )  # fmt: skip
 
     def termination_at(self, steps: int) -> float:
         """The termination distance after ``steps`` steps of this stage, m."""
@@ -208,6 +263,8 @@ class PolicyRunConfig:
             (self.ppo.activation in ACTIVATIONS, f"ppo.activation must be one of {ACTIVATIONS}"),
             (self.ppo.vec_env in VEC_ENVS, f"ppo.vec_env must be one of {VEC_ENVS}"),
             (self.amp.loss in AMP_LOSSES, f"amp.loss must be one of {AMP_LOSSES}"),
+            (self.amp.real_sampling in REAL_SAMPLING,
+             f"amp.real_sampling must be one of {REAL_SAMPLING}"),
             (self.amp.window >= 1, "amp.window must be >= 1"),
             (self.ppo.n_envs >= 1, "ppo.n_envs must be >= 1"),
             (self.ppo.env_threads >= 0, "ppo.env_threads must be >= 0 (0 = all cores)"),

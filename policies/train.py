@@ -38,12 +38,13 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
 from grip.config import drop_removed
-from grip.core.reference_sets import load_reference, select_clips
+from grip.core.reference_sets import load_reference, select_clip_indices
 from grip.core.rundir import RunDir
 from grip.task import amp as A
 from policies.amp import AmpTrainer, RealSampler
 from policies.checkpoint import load_weights, read_ppo_zip, read_vecnorm
 from policies.config import REMOVED_SETTINGS, PolicyRunConfig, StageConfig
+from policies.curriculum import StageCurriculum
 from policies.mining import ClipFailureStats
 from policies.runner import ACTIVATION_FNS, linear_layers
 from policies.vec_env import (
@@ -68,10 +69,12 @@ RESUMABLE: tuple[str, ...] = (
     "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
     "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs", "ppo.gae_lambda",
     "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm",
-    "ppo.critic_warmup_steps",
+    "ppo.critic_warmup_steps", "amp.real_sampling", "env.reward.weights.amp",
 )  # fmt: skip
 """Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's (a resumed
-run takes them from the config, not from its checkpoint), the termination curriculum, stage 2."""
+run takes them from the config, not from its checkpoint), the termination curriculum, stage 2,
+and how the style reward is made (the real windows' sampler, AMP on or off: a fork of a run's
+checkpoint may A/B them)."""
 
 
 def episodes_by_category(counts: Iterable[tuple[str, int, int]]) -> dict[str, list[int]]:
@@ -120,7 +123,7 @@ class TrainingCallback(BaseCallback):
         self.ep_err, self.ep_err_n, self.ep_frames = np.zeros(n), np.zeros(n), np.zeros(n)
         self.start_steps = self.num_timesteps
         self._set_termination()
-        self._set_clip_weights()
+        self._push_curriculum()
         self._set_learning_rate()
         self.trainer.set_actor_frozen(self.trainer.in_critic_warmup())
 
@@ -129,17 +132,24 @@ class TrainingCallback(BaseCallback):
         self.model.lr_schedule = ConstantLearningRate(self.trainer.learning_rate_now())
 
     def _set_termination(self) -> None:
-        """The termination curriculum: the stage's distance after the steps done so far."""
+        """The termination curriculum: the stage's distance after the steps done so far (with
+        per-category distances, :meth:`_push_curriculum` sets them; their mean is logged)."""
+        per_category = self.trainer.curriculum.termination_m()
+        if per_category is not None:
+            self.termination_m = per_category
+            return
         tau = self.stage.termination_at(self.trainer.stage_done)
         if tau != self.termination_m or self.rollouts == 0:
             self.training_env.env_method("set_termination_dist", tau)
             self.termination_m = tau
 
-    def _set_clip_weights(self) -> None:
-        """Hard-clip mining: the environments' clip sampling follows the failure counts."""
-        mining = self.trainer.mining  # (None unless the stage's mining_mix > 0)
-        if mining is not None:
-            self.training_env.env_method("set_clip_weights", mining.weights())
+    def _push_curriculum(self) -> None:
+        """The stage's curricula to the environments (clip weights, start bins, per-category
+        distances; :meth:`policies.curriculum.StageCurriculum.push`) and the real windows'
+        clip probabilities (``amp.real_sampling = "episodes"``)."""
+        env = self.training_env
+        self.trainer.curriculum.push(lambda name, *args: env.env_method(name, *args))
+        self.trainer.set_real_probabilities()
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
@@ -153,8 +163,11 @@ class TrainingCallback(BaseCallback):
             self.ep_frames[i] += info.get("frames", 1)
             if done:
                 ok = bool(info.get("TimeLimit.truncated", False))
-                if self.trainer.mining is not None and "clip_index" in info:
-                    self.trainer.mining.add(int(info["clip_index"]), not ok)
+                if "clip_index" in info:  # (the episode started ep_frames before its end)
+                    end = int(info.get("frame", 0))
+                    self.trainer.curriculum.add(int(info["clip_index"]),
+                                                end - int(self.ep_frames[i]), end,
+                                                not ok)  # fmt: skip
                 mean_err = self.ep_err[i] / max(self.ep_err_n[i], 1)
                 cat = self.trainer.clip_categories.get(info.get("clip"), "unknown")
                 self.episodes.append((ok, mean_err, int(self.ep_frames[i]), cat))
@@ -179,12 +192,10 @@ class TrainingCallback(BaseCallback):
             log("episode/count", len(self.episodes))
             log("episode/frames", float(np.mean([e[2] for e in self.episodes])))
         log("episode/termination_m", self.termination_m)
-        if tr.mining is not None:
-            tr.mining.end_rollout()
-            w = tr.mining.weights()
-            log("mining/max_weight", float(w.max()))
-            log("mining/min_weight", float(w.min()))
-            self._set_clip_weights()
+        by_cat = tr.curriculum.termination_by_category()  # (this rollout's, for its row)
+        for k, v in tr.curriculum.end_rollout().items():
+            log(k, v)
+        self._push_curriculum()
         self._set_learning_rate()
         row = {"timesteps": int(tr.total_done()),
                "frames": int(tr.total_done()) * tr.cfg.env.action_repeat, "stage": self.stage_name,
@@ -199,6 +210,8 @@ class TrainingCallback(BaseCallback):
             row["by_category"] = episodes_by_category(
                 (cat, 1, not ok_) for ok_, _, _, cat in self.episodes
             )
+        if by_cat is not None:
+            row["termination_by_category"] = by_cat
         tr.history.append(row)
         d_acc = (stats["acc_real"] + stats["acc_fake"]) / 2
         succ, err = row.get("success_rate", 0.0), row.get("mpjpe_mm", 0.0)
@@ -277,12 +290,19 @@ class PolicyTrainer:
         self.amp_wrapper: AmpReward | None = None
         ref = load_reference(self.reference)
         real = RealSampler([A.reference_amp_features(c) for c in ref.clips], cfg.amp.window)
-        self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed)
-        self.mining: ClipFailureStats | None = None  # the current stage's hard-clip mining
+        # (AMP off, weight 0: the discriminator is neither run nor trained)
+        self.amp = AmpTrainer(cfg.amp, real, seed=cfg.seed,
+                              active=cfg.env.reward.weights.amp != 0)  # fmt: skip
+        self.curriculum: StageCurriculum | None = None  # the current stage's clip curricula
         self.clip_categories: dict[str, str] = {}  # clip name -> category, of the stage's clips
-        self._mining_state: dict | None = None  # from the checkpoint, until its stage runs
+        self._saved_state: dict | None = None  # the checkpoint's state, until its stage runs
 
     # -------------------------------------------------------------- bookkeeping
+    @property
+    def mining(self) -> ClipFailureStats | None:
+        """The current stage's hard-clip mining (``None`` unless its ``mining_mix > 0``)."""
+        return None if self.curriculum is None else self.curriculum.mining
+
     @property
     def ckpt_dir(self) -> Path:
         return self.rundir.checkpoint_dir
@@ -307,16 +327,19 @@ class PolicyTrainer:
 
         state = {"stage_index": self.stage_index, "stage_done": self.stage_done,
                  "wall_s": self.wall_s(), "history": self.history}  # fmt: skip
-        if self.mining is not None:
-            state["mining"] = {"stage_index": self.stage_index, **self.mining.state_dict()}
+        if self.curriculum is not None:
+            state.update(self.curriculum.state(self.stage_index))
         self.rundir.save_checkpoint(write, state)
 
     # -------------------------------------------------------------- model
     def _policy_kwargs(self) -> dict:
         p = self.cfg.ppo
         arch = list(p.net_arch)
+        # SB3's Adam (its eps of 1e-5) over all tensors at once: the numbers of its default
+        # loop over the tensors, bit for bit, ~30 % faster (benchmarks/ppo_update.py)
         return {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": ACTIVATION_FNS[p.activation],
-                "log_std_init": p.log_std_init}  # fmt: skip
+                "log_std_init": p.log_std_init,
+                "optimizer_kwargs": {"eps": 1e-5, "foreach": True}}  # fmt: skip
 
     def _build_env(self, stage: StageConfig) -> VecNormalize:
         p = self.cfg.ppo
@@ -470,7 +493,7 @@ class PolicyTrainer:
         if state is not None:
             self.stage_index, self.stage_done = state["stage_index"], state["stage_done"]
             self.rundir.wall0_s, self.history = state["wall_s"], state["history"]
-            self._mining_state = state.get("mining")
+            self._saved_state = state
             ck = load_weights(self.ckpt_dir / "amp.pt", "discriminator checkpoint")
             ck["rng"] = json.loads(ck["rng"])
             self.amp.load_state_dict(ck)
@@ -498,25 +521,31 @@ class PolicyTrainer:
                 self.venv.close()
 
     def _begin_stage_clips(self, stage: StageConfig) -> list[str]:
-        """The stage's clip bookkeeping: :attr:`clip_categories` and the hard-clip miner
-        :attr:`mining` (``None`` unless ``stage.mining_mix > 0``; its counts restored from the
-        checkpoint when they are this stage's).
+        """The stage's clip bookkeeping: :attr:`clip_categories` and the curricula
+        :attr:`curriculum` (hard-clip mining, start bins, per-category termination; their
+        counts restored from the checkpoint when they are this stage's), and the real windows'
+        clip probabilities.
 
         Returns:
             ``(C,)`` the category of each of the stage's clips, in the environments' clip order.
         """
-        self.mining = None
-        clips = select_clips(load_reference(self.reference), stage.categories).clips
+        ref = load_reference(self.reference)
+        index = select_clip_indices(ref, stage.categories)
+        clips = [ref.clips[i] for i in index]
         self.clip_categories = {c.name: c.category for c in clips}
-        if stage.mining_mix > 0:
-            names = [c.name for c in clips]
-            self.mining = ClipFailureStats(names, stage.mining_mix, stage.mining_decay,
-                                           stage.mining_prior)  # fmt: skip
-            saved = self._mining_state
-            if saved is not None and saved.get("stage_index") == self.stage_index:
-                self.mining.load_state_dict(saved)
-        self._mining_state = None
+        self.curriculum = StageCurriculum(stage, clips, index, len(ref.clips),
+                                          1.0 / self.cfg.env.control_dt_s,
+                                          stage.termination_at(self.stage_done))  # fmt: skip
+        self.curriculum.restore(self._saved_state, self.stage_index)
+        self._saved_state = None
+        self.set_real_probabilities()
         return [c.category for c in clips]
+
+    def set_real_probabilities(self) -> None:
+        """``amp.real_sampling = "episodes"``: the real windows' clips drawn as the episodes'
+        (:meth:`policies.curriculum.StageCurriculum.real_probabilities`)."""
+        if self.cfg.amp.real_sampling == "episodes" and self.curriculum is not None:
+            self.amp.set_real_clip_probabilities(self.curriculum.real_probabilities())
 
     def _run_stage(self, name: str, stage: StageConfig, remaining: int, state: dict | None,
                    bar) -> None:  # fmt: skip

@@ -108,7 +108,8 @@ class BatchedVecEnv(VecEnv):
 
 class AmpReward(VecEnvWrapper):
     """Adds ``weight x r_amp`` of the discriminator to the environment reward and keeps the
-    rollout's AMP windows for the discriminator's next update (``info["reward/amp"]`` is set)."""
+    rollout's AMP windows for the discriminator's next update (``info["reward/amp"]`` is set).
+    With AMP off (``amp.active`` false) neither: ``info["reward/amp"]`` is 0."""
 
     def __init__(self, venv: VecEnv, amp: AmpTrainer, weight: float) -> None:
         super().__init__(venv)
@@ -120,6 +121,10 @@ class AmpReward(VecEnvWrapper):
 
     def step_wait(self):
         obs, rew, dones, infos = self.venv.step_wait()
+        if not self.amp.active:
+            for info in infos:
+                info["reward/amp"] = 0.0
+            return obs, rew, dones, infos
         x = np.stack([info["amp_obs"] for info in infos])
         r = self.amp.reward(x)
         for info, ri in zip(infos, r, strict=True):

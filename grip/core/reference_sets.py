@@ -108,3 +108,23 @@ def start_bin_probabilities(last_start: int, bin_frames: int, weights) -> np.nda
     if p.sum() <= 0:
         raise ValueError("start bin weights are all zero where episodes can start")
     return p / p.sum()
+
+
+def start_bin_table(last_starts: np.ndarray, bin_frames: int, weights) -> np.ndarray:
+    """:func:`start_bin_probabilities` of every clip as one ``(C, most bins)`` table (zeros
+    after a clip's bins), for an environment that draws on a device.
+
+    Args:
+        last_starts: ``(C,)`` each clip's last start frame.
+        bin_frames: Frames per bin.
+        weights: Per clip, its bin weights or ``None`` (every start frame equally).
+    """
+    rows = []
+    for s, w in zip(np.asarray(last_starts).tolist(), weights, strict=True):
+        if w is None:
+            w = np.ones(-(-(int(s) + 1) // bin_frames))
+        rows.append(start_bin_probabilities(int(s), bin_frames, w))
+    table = np.zeros((len(rows), max(len(r) for r in rows)))
+    for i, r in enumerate(rows):
+        table[i, : len(r)] = r
+    return table

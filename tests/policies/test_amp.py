@@ -40,6 +40,75 @@ def test_real_windows_never_cross_clips():
     assert np.all((per_window == 0).all(1) | (per_window == 1).all(1))
 
 
+def _labelled_clips(lengths):
+    """Clips whose frames hold (clip index, frame index) in their first two values."""
+    return [np.stack([np.full(n, c), np.arange(n)], 1) @ np.eye(2, FRAME_DIM)
+            for c, n in enumerate(lengths)]  # fmt: skip
+
+
+def test_real_windows_follow_the_clip_probabilities():
+    """``"episodes"``: clips drawn with the given probabilities (chi-square on a seeded draw
+    of 20,000: the test fails with the by-frame draw, whose shares are 0.1/0.3/0.6), frames
+    uniform within the drawn clip, windows within it; ``None`` restores the by-frame draw."""
+    lengths = [10, 30, 60]
+    s = RealSampler(_labelled_clips(lengths), window=3)
+    p = np.array([0.5, 0.0, 0.5])
+    s.set_clip_probabilities(2 * p)  # (normalised)
+    n = 20000
+    w = s.sample(n, np.random.default_rng(1)).reshape(n, 3, FRAME_DIM)
+    clip, frame = w[:, -1, 0].astype(int), w[:, -1, 1].astype(int)
+    assert (w[:, :, 0] == clip[:, None]).all()  # (no window crosses clips)
+    counts = np.bincount(clip, minlength=3)
+    assert counts[1] == 0
+    expected = n * p[[0, 2]]
+    chi2 = (((counts[[0, 2]] - expected) ** 2) / expected).sum()
+    assert chi2 < 10.8  # (1 degree of freedom, p = 0.001)
+    for c in (0, 2):  # uniform over the clip's frames
+        f = np.bincount(frame[clip == c], minlength=lengths[c])
+        e = (clip == c).sum() / lengths[c]
+        assert (((f - e) ** 2) / e).sum() < 2 * lengths[c] + 30
+    s.set_clip_probabilities(None)
+    by_frame = np.bincount(s.sample(n, np.random.default_rng(1))[:, -FRAME_DIM].astype(int),
+                           minlength=3) / n  # fmt: skip
+    np.testing.assert_allclose(by_frame, np.array(lengths) / 100, atol=0.02)
+    for bad in ([1.0, 1.0], [np.nan, 1, 1], [-1, 1, 1]):
+        with pytest.raises(ValueError, match="real clip probabilities"):
+            s.set_clip_probabilities(bad)
+    with pytest.raises(ValueError, match="all zero"):
+        s.set_clip_probabilities([0.0, 0.0, 0.0])
+
+
+def test_the_default_real_draw_is_unchanged():
+    """Without clip probabilities the sampler draws exactly as before (one integer per window
+    over all frames), so older runs resume with the same draws."""
+    s = RealSampler(_labelled_clips([10, 30]), window=2)
+    got = s.sample(50, np.random.default_rng(7))
+    t = np.random.default_rng(7).integers(0, 40, 50)
+    np.testing.assert_array_equal(got[:, -FRAME_DIM], (t >= 10).astype(np.float32))
+    np.testing.assert_array_equal(got[:, -FRAME_DIM + 1], np.where(t >= 10, t - 10, t))
+
+
+def test_an_inactive_trainer_neither_scores_nor_trains():
+    """AMP off (``active`` false): reward 0 without running the discriminator, no update, no
+    replay; the blank output layer gives probability 0.5 on any window (under the fall
+    detector's 0.7: a fall is the pelvis height alone)."""
+    cfg = AmpConfig(window=1, hidden=(8,), batch_size=16, updates_per_rollout=2)
+    real = RealSampler([np.random.default_rng(0).normal(size=(50, FRAME_DIM))], window=1)
+    amp = AmpTrainer(cfg, real, seed=0, active=False)
+    before = {k: v.clone() for k, v in amp.disc.state_dict().items()}
+    fake = np.random.default_rng(1).normal(size=(64, FRAME_DIM)).astype(np.float32)
+    assert amp.reward(fake).tolist() == [0.0] * 64
+    stats = amp.update(fake)
+    assert set(stats.values()) == {0.0} and len(amp.replay) == 0
+    for k, v in amp.disc.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    assert not amp.opt.state
+    np.testing.assert_array_equal(amp.disc.probability(fake), 0.5)
+    on = AmpTrainer(cfg, real, seed=0)
+    on.update(fake)
+    assert len(on.replay) == 64 and on.opt.state  # (the same calls train an active one)
+
+
 @pytest.mark.parametrize("loss", ["lsgan", "bce"])
 def test_discriminator_learns_to_tell_two_motions_apart(loss):
     cfg = AmpConfig(window=1, hidden=(32,), loss=loss, lr=3e-3, batch_size=128,
