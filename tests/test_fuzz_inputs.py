@@ -22,18 +22,28 @@ import json
 import pickle
 import re
 import signal
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.fuzz_mutators import (
+    BYTE_MUTATORS,
+    NPZ_MUTATORS,
+    PKL_MUTATORS,
+    TEXT_MUTATORS,
+    cut,
+    flip,
+    mutate_json_text,
+    npz_bytes,
+    npz_members,
+    npz_structured,
+)
+
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "motions"
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20  # one load of a small mutant takes milliseconds; a hang is a failure
-EXTREMES = ("nan", "inf", "-inf", "1e308", "1e30", "-1e30", "0", "-0", "1800", "1e-9",
-            "9" * 5000, "1e-320", "abc", "", "0x10", "-1")  # fmt: skip
 
 
 class _Payload:
@@ -44,195 +54,6 @@ class _Payload:
 
     def __reduce__(self):
         return (open, (self.marker, "w"))
-
-
-# --------------------------------------------------------------------------- mutators
-def _flip(rng: np.random.Generator, b: bytes) -> bytes:
-    a = bytearray(b)
-    for i in rng.integers(0, len(a), size=int(rng.integers(1, 9))):
-        a[i] = int(rng.integers(0, 256))
-    return bytes(a)
-
-
-def _cut(rng: np.random.Generator, b: bytes) -> bytes:
-    return b[: int(rng.integers(0, len(b)))]
-
-
-def _delete(rng: np.random.Generator, b: bytes) -> bytes:
-    i = int(rng.integers(0, len(b)))
-    return b[:i] + b[i + int(rng.integers(1, 200)):]
-
-
-def _repeat(rng: np.random.Generator, b: bytes) -> bytes:
-    i = int(rng.integers(0, len(b)))
-    chunk = b[i: i + int(rng.integers(1, 200))]
-    return b[:i] + chunk * int(rng.integers(2, 50)) + b[i:]
-
-
-def _insert(rng: np.random.Generator, b: bytes) -> bytes:
-    i = int(rng.integers(0, len(b)))
-    return b[:i] + rng.integers(0, 256, size=int(rng.integers(1, 64))).astype(np.uint8).tobytes() \
-        + b[i:]
-
-
-BYTE_MUTATORS = (_flip, _cut, _delete, _repeat, _insert)
-
-
-def _text_number(rng: np.random.Generator, b: bytes) -> bytes:
-    """Replace one to three numeric tokens by extreme or malformed values."""
-    toks = b.split(b" ")
-    numeric = [i for i, t in enumerate(toks) if t.strip()[:1] in b"-0123456789"]
-    if not numeric:
-        return _flip(rng, b)
-    for i in rng.choice(numeric, size=min(len(numeric), int(rng.integers(1, 4))), replace=False):
-        tail = b"\n" if toks[i].endswith(b"\n") else b""
-        toks[i] = EXTREMES[int(rng.integers(len(EXTREMES)))].encode() + tail
-    return b" ".join(toks)
-
-
-def _text_lines(rng: np.random.Generator, b: bytes) -> bytes:
-    """Delete, repeat or swap lines."""
-    lines = b.split(b"\n")
-    i, j = (int(x) for x in rng.integers(0, len(lines), size=2))
-    op = int(rng.integers(3))
-    if op == 0:
-        del lines[i]
-    elif op == 1:
-        lines[i:i] = [lines[i]] * int(rng.integers(2, 400))
-    else:
-        lines[i], lines[j] = lines[j], lines[i]
-    return b"\n".join(lines)
-
-
-TEXT_MUTATORS = (*BYTE_MUTATORS, _text_number, _text_number, _text_lines, _text_lines)
-
-
-def _npz_members(b: bytes) -> dict[str, bytes]:
-    with zipfile.ZipFile(io.BytesIO(b)) as z:
-        return {n: z.read(n) for n in z.namelist()}
-
-
-def _npz_bytes(members: dict[str, bytes]) -> bytes:
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        for n, data in members.items():
-            z.writestr(n, data)
-    return buf.getvalue()
-
-
-def _npy(arr: np.ndarray) -> bytes:
-    buf = io.BytesIO()
-    np.save(buf, arr, allow_pickle=False)
-    return buf.getvalue()
-
-
-def _lying_header(shape: tuple[int, ...]) -> bytes:
-    """An ``.npy`` whose header claims ``shape`` (float64) but holds a few bytes: a bomb."""
-    header = repr({"descr": "<f8", "fortran_order": False, "shape": shape}).encode()
-    header += b" " * (63 - (len(header) + 10) % 64) + b"\n"
-    return b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + b"\0" * 64
-
-
-def _deep(depth: int) -> str:
-    return "[" * depth + "]" * depth
-
-
-def _mutate_json_text(rng: np.random.Generator, text: str) -> str:
-    op = int(rng.integers(5))
-    if op == 0:
-        return _deep(int(rng.choice([1000, 200_000])))
-    if op == 1:
-        return text.replace(":", ": " + "9" * 5000 + ", \"x\":", 1)
-    if op == 2:
-        try:
-            d = json.loads(text)
-        except ValueError:
-            return text[: len(text) // 2]
-        if isinstance(d, dict) and d:
-            k = list(d)[int(rng.integers(len(d)))]
-            d[k] = [None, "x", -1, 1e308, {}, [], True][int(rng.integers(7))]
-        return json.dumps(d)
-    if op == 3:
-        return '{"a": ' + _deep(50_000) + "}"
-    return text[: int(rng.integers(0, len(text) + 1))]
-
-
-def _npz_structured(rng: np.random.Generator, b: bytes) -> bytes:
-    """Replace, reshape, retype or delete one member, lie in a header or break the metadata."""
-    members = _npz_members(b)
-    names = list(members)
-    name = names[int(rng.integers(len(names)))]
-    meta = [n for n in names if "meta" in n]
-    op = int(rng.integers(7))
-    if op == 0 and meta:
-        m = meta[0]
-        arr = np.load(io.BytesIO(members[m]), allow_pickle=False)
-        members[m] = _npy(np.array(_mutate_json_text(rng, str(arr))))
-        return _npz_bytes(members)
-    arr = np.load(io.BytesIO(members[name]), allow_pickle=False)
-    if op == 1:
-        del members[name]
-    elif op == 2 and arr.dtype.kind == "f" and arr.size:
-        bad = arr.copy()
-        flat = bad.reshape(-1)
-        idx = rng.integers(0, flat.size, size=max(1, flat.size // 50))
-        flat[idx] = [np.nan, np.inf, 1e30, -1e30, 0.0][int(rng.integers(5))]
-        members[name] = _npy(bad if rng.random() < 0.5 else arr * 1000.0)
-    elif op == 3 and arr.ndim:
-        members[name] = _npy(arr[:-1] if rng.random() < 0.5 else arr.reshape(-1))
-    elif op == 4 and arr.dtype.kind in "fiub":
-        dtype = [np.int8, np.bool_, np.float16, "U3"][int(rng.integers(4))]
-        members[name] = _npy(arr.astype(dtype))
-    elif op == 5:
-        members[name] = _lying_header((200_000, 10_000))
-    else:
-        members[name] = _npy(np.zeros((0, *arr.shape[1:]), dtype=arr.dtype))
-    return _npz_bytes(members)
-
-
-def _surrogate_in(rng: np.random.Generator, tree):
-    """``tree`` (JSON-like) with a lone surrogate (``os.fsdecode(b"\\xff")``) put into one of its
-    strings, a value or a key."""
-    spots = []  # (container, key, whether the key itself is the string)
-    stack = [tree]
-    while stack:
-        node = stack.pop()
-        pairs = node.items() if isinstance(node, dict) else enumerate(node)
-        for k, v in list(pairs):
-            if isinstance(node, dict) and isinstance(k, str):
-                spots.append((node, k, True))
-            if isinstance(v, str):
-                spots.append((node, k, False))
-            elif isinstance(v, dict | list):
-                stack.append(v)
-    if spots:
-        node, k, is_key = spots[int(rng.integers(len(spots)))]
-        if is_key:
-            node[k[:1] + "\udcff" + k[1:]] = node.pop(k)
-        else:
-            node[k] = node[k][:1] + "\udcff" + node[k][1:]
-    return tree
-
-
-def _npz_surrogates(rng: np.random.Generator, b: bytes) -> bytes:
-    """A lone surrogate in one string of the JSON metadata (as a ``"\\udcff"`` escape)."""
-    members = _npz_members(b)
-    meta = next((n for n in members if "meta" in n), None)
-    if meta is None:  # (an AMASS clip: no strings of ours)
-        return _npz_structured(rng, b)
-    arr = np.load(io.BytesIO(members[meta]), allow_pickle=False)
-    members[meta] = _npy(np.array(json.dumps(_surrogate_in(rng, json.loads(str(arr))))))
-    return _npz_bytes(members)
-
-
-def _pickle_surrogates(rng: np.random.Generator, b: bytes) -> bytes:
-    """A lone surrogate in one string of a (trusted, seed) pickle."""
-    return pickle.dumps(_surrogate_in(rng, pickle.loads(b)), protocol=4)
-
-
-NPZ_MUTATORS = (*BYTE_MUTATORS, _npz_structured, _npz_structured, _npz_structured,
-                _npz_surrogates)  # fmt: skip
-PKL_MUTATORS = (*BYTE_MUTATORS, _pickle_surrogates)
 
 
 # --------------------------------------------------------------------------- seeds
@@ -442,7 +263,7 @@ def _hostile_files(root: Path, marker: Path) -> list[tuple[Path, Callable[[Path]
         buf = io.BytesIO()
         np.save(buf, obj, allow_pickle=True)
         p = root / name
-        p.write_bytes(_npz_bytes({"poses.npy": buf.getvalue(), "trans.npy": buf.getvalue(),
+        p.write_bytes(npz_bytes({"poses.npy": buf.getvalue(), "trans.npy": buf.getvalue(),
                                   "__meta__.json.npy": buf.getvalue()}))  # fmt: skip
         out.append((p, loader))
     from tests.motion.poselib_files import write_poselib
@@ -494,16 +315,16 @@ def _run_all(tmp_path: Path, n: int, seed: int) -> list[str]:
 
 
 def _json_mutator(rng: np.random.Generator, b: bytes) -> bytes:
-    return _mutate_json_text(rng, b.decode("utf-8", "replace")).encode()
+    return mutate_json_text(rng, b.decode("utf-8", "replace")).encode()
 
 
 def _zip_member_mutator(member: str, inner) -> Callable:
     """Mutate one member of a zip (the ``data`` JSON or a state dict of SB3's ``model.zip``)."""
 
     def mutate(rng: np.random.Generator, b: bytes) -> bytes:
-        members = _npz_members(b)
+        members = npz_members(b)
         members[member] = inner(rng, members[member])
-        return _npz_bytes(members)
+        return npz_bytes(members)
 
     mutate.__name__ = f"{member}:{getattr(inner, '__name__', 'mutate')}"
     return mutate
@@ -540,8 +361,8 @@ def _fuzz_run_folder(run: Path, n: int, seed: int, marker: Path, work: Path) -> 
         ck / "checkpoint" / "model.zip": (*BYTE_MUTATORS,
                                           _zip_member_mutator("data", _json_mutator),
                                           _zip_member_mutator("data", payload),
-                                          _zip_member_mutator("policy.pth", _flip),
-                                          _zip_member_mutator("policy.pth", _cut)),
+                                          _zip_member_mutator("policy.pth", flip),
+                                          _zip_member_mutator("policy.pth", cut)),
         ck / "checkpoint" / "vecnorm.npz": NPZ_MUTATORS,
         ck / "config.json": (*BYTE_MUTATORS, _json_mutator, _json_mutator),
         ck / "checkpoint" / "state.json": (*BYTE_MUTATORS, _json_mutator, _json_mutator),
@@ -602,7 +423,7 @@ def test_a_batch_with_fuzzed_recordings_goes_on(tmp_path: Path, capsys) -> None:
         save_recording(make_recording(n_frames=60, seed=i), p)
         good.append(p)
     bad = []
-    for i, mut in enumerate((_cut, _npz_structured, _flip)):
+    for i, mut in enumerate((cut, npz_structured, flip)):
         p = seqs / f"bad{i}.npz"
         p.write_bytes(mut(rng, good[0].read_bytes()))
         bad.append(p)
