@@ -7,6 +7,8 @@ at least a second, then jumps (arms still), then does what is to be recorded. Im
 
 1. Read the Moticon insole export (:mod:`prism_tools.devices.moticon`) and the IMU CSVs
    (:mod:`prism_tools.devices.imu_csv`); a foot without an IMU file takes its insole's IMU.
+   Each IMU's units, kind and quaternion order are checked against gravity
+   (:mod:`prism_tools.devices.checks`).
 2. Synchronise: find the jump's landing in every file (:mod:`prism_tools.devices.sync`; the
    insole file by its IMUs, else by its total force) and shift each file's clock so that the
    landings coincide. ``sync=False`` takes the files' clocks as one.
@@ -17,8 +19,8 @@ at least a second, then jumps (arms still), then does what is to be recorded. Im
    reported; a longer one is an error.
 4. Find the calibration window: the first ``calib_s`` s of the first run of frames before the
    jump in which every IMU is still (angular rate below 20 deg/s, specific force within 0.1 g of
-   1 g), or the window starting at ``calib_at_s``. The recording starts there: frame 0 is the
-   calibration pose, as ``--init standing`` assumes.
+   1 g), or the window starting at ``calib_at_s`` (which must be still throughout). The
+   recording starts there: frame 0 is the calibration pose, as ``--init standing`` assumes.
 5. Orient and calibrate each IMU (:mod:`prism_tools.devices.orientation` for sensors that
    export no orientation, :mod:`prism_tools.devices.calibrate`): ``ori_world`` is the segment's
    world orientation (the rest T-pose's at frame 0, heading +y), ``acc_world_*`` the sensor's
@@ -62,10 +64,13 @@ from prism_tools.devices.calibrate import (
     mount_matrix,
     still_runs,
 )
+from prism_tools.devices.checks import check_imu_export, unit_fixes
 from prism_tools.devices.common import DeviceFileError, find_gaps
 from prism_tools.devices.imu_csv import ImuCsv, ImuCsvOptions, read_imu_csv
+from prism_tools.devices.insole_import import insole_steps, insole_stream, resample_insole
 from prism_tools.devices.moticon import MoticonExport, read_moticon
 from prism_tools.devices.orientation import DEFAULT_GAIN, gravity_filter
+from prism_tools.devices.report import ImportReport, StreamReport
 from prism_tools.devices.sync import Landing, SyncSettings, find_landings
 from prism_tools.schema import Recording
 from prism_tools.streams import (
@@ -74,9 +79,7 @@ from prism_tools.streams import (
     IMU_PARTS,
     DataInfo,
     ImuStream,
-    InsoleStream,
     SubjectInfo,
-    contacts_from_cells,
 )
 from prism_tools.validation import validate
 
@@ -126,79 +129,6 @@ class ImportOptions:
     name: str | None = None
     category: str | None = None
     subject_id: str = "subject"
-
-
-@dataclass(frozen=True)
-class StreamReport:
-    """One file as imported.
-
-    Attributes:
-        name: ``"insoles"`` or the IMU part.
-        file: The file.
-        kind: ``"Moticon OpenGo text export"``, ``"Movella DOT CSV"``, ``"generic IMU CSV"``.
-        channels: Channel group (``"L_Foot insole"``, ``"IMU"``, ...) -> ``{"samples", "rate_hz",
-            "missing", "gaps", "longest_gap_s"}`` over the whole file.
-        dropped_rows: Rows dropped for missing values (IMU CSVs).
-        landing_s: The jump's landing on the file's clock, s (``None`` without sync).
-        offset_s: The file's clock minus the reference file's, s.
-    """
-
-    name: str
-    file: str
-    kind: str
-    channels: dict[str, dict[str, float]]
-    dropped_rows: int
-    landing_s: float | None
-    offset_s: float
-
-
-@dataclass(frozen=True)
-class ImportReport:
-    """What :func:`import_devices` did, for the summary and ``extras["device_import"]``.
-
-    Attributes:
-        streams: One per file.
-        reference: Name of the reference stream (its clock is the recording's).
-        fps: Output frame rate, Hz.
-        frames: Output frames.
-        start_reference_s: Frame 0 on the reference clock, s.
-        jump_frame: The landing's output frame (``None`` without sync).
-        calib_frames: The calibration window's frames ``[start, stop)`` (start = 0).
-        still_s: Length of the still run it was taken from, s.
-        subject_mass_kg: The mass used.
-        mass_source: ``"given"``, ``"insoles"`` or ``"default"``.
-        sites: Part -> ``{"source", "heading_deg", "ref_tilt_deg", "mount_error_deg",
-            "gyro_bias_deg_s"}``.
-        notes: Warnings for the user.
-    """
-
-    streams: tuple[StreamReport, ...]
-    reference: str
-    fps: float
-    frames: int
-    start_reference_s: float
-    jump_frame: int | None
-    calib_frames: tuple[int, int]
-    still_s: float
-    subject_mass_kg: float
-    mass_source: str
-    sites: dict[str, dict[str, Any]]
-    notes: tuple[str, ...] = ()
-
-    @property
-    def duration_s(self) -> float:
-        return self.frames / self.fps
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready."""
-        return {
-            "streams": [vars(s) for s in self.streams],
-            "reference": self.reference, "fps": self.fps, "frames": self.frames,
-            "start_reference_s": self.start_reference_s, "jump_frame": self.jump_frame,
-            "calib_frames": list(self.calib_frames), "still_s": self.still_s,
-            "subject_mass_kg": self.subject_mass_kg, "mass_source": self.mass_source,
-            "sites": self.sites, "notes": list(self.notes),
-        }  # fmt: skip
 
 
 @dataclass
@@ -265,6 +195,8 @@ def import_devices(
     for part, path in imus.items():
         csvs[part] = read_imu_csv(path, csv_options, limits)
         c = csvs[part]
+        check_imu_export(c.time_s, c.acc_mps2, c.acc_kind, c.gyr_rad_s, c.quat_wxyz, c.source,
+                         part, unit_fixes(c.fmt), c.quat_order)  # fmt: skip
         rate = 1.0 / float(np.median(np.diff(c.time_s)))
         say(f"read {path}: {_csv_kind(c)} for {part}, {len(c.time_s)} samples at {rate:.4g} Hz"
             + (f", {len(c.dropped_lines)} rows with missing values dropped"
@@ -288,6 +220,9 @@ def import_devices(
             imu_sources.append(_Imu(foot, INSOLES, moticon.source, moticon.time_s[ok],
                                     side.acc_mps2[ok], "specific_force", side.gyr_rad_s[ok],
                                     None))  # fmt: skip
+            check_imu_export(moticon.time_s[ok], side.acc_mps2[ok], "specific_force",
+                             side.gyr_rad_s[ok], None, moticon.source, f"{foot} insole IMU",
+                             unit_fixes("moticon"))  # fmt: skip
     imu_sources.sort(key=lambda s: IMU_PARTS.index(s.part))
 
     # ---- 2. synchronise
@@ -351,8 +286,14 @@ def import_devices(
     c0, still_len = _calibration_start(still, win, jump_frame, grid, shift[reference], options,
                                        imu_files)  # fmt: skip
     if still_len < win:
-        notes.append(f"the calibration window at {options.calib_at_s} s is not still throughout "
-                     "(a sensor moved): orientations may be off")  # fmt: skip
+        moved = grid[c0 + still_len] + shift[reference]
+        raise DeviceFileError(
+            f"the calibration window at {options.calib_at_s:g} s is not still: an IMU moves from "
+            f"{moved:.3f} s on the {reference} clock ({still_len / options.fps:.2f} s of the "
+            f"{options.calib_s:g} s still; still: angular rate below "
+            f"{math.degrees(STILL_GYR_RAD_S):g} deg/s, acceleration within "
+            f"{STILL_ACC_MPS2 / GRAVITY:g} g of 1 g), which would turn every orientation: give "
+            "the start of the still T-pose, or leave --calib-at out to find it")  # fmt: skip
     out_n = n - c0
     say(f"calibration: still from {grid[c0] + shift[reference]:.3f} s on the {reference} clock "
         f"({still_len / options.fps:.2f} s still; the first {options.calib_s:g} s averaged)")
@@ -380,8 +321,8 @@ def import_devices(
     if moticon is not None:
         body0 = build_body(BodyParams(height_m=body_height))
         for foot in moticon.sides:
-            insole_grid[foot] = _resample_insole(moticon, foot, grid + shift[INSOLES],
-                                                 body0.insole_area_cm2[FEET.index(foot)])
+            insole_grid[foot] = resample_insole(moticon, foot, grid + shift[INSOLES],
+                                                body0.insole_area_cm2[FEET.index(foot)])
     if mass is None:
         if len(insole_grid) == 2:
             standing = sum(g["total_n"][c0 : c0 + win].mean() for g in insole_grid.values())
@@ -412,9 +353,9 @@ def import_devices(
         notes.append(f"no IMU for {', '.join(missing)}: the shipped models read L_Foot, R_Foot, "
                      "L_Wrist and R_Wrist")  # fmt: skip
 
-    insole = {foot: _insole_stream(g, foot, c0, body, mass)
+    insole = {foot: insole_stream(g, foot, c0, body, mass)
               for foot, g in insole_grid.items()}  # fmt: skip
-    steps = _steps(moticon, grid, shift.get(INSOLES, 0.0), c0, out_n, options.fps)
+    steps = insole_steps(moticon, grid, shift.get(INSOLES, 0.0), c0, out_n, options.fps)
 
     streams = tuple(
         StreamReport(name=name, file=file,
@@ -640,73 +581,3 @@ def _calibrated_imu(s: _Imu, g: dict[str, np.ndarray | None], c0: int, win: int,
             "mount_error_deg": round(cal.mount_error_deg, 3),
             "gyro_bias_deg_s": None if bias is None else np.degrees(bias).round(4).tolist()}
     return stream, info  # fmt: skip
-
-
-def _resample_insole(m: MoticonExport, foot: str, t: np.ndarray,
-                     area_cm2: np.ndarray) -> dict[str, np.ndarray]:  # fmt: skip
-    side = m.sides[foot]
-    ok = side.valid
-    times = m.time_s[ok]
-    p = side.pressure_n_cm2[ok]
-    out = {"pressure": resample_linear(times, p, t)}
-    cells_n = p * area_cm2
-    total = side.total_force_n[ok] if side.total_force_n is not None else cells_n.sum(axis=1)
-    total = np.where(np.isfinite(total), total, cells_n.sum(axis=1))
-    out["total_n"] = resample_linear(times, total, t)
-    if side.cop_norm is not None:
-        cop = side.cop_norm[ok]
-        cop = np.where(np.isfinite(cop), cop, 0.0)
-        out["cop_norm"] = resample_linear(times, cop, t)
-    return out
-
-
-def _insole_stream(g: dict[str, np.ndarray], foot: str, c0: int, body: Any,
-                   mass: float) -> InsoleStream:  # fmt: skip
-    from grip.core import skeleton as sk
-    from prism_tools.synth.config import InsoleSynthConfig
-
-    cfg = InsoleSynthConfig()
-    f = FEET.index(foot)
-    cells = g["pressure"][c0:] * body.insole_area_cm2[f]
-    total = np.maximum(g["total_n"][c0:], 0.0)
-    s = cells.sum(axis=1)
-    cells = np.where((s > 0)[:, None], cells * (total / np.where(s > 0, s, 1.0))[:, None], 0.0)
-    dims = np.array([body.foot_length, body.foot_width])
-    loaded = total >= cfg.cop_min_force_n
-    if "cop_norm" in g:
-        cop = g["cop_norm"][c0:] * dims
-    else:
-        uv = sk.INSOLE_CELL_UV * dims
-        cop = cells @ uv / np.where(s > 0, cells.sum(axis=1), 1.0)[:, None]
-    cop = np.where(loaded[:, None], cop, 0.0)
-    bw = mass * GRAVITY
-    force = total / bw
-    origin = CANONICAL_TO_WORLD @ (body.rest_joint_pos[sk.FOOT_BODY[foot]] + body.insole_origin[f])
-    axes = CANONICAL_TO_WORLD @ body.insole_axes[f].T  # (3, 2): forward, medial
-    force_world = np.zeros((len(force), 3))
-    force_world[:, 2] = force
-    return InsoleStream(
-        contacts=contacts_from_cells(cells, cfg.contact_threshold_n),
-        force=force[:, None],
-        forces=cells / bw,
-        CoP=cop,
-        force_world=force_world,
-        CoP_world=origin + cop @ axes.T,
-    )
-
-
-def _steps(m: MoticonExport | None, grid: np.ndarray, shift: float, c0: int, n: int,
-           fps: float) -> dict[str, dict[str, list[int]]]:  # fmt: skip
-    """Moticon's step events as output frames ``{foot: {"heel_strike": [...], "toe_off": [...]}}``
-    (feet without events left out)."""
-    if m is None:
-        return {}
-    out: dict[str, dict[str, list[int]]] = {}
-    for foot, side in m.sides.items():
-        ev = {}
-        for key, rows in (("heel_strike", side.heel_strike_rows), ("toe_off", side.toe_off_rows)):
-            frames = np.round((m.time_s[rows] - shift - grid[c0]) * fps).astype(np.int64)
-            ev[key] = [int(x) for x in frames if 0 <= x < n]
-        if ev["heel_strike"] or ev["toe_off"]:
-            out[foot] = ev
-    return out

@@ -119,6 +119,8 @@ class ImuCsv:
         meta: Metadata lines before the header (Movella: ``DeviceTag``, ``OutputRate``, ...).
         source: The file read (``""`` when built in memory).
         dropped_lines: 1-based lines of rows dropped for missing values.
+        quat_order: The order positional quaternion columns ``q0..q3`` were read in
+            (``"wxyz"``, ``"xyzw"``), ``None`` for named columns or none.
     """
 
     time_s: np.ndarray
@@ -130,6 +132,7 @@ class ImuCsv:
     meta: dict[str, str] = field(default_factory=dict)
     source: str = ""
     dropped_lines: tuple[int, ...] = ()
+    quat_order: str | None = None
 
     def __post_init__(self) -> None:
         if self.acc_kind not in ACC_KINDS:
@@ -276,7 +279,8 @@ def read_imu_csv(path: str | os.PathLike[str], options: ImuCsvOptions | None = N
     require_increasing(t, lines_arr, source)
     return ImuCsv(time_s=t, acc_mps2=acc, acc_kind=parsed["acc_kind"], gyr_rad_s=gyr,
                   quat_wxyz=quat, fmt="movella_dot" if dot else "generic", meta=meta,
-                  source=source, dropped_lines=dropped)  # fmt: skip
+                  source=source, dropped_lines=dropped,
+                  quat_order=parsed.get("quat_order"))  # fmt: skip
 
 
 def _missing(source: str, line: int, what: str, cols: dict[str, int]) -> DeviceFileError:
@@ -330,6 +334,7 @@ def _generic_columns(cols: dict[str, int], o: ImuCsvOptions, source: str, line: 
         pos = _find(cols, _GENERIC["quat_pos"])
         if pos is not None:
             quat = pos if o.quat_order in (None, "wxyz") else [pos[3], pos[0], pos[1], pos[2]]
+            out["quat_order"] = o.quat_order or "wxyz"
     if quat is not None:
         out["quat"] = quat
     if gyr is None and quat is None:

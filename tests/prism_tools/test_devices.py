@@ -349,7 +349,8 @@ def test_calibration_window_and_mount_options(source, files, imported) -> None:
     assert abs(turned) == pytest.approx(90.0, abs=1e-3)
     assert got.sites["R_Wrist"] == report.sites["R_Wrist"]
     moving = dataclasses.replace(opts, calib_at_s=_clock_at_frame0(INSOLE_CLOCK) + 3.5)
-    assert "not still throughout" in import_devices(insoles, imus, moving, GENERIC)[1].notes[0]
+    with pytest.raises(DeviceFileError, match=r"calibration window at .* s is not still"):
+        import_devices(insoles, imus, moving, GENERIC)
     with pytest.raises(DeviceFileError, match=r"calibration start 99 s is outside the span"):
         import_devices(insoles, imus, dataclasses.replace(opts, calib_at_s=99.0), GENERIC)
 
@@ -594,3 +595,52 @@ def _spin(line: str) -> str:
     f = line.split(",")
     f[6] = "200"
     return ",".join(f)
+
+
+# ------------------------------------------------- claims that gravity contradicts (issue 50)
+def _claimed(files, tmp_path, options: ImuCsvOptions, header: tuple[str, str] | None = None):
+    """Import the round trip's files with the R_Wrist CSV's units claimed as ``options`` (its
+    header line edited by ``header``: (old, new))."""
+    insoles, imus = files
+    imus = dict(imus)
+    if header is not None:
+        text = imus["R_Wrist"].read_text()
+        imus["R_Wrist"] = tmp_path / "R_Wrist_edited.csv"
+        imus["R_Wrist"].write_text(text.replace(*header, 1))
+    return import_devices(insoles, imus, ImportOptions(), options)
+
+
+@pytest.mark.parametrize(("claim", "match"), [
+    ({"acc_unit": "mps2"}, r"accelerations read 1 m/s\^2 .*the values are in g, not m/s\^2 "
+                           r"\(--acc-unit g"),
+    ({"gyro_unit": "rad"}, r"gyroscope turns 57.\d times as fast .*deg/s, not rad/s "
+                           r"\(--gyro-unit deg"),
+    ({"acc_has_gravity": False}, r"accelerations read 9.81 m/s\^2 .*about 1 g, but they are "
+                                 r"read as acceleration without gravity: they hold gravity "
+                                 r"\(--acc-has-gravity"),
+], ids=["acc-unit", "gyro-unit", "gravity"])  # fmt: skip
+def test_wrong_units_are_named(files, tmp_path, claim, match) -> None:
+    with pytest.raises(DeviceFileError, match=r"R_Wrist\.csv: R_Wrist: the " + match):
+        _claimed(files, tmp_path, dataclasses.replace(GENERIC, **claim))
+
+
+def test_wrong_quaternion_order_is_named(files, tmp_path) -> None:
+    """The watch's positional columns q0..q3 hold x, y, z, w; read as w, x, y, z."""
+    header = ("qx,qy,qz,qw", "q0,q1,q2,q3")
+    assert header[0] in files[1]["R_Wrist"].read_text()
+    wrong = dataclasses.replace(GENERIC, quat_order="wxyz")
+    with pytest.raises(DeviceFileError, match=r"R_Wrist: rotated by the exported orientation, "
+                       r"gravity points \d+ deg apart \(median\) and 100 deg from the reference "
+                       r"frame's vertical.*the quaternion columns are xyzw, not wxyz "
+                       r"\(--quat-order xyzw"):  # fmt: skip
+        _claimed(files, tmp_path, wrong, header)
+    rec, _ = _claimed(files, tmp_path, GENERIC, header)  # the right order: imported as before
+    assert "R_Wrist" in rec.imu
+
+
+def test_a_calibration_window_in_the_jump_is_refused(files) -> None:
+    insoles, imus = files
+    at = _clock_at_frame0(INSOLE_CLOCK) + STILL_S + PUSH_S  # the take-off
+    with pytest.raises(DeviceFileError, match=r"calibration window at .* is not still: an IMU "
+                                              r"moves from"):  # fmt: skip
+        import_devices(insoles, imus, ImportOptions(calib_at_s=at), GENERIC)
