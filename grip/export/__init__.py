@@ -43,7 +43,7 @@ from pathlib import Path
 
 from grip.core.body import BodyParams
 from grip.core.reconstruction import Reconstruction
-from grip.export.common import ExportError, check_ground_truth
+from grip.export.common import ExportError, check_ground_truth, check_rotations
 from grip.kinematics.features import ground_truth
 
 __all__ = ["FORMATS", "export_reconstruction"]
@@ -113,6 +113,7 @@ def export_reconstruction(
             elif fmt == "html":
                 from grip.export.html import write_viewer
 
+                check_rotations(recon, out / f"{stem}.html")  # (write_viewer does not)
                 page = write_viewer(recon, out / f"{stem}.html", recording=recording, body=body)
                 written.append(page.path)
             else:

@@ -55,7 +55,12 @@ from grip.core import skeleton as sk
 from grip.core.body import BodyModel, BodyParams
 from grip.core.reconstruction import Reconstruction
 from grip.core.rotations import matrix_to_axis_angle, orthonormalize
-from grip.export.common import ExportError, body_model, write_file
+from grip.export.common import (
+    ExportError,
+    body_model,
+    check_rotations,
+    write_file,
+)
 
 SMPL_NEUTRAL_PELVIS_M: np.ndarray = np.array([0.0, -0.22, 0.03])
 """``J_0``: the approximate rest pelvis of the neutral SMPL model in model space, m, added to
@@ -75,22 +80,6 @@ NOTE = (
 )
 """The ``note`` string of every file."""
 
-ROTATION_TOLERANCE = 1e-3
-"""Largest ``|R^T R - I|`` entry accepted in ``global_rot``; beyond it the matrix is no
-rotation and the export is refused (below it, it is projected onto the nearest rotation)."""
-
-
-def _check_rotations(recon: Reconstruction) -> None:
-    """Raise :class:`ExportError` unless every ``global_rot`` is a proper rotation."""
-    r = recon.global_rot
-    err = np.abs(np.swapaxes(r, -1, -2) @ r - np.eye(3)).max(axis=(-2, -1))
-    bad = (err > ROTATION_TOLERANCE) | (np.linalg.det(r) <= 0)
-    if bad.any():
-        t, j = (int(i) for i in np.argwhere(bad)[0])
-        raise ExportError(f"reconstruction {recon.name!r}: global_rot of joint "
-                          f"{sk.JOINT_NAMES[j]} at frame {t} is not a rotation (|R^T R - I| = "
-                          f"{err[t, j]:.3g}, det {np.linalg.det(r[t, j]):.3g})")  # fmt: skip
-
 
 def amass_arrays(recon: Reconstruction,
                  body: BodyParams | BodyModel | None = None) -> dict[str, np.ndarray]:  # fmt: skip
@@ -107,7 +96,7 @@ def amass_arrays(recon: Reconstruction,
     Raises:
         ExportError: A ``global_rot`` entry is not a rotation.
     """
-    _check_rotations(recon)
+    check_rotations(recon)
     params = body_model(body).params
     local = orthonormalize(recon.local_rot)  # rounding of the stored matrices, nothing more
     poses = matrix_to_axis_angle(local).reshape(recon.n_frames, 3 * sk.N_JOINTS)

@@ -38,7 +38,7 @@ from grip.core.body import BodyModel, BodyParams
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import hinges_from_local
 from grip.core.rotations import matrix_to_euler
-from grip.export.common import Y_UP_FROM_WORLD, body_model, write_file
+from grip.export.common import Y_UP_FROM_WORLD, body_model, check_rotations, write_file
 
 UNITS: dict[str, float] = {"cm": 100.0, "m": 1.0}
 """File units per metre."""
@@ -189,8 +189,10 @@ def write_bvh(
     """Write :func:`bvh_text` to ``path`` atomically.
 
     Raises:
-        ExportError: The file cannot be written (the message names it).
+        ExportError: The file cannot be written, or a rotation is no rotation
+            (:func:`grip.export.common.check_rotations`); the message names the file.
         ValueError: ``unit`` is neither ``"cm"`` nor ``"m"``.
     """
+    check_rotations(recon, path)
     data = bvh_text(recon, body, unit=unit).encode("ascii")
     return write_file(path, lambda f: f.write(data))

@@ -1,5 +1,5 @@
 """What every exporter of :mod:`grip.export` shares: the y-up export frame, the body model posed
-by a reconstruction, the ground-truth check and atomic file writes that raise
+by a reconstruction, the rotation and ground-truth checks and atomic file writes that raise
 :class:`ExportError`.
 
 The format modules (:mod:`grip.export.bvh`, :mod:`~grip.export.glb`, :mod:`~grip.export.video`,
@@ -80,6 +80,36 @@ def fk_mismatch_m(recon: Reconstruction, body: BodyParams | BodyModel | None = N
     """
     _, pos = posed_body(recon, body)
     return float(np.linalg.norm(pos - recon.joint_pos, axis=-1).max())
+
+
+ROTATION_TOLERANCE = 1e-3
+"""Largest ``|R^T R - I|`` entry accepted in ``global_rot``; beyond it the matrix is no
+rotation and the export is refused (below it, writers that need one project it onto the nearest
+rotation)."""
+
+
+def check_rotations(recon: Reconstruction, path: str | os.PathLike | None = None) -> None:
+    """Raise :class:`ExportError` unless every ``global_rot`` is a proper rotation (orthonormal
+    within :data:`ROTATION_TOLERANCE`, determinant +1): a zero matrix or a reflection would
+    be written as a collapsed or mirrored body. Every writer calls it first.
+
+    Args:
+        recon: The reconstruction.
+        path: The file being written, named first in the message.
+    """
+    r = recon.global_rot
+    err = np.abs(np.swapaxes(r, -1, -2) @ r - np.eye(3)).max(axis=(-2, -1))
+    det = np.linalg.det(r)
+    bad = ~(err <= ROTATION_TOLERANCE) | ~(det > 0)
+    if bad.any():
+        from grip.core import skeleton as sk
+
+        t, j = (int(i) for i in np.argwhere(bad)[0])
+        where = f"{path}: " if path is not None else ""
+        raise ExportError(f"{where}reconstruction {recon.name!r}: global_rot of joint "
+                          f"{sk.JOINT_NAMES[j]} at frame {t} is not a rotation (|R^T R - I| = "
+                          f"{err[t, j]:.3g}, det {det[t, j]:.3g}; {int(bad.sum())} such "
+                          "matrices): nothing written")  # fmt: skip
 
 
 def check_ground_truth(recon: Reconstruction, gt: GroundTruth) -> None:

@@ -28,7 +28,14 @@ from grip.core import skeleton as sk
 from grip.core.body import BodyModel, BodyParams
 from grip.core.reconstruction import Reconstruction
 from grip.core.rotations import rotation_between
-from grip.export.common import Y_UP_FROM_WORLD, ExportError, body_model, posed_body, write_file
+from grip.export.common import (
+    Y_UP_FROM_WORLD,
+    ExportError,
+    body_model,
+    check_rotations,
+    posed_body,
+    write_file,
+)
 
 _SIDE_RGBA = {
     "L": np.array([90, 140, 220, 255], dtype=np.uint8),
@@ -197,9 +204,11 @@ def write_pose_glb(
     ``"body"``, atomically.
 
     Raises:
-        ExportError: The file cannot be written (the message names it).
+        ExportError: The file cannot be written, or a rotation is no rotation (the message
+            names the file).
         ValueError: ``frame`` is outside the reconstruction.
     """
+    check_rotations(recon, path)
     scene = trimesh.Scene()
     scene.add_geometry(posed_mesh(recon, frame, body), node_name="body", geom_name="body")
     return _export_glb(scene, Path(path))
@@ -216,6 +225,8 @@ def write_strobe_glb(
     """Write :func:`strobe_scene` as a ``.glb``, atomically.
 
     Raises:
-        ExportError: The file cannot be written (the message names it).
+        ExportError: The file cannot be written, or a rotation is no rotation (the message
+            names the file).
     """
+    check_rotations(recon, path)
     return _export_glb(strobe_scene(recon, body, every=every, floor=floor), Path(path))

@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from grip.core import metrics as M
 from grip.core import skeleton as sk
 from grip.core.reconstruction import Reconstruction
-from grip.export.common import ExportError, check_ground_truth, write_file
+from grip.export.common import ExportError, check_ground_truth, check_rotations, write_file
 from grip.kinematics.features import GroundTruth
 
 _REC_COLOR = "tab:blue"
@@ -209,10 +209,11 @@ def write_summary_png(
         :func:`summary_stats` of the reconstruction.
 
     Raises:
-        ExportError: The file cannot be written (the message names it), or ``gt`` does not
-            cover the reconstruction's frames.
+        ExportError: The file cannot be written (the message names it), a rotation is no
+            rotation, or ``gt`` does not cover the reconstruction's frames.
     """
     path = Path(path)
+    check_rotations(recon, path)
     fig = summary_figure(recon, gt)
     buf = io.BytesIO()
     try:

@@ -32,7 +32,13 @@ from grip.core.body import BodyModel, BodyParams
 from grip.core.mjcf import MjcfConfig
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import pose_vector
-from grip.export.common import ExportError, body_model, check_ground_truth, write_file
+from grip.export.common import (
+    ExportError,
+    body_model,
+    check_ground_truth,
+    check_rotations,
+    write_file,
+)
 from grip.kinematics.features import GroundTruth
 from grip.sim.model import HumanoidIndex, load_model, write_pose_vector
 
@@ -222,13 +228,14 @@ def write_video(
 
     Raises:
         RenderBackendError: No OpenGL backend; nothing is written.
-        ExportError: The file cannot be encoded or written (the message names it), or ``gt``
-            does not match the reconstruction.
+        ExportError: The file cannot be encoded or written (the message names it), a
+            rotation is no rotation, or ``gt`` does not match the reconstruction.
     """
     import imageio.v2 as imageio
 
     cfg = cfg or VideoConfig()
     path = Path(path)
+    check_rotations(recon, path)
     images = render_frames(recon, body, gt=gt, cfg=cfg)
     try:
         first = next(images)  # raises RenderBackendError before any file is created
