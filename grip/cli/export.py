@@ -238,8 +238,10 @@ def _export_one(fmt: str, recon, args: argparse.Namespace, stem: str, body, gt, 
     (``recording``: the --gt recording, for the html page's insoles and props)."""
     out: Path = args.out
     if fmt == "html":
+        from grip.export.common import check_rotations
         from grip.export.html import write_viewer
 
+        check_rotations(recon, out / f"{stem}.html")
         page = write_viewer(recon, out / f"{stem}.html", recording=recording, body=body)
         yield f"wrote {page.path} ({page.n_bytes / 1e6:.2f} MB, {len(page.labels)} bodies)"
         return

@@ -74,7 +74,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from grip.assets import ASSETS
     from grip.cli.errors import CliError
     from grip.core.reconstruction import Reconstruction, ReconstructionError
-    from grip.export.common import ExportError, fk_mismatch_m
+    from grip.export.common import ExportError, check_rotations, fk_mismatch_m
     from grip.export.html import check_compatible, load_web_assets, write_viewer
 
     def load(path: Path) -> Reconstruction:
@@ -116,6 +116,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     print(f"{args.recon}: {recon.name} ({recon.method}), {recon.n_frames} frames at "
           f"{recon.fps:g} Hz, {recon.falls.shape[0]} fall event(s)")  # fmt: skip
     try:
+        for r in (recon, *(r for _, r in compare)):  # (a zero or mirrored rotation: refused)
+            check_rotations(r)
         page = write_viewer(recon, args.out, assets, recording=recording,
                             compare=[r for _, r in compare], compare_labels=_labels(compare),
                             title=args.title)  # fmt: skip

@@ -63,3 +63,19 @@ def test_export_reconstruction_refuses_them_in_every_format(tmp_path) -> None:
 def test_proper_rotations_pass(tmp_path) -> None:
     check_rotations(_recon(None))
     assert write_bvh(_recon(None), tmp_path / "ok.bvh").is_file()
+
+
+@pytest.mark.parametrize("command", ["export", "view"])
+def test_the_html_commands_refuse_them(tmp_path, capsys, command) -> None:
+    from grip.cli.main import main
+
+    path = tmp_path / "r.npz"
+    _recon("zero").save(path)
+    page = tmp_path / "v.html"
+    argv = ["view", str(path), "--out", str(page)]
+    if command == "export":
+        argv = ["export", str(path), "--formats", "html", "--out", str(tmp_path / "out")]
+    assert main(argv) != 0
+    err = capsys.readouterr().err
+    assert "R_Knee at frame 3 is not a rotation" in err and "Traceback" not in err, err
+    assert not page.exists() and not (tmp_path / "out" / "r.html").exists()
