@@ -28,9 +28,11 @@ from grip.core.reference_sets import clip_probabilities
 from policies.config import StageConfig
 from policies.mining import START_BIN_S, ClipFailureStats, StartBinStats
 
-TERMINATION_DECAY = 0.8
-"""Per-rollout decay of the per-category episode counts (:class:`CategoryTermination`): the
-share of episodes that reach their limit is judged on about the last five rollouts."""
+TERMINATION_MEMORY = 10.0
+"""Episodes of a category that its share of episodes reaching their limit is judged on
+(:class:`CategoryTermination`): after a rollout with ``n`` of its episodes its counts decay by
+``max(0.5, 1 - n / 10)``, so a category of 40 episodes a rollout is judged on about its last
+two rollouts and one of 0.5 on about its last twenty."""
 
 TERMINATION_MIN_EPISODES = 4.0
 """Decayed episodes a category needs before its distance moves (a rare category's share of a
@@ -41,10 +43,13 @@ class CategoryTermination:
     """A termination distance per motion category, driven by how its episodes end (PBHC's
     and ASAP's termination curricula, per category).
 
-    After each rollout, a category with at least :data:`TERMINATION_MIN_EPISODES` (decayed)
-    episodes whose share of episodes that reached their length limit (truncated, not
-    terminated) is above ``band[1]`` gets a distance ``(1 - step)`` times tighter, below
-    ``band[0]`` ``(1 + step)`` times looser, always within ``[min_m, max_m]``.
+    After each rollout, a category that had episodes in it and has at least
+    :data:`TERMINATION_MIN_EPISODES` (decayed) episodes, whose share of episodes that reached
+    their length limit (truncated, not terminated) is above ``band[1]``, gets a distance
+    ``(1 - step)`` times tighter, below ``band[0]`` ``(1 + step)`` times looser, always within
+    ``[min_m, max_m]``. The counts then decay by the category's new episodes (memory
+    ``memory`` episodes, :data:`TERMINATION_MEMORY`), so rare and common categories are judged
+    on as many episodes.
 
     Args:
         clip_categories: ``(C,)`` each clip's category, in the environments' clip order.
@@ -52,43 +57,48 @@ class CategoryTermination:
         min_m, max_m: Bounds of the distance, m (``0 < min_m <= max_m``).
         band: ``(low, high)`` shares of episodes that reached their limit.
         step: Relative change per rollout, in (0, 1).
-        decay: Per-rollout decay of the counts, in (0, 1].
+        memory: Episodes a category is judged on (> 0).
     """
 
     def __init__(self, clip_categories: Sequence[str], start_m: float, min_m: float,
                  max_m: float, band: tuple[float, float], step: float,
-                 decay: float = TERMINATION_DECAY) -> None:  # fmt: skip
-        if not 0 < min_m <= max_m or not 0 < step < 1 or not 0 < decay <= 1:
+                 memory: float = TERMINATION_MEMORY) -> None:  # fmt: skip
+        if not 0 < min_m <= max_m or not 0 < step < 1 or not memory > 0:
             raise ValueError("category termination needs 0 < min_m <= max_m, 0 < step < 1, "
-                             "0 < decay <= 1")  # fmt: skip
+                             "memory > 0")  # fmt: skip
         self.categories = list(dict.fromkeys(clip_categories))
         index = {c: i for i, c in enumerate(self.categories)}
         self.clip_category = np.array([index[c] for c in clip_categories], dtype=np.int64)
         self.min_m, self.max_m = float(min_m), float(max_m)
-        self.band, self.step, self.decay = (float(band[0]), float(band[1])), float(step), decay
+        self.band, self.step = (float(band[0]), float(band[1])), float(step)
+        self.memory = float(memory)
         k = len(self.categories)
         self.dist_m = np.full(k, float(np.clip(start_m, self.min_m, self.max_m)))
         self.episodes = np.zeros(k)
         self.reached = np.zeros(k)
+        self._new = np.zeros(k)  # episodes since the last end_rollout
 
     def add(self, clip_index, reached) -> None:
         """Count finished episodes (scalars or ``(E,)`` arrays): clip and whether each reached
         its length limit."""
         cat = self.clip_category[np.atleast_1d(np.asarray(clip_index, dtype=np.int64))]
         np.add.at(self.episodes, cat, 1.0)
+        np.add.at(self._new, cat, 1.0)
         np.add.at(self.reached, cat, np.atleast_1d(np.asarray(reached, dtype=np.float64)))
 
     def end_rollout(self) -> None:
-        """Move each category's distance by its episodes, then decay the counts."""
-        seen = self.episodes >= TERMINATION_MIN_EPISODES
+        """Move the distance of each category that had episodes, then decay its counts."""
+        seen = (self.episodes >= TERMINATION_MIN_EPISODES) & (self._new > 0)
         share = self.reached / np.maximum(self.episodes, 1e-12)
         tighten = seen & (share > self.band[1])
         loosen = seen & (share < self.band[0])
         self.dist_m[tighten] *= 1.0 - self.step
         self.dist_m[loosen] *= 1.0 + self.step
         np.clip(self.dist_m, self.min_m, self.max_m, out=self.dist_m)
-        self.episodes *= self.decay
-        self.reached *= self.decay
+        d = np.maximum(0.5, 1.0 - self._new / self.memory)
+        self.episodes *= d
+        self.reached *= d
+        self._new[:] = 0.0
 
     def clip_dists(self) -> np.ndarray:
         """``(C,)`` the distance of each clip's category, m."""

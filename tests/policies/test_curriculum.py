@@ -80,23 +80,34 @@ def test_start_bins_state_maps_by_name_and_drops_what_changed():
 
 def test_category_termination_tightens_loosens_and_stays_in_bounds():
     ct = CategoryTermination(["walk", "run", "walk", "dance"], start_m=0.5, min_m=0.2,
-                             max_m=0.6, band=(0.5, 0.8), step=0.1, decay=1.0)  # fmt: skip
+                             max_m=0.6, band=(0.5, 0.8), step=0.1, memory=1e9)  # fmt: skip
     assert ct.categories == ["walk", "run", "dance"]
     np.testing.assert_allclose(ct.clip_dists(), [0.5, 0.5, 0.5, 0.5])
-    ct.add([0, 2, 0, 2, 0], [True] * 5)  # walk: 5 of 5 reach their limit
-    ct.add([1] * 4, [False, False, False, True])  # run: 1 of 4
+
+    def rollout():
+        ct.add([0, 2, 0, 2, 0], [True] * 5)  # walk: 5 of 5 reach their limit
+        ct.add([1] * 4, [False, False, False, True])  # run: 1 of 4
+        ct.end_rollout()
+
     ct.add([3] * 3, [False] * 3)  # dance: too few episodes to judge
     assert 3 < TERMINATION_MIN_EPISODES <= 4
-    ct.end_rollout()
+    rollout()
     np.testing.assert_allclose(ct.dist_m, [0.45, 0.55, 0.5])
     np.testing.assert_allclose(ct.clip_dists(), [0.45, 0.55, 0.45, 0.5])
     for _ in range(20):
-        ct.end_rollout()  # (the same shares, decay 1)
+        rollout()
     np.testing.assert_allclose(ct.dist_m, [0.2, 0.6, 0.5])
-    mid = CategoryTermination(["walk"], 0.3, 0.1, 1.0, (0.5, 0.8), 0.1, decay=0.5)
-    mid.add([0] * 10, [True] * 6 + [False] * 4)  # 0.6: in the band, no change
+    ct.end_rollout()  # (no new episodes: nothing moves, nothing decays)
+    np.testing.assert_allclose(ct.dist_m, [0.2, 0.6, 0.5])
+    # the counts decay by each category's new episodes: memory 10, 4 new -> x 0.6
+    mid = CategoryTermination(["walk"], 0.3, 0.1, 1.0, (0.5, 0.8), 0.1, memory=10.0)
+    mid.add([0] * 4, [True] * 3 + [False])  # 0.75: in the band, no change
     mid.end_rollout()
-    assert mid.dist_m.tolist() == [0.3] and mid.episodes.tolist() == [5.0]
+    assert mid.dist_m.tolist() == [0.3]
+    np.testing.assert_allclose([mid.episodes[0], mid.reached[0]], [2.4, 1.8])
+    mid.add([0] * 30, [True] * 30)
+    mid.end_rollout()  # (a decay of at most one half a rollout)
+    assert mid.dist_m[0] == pytest.approx(0.27) and mid.episodes[0] == pytest.approx(16.2)
     fresh = CategoryTermination(["run", "walk", "jump"], 0.5, 0.3, 0.6, (0.5, 0.8), 0.1)
     fresh.load_state_dict(ct.state_dict())
     np.testing.assert_allclose(fresh.dist_m, [0.6, 0.3, 0.5])  # clamped; jump keeps its start
