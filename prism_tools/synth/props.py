@@ -46,6 +46,9 @@ needs no legs), and points under it stand on the floor (:func:`support_height` w
 Seats within :data:`SEAT_MERGE_HEIGHT_M` of each other are one seat (two postures on one
 stool).
 
+A body whose soles never come within :data:`FLOATING_M` of the floor is refused: where nothing
+touches the floor, the floor level and so the props cannot be told.
+
 Every threshold is a module constant with its reason; none is a setting to tune.
 """
 
@@ -80,6 +83,10 @@ PELVIS_ABOVE_FOOT_M = 0.25
 """A foot that carries the body has the pelvis at least this far above it (standing on a step:
 ~0.8 m; perched with a foot on a stool's rung: ~0.3 m); a still foot level with the pelvis is a
 leg lying on the floor or held up, not standing on anything."""
+FLOATING_M = 0.5
+"""A body whose soles never come this close to the floor (z = 0) floats: its supports cannot be
+told from its position (a clip 6.4 m up made a 6.8 m tower), so it is refused. Retargeted feet
+float a few centimetres; ten times that is no floor contact at all."""
 FLOOR_PERCENTILE = 5.0
 """The clip's floor level: this percentile of the heights of all planted soles."""
 MIN_SEATED_S = 0.5
@@ -344,8 +351,17 @@ def infer_props(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel,
 
     Returns:
         The props; empty for a motion on flat ground.
+
+    Raises:
+        ValueError: The soles never come within :data:`FLOATING_M` of the floor (a motion
+            that floats: put it on the floor first).
     """
     cells = insole_cell_positions(global_rot, joint_pos, body)  # (T, 2, 16, 3)
+    lowest = float(cells[..., 2].min()) if cells.size else 0.0
+    if lowest > FLOATING_M:
+        raise ValueError(f"the body never comes within {FLOATING_M:g} m of the floor (its lowest "
+                         f"sole point is {lowest:.2f} m up): no supports can be inferred for a "
+                         "floating motion; put it on the floor (z = 0) first")  # fmt: skip
     planted, height = _planted(cells, fps)
     if not planted.any():
         return []

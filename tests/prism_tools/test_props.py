@@ -217,3 +217,18 @@ def test_a_seat_the_legs_reach_under_is_a_slab_open_underneath():
     (slab,) = props_as_objects([seat]).values()
     np.testing.assert_allclose([slab.vertices[:, 2].min(), slab.vertices[:, 2].max()],
                                [seat.bottom_m, seat.height_m])  # fmt: skip
+
+
+@pytest.mark.parametrize("clip", ["step", "seat"])
+def test_a_body_that_never_comes_near_the_floor_gets_no_props(clip):
+    """Standing on a box, or sitting, 6.4 m up: a 6.8 m tower used to be built under it."""
+    lift = 6.4
+    if clip == "step":
+        g, p = _concat(_standing(100, raise_m=lift), _standing(150, at=(1.0, 0.5),
+                                                               raise_m=lift + 0.4))  # fmt: skip
+    else:
+        g, p = _concat(_standing(100, at=_in_front_of_the_seat()), _sitting(150))
+        p = p + np.array([0.0, 0.0, lift])
+    with pytest.raises(ValueError, match=r"never comes within 0.5 m of the floor \(its lowest "
+                                         r"sole point is 6.4\d m up\)"):  # fmt: skip
+        infer_props(g, p, BODY, FPS)
