@@ -10,7 +10,9 @@ rounds that take turns with its reference and the medians are kept.
   ``StreamingEstimator`` runs); ``module_stream``: ``KinematicsNet.forward`` on a one-frame
   sequence, for comparison.
 - offline: 32 sequences of 500 frames through ``KinematicsNet.forward``, on ``--threads``
-  threads (default 1; the bare LSTM reference runs on as many).
+  threads (default 1; the bare LSTM reference runs on as many); per second of wall time and
+  per second of the process's CPU time (``offline_frames_per_cpu_s``: on a machine other
+  processes share, what a core of its own would do, less their effect on the caches).
 
     python benchmarks/kinematics_speed.py [--model CKPT] [--hidden 256 --layers 2] [--json PATH]
     python benchmarks/kinematics_speed.py --model CKPT --tta full
@@ -31,21 +33,30 @@ import torch
 from grip.kinematics.model import FrameStep, KinematicsNet, KinematicsNetConfig
 
 
-def _time(fn, repeats: int) -> float:
+def _time(fn, repeats: int, cpu: list | None = None) -> float:
+    """Wall seconds per call (``cpu``: the process's CPU seconds per call appended)."""
     fn()  # warm-up
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     for _ in range(repeats):
         fn()
+    if cpu is not None:
+        cpu.append((time.process_time() - c0) / repeats)
     return (time.perf_counter() - t0) / repeats
 
 
-def _interleaved(fns: dict, repeats: int, rounds: int) -> dict[str, float]:
+def _interleaved(fns: dict, repeats: int, rounds: int,
+                 cpu: dict | None = None) -> dict[str, float]:  # fmt: skip
     """Median seconds per call of each function over ``rounds`` rounds that take turns, so
-    that a change in the machine's load hits the figures and their reference alike."""
+    that a change in the machine's load hits the figures and their reference alike (``cpu``:
+    filled with the medians of the process's CPU seconds per call, which other processes on
+    a shared machine do not inflate)."""
     got: dict[str, list[float]] = {k: [] for k in fns}
+    used: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(rounds):
         for k, fn in fns.items():
-            got[k].append(_time(fn, repeats))
+            got[k].append(_time(fn, repeats, used[k]))
+    if cpu is not None:
+        cpu.update({k: statistics.median(v) for k, v in used.items()})
     return {k: statistics.median(v) for k, v in got.items()}
 
 
@@ -59,8 +70,12 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5, help="rounds of every timing, in turns")
     ap.add_argument("--tta", default="full", help="test-time augmentation timed with --model")
     ap.add_argument("--json", default=None, help="also write the figures here")
-    ap.add_argument("--threads", type=int, default=1,
-                    help="torch threads of the offline figures (streaming always runs on one)")
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads of the offline figures (streaming always runs on one)",
+    )
     args = ap.parse_args()
     torch.set_num_threads(1)
     if args.model:
@@ -105,8 +120,9 @@ def main() -> None:
     rb = torch.randn(32, 500, cfg.hidden)
     with torch.inference_mode():
         s32 = net.initial_state({k: v.expand(32, -1) for k, v in first.items()})
+        off_cpu: dict[str, float] = {}
         off = _interleaved({"net": lambda: net(xb, s32), "ref": lambda: ref(rb)}, 1,
-                           args.rounds)  # fmt: skip
+                           args.rounds, off_cpu)  # fmt: skip
     frames = 32 * 500
     torch.set_num_threads(1)
     steps = _estimator_steps(args.model, args.tta, args.frames) if args.model else {}
@@ -119,6 +135,9 @@ def main() -> None:
         "offline_frames_per_s": frames / off["net"],
         "ref_lstm_offline_frames_per_s": frames / off["ref"],
         "offline_ratio_to_ref": off["ref"] / off["net"],
+        # (per second of the process's CPU time: what a core of its own would do)
+        "offline_frames_per_cpu_s": frames / off_cpu["net"],
+        "ref_lstm_offline_frames_per_cpu_s": frames / off_cpu["ref"],
         "hidden": cfg.hidden,
         "layers": cfg.layers,
         "parameters": int(sum(p.numel() for p in net.parameters())),
