@@ -23,6 +23,8 @@ part's time excludes the parts it calls):
 
     python benchmarks/train_profile.py --rollouts 6 --json profile.json
     python benchmarks/train_profile.py --set ppo.vec_env=dummy --json profile_dummy.json
+    python benchmarks/train_profile.py --config configs/policy/teacher.toml --reference REF.npz \
+        --set ppo.threads=1 --set ppo.env_threads=1 --clock cpu --json F
 
 Timing wrappers cost about a microsecond per call; the shares, not the absolute times, are the
 figures to compare (the README quotes them with this command).
@@ -55,7 +57,8 @@ class PartTimer:
     """Exclusive wall time per part of the functions it wraps (main thread only: calls from
     other threads, e.g. physics threads, pass through untimed)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock=time.perf_counter) -> None:
+        self.clock = clock
         self.excl: dict[str, float] = defaultdict(float)
         self.calls: dict[str, int] = defaultdict(int)
         self._stack: list[list[float]] = []  # [child time] per open call
@@ -71,14 +74,14 @@ class PartTimer:
             if threading.current_thread() is not timer._main:
                 return orig(*args, **kwargs)
             timer._stack.append([0.0])
-            t0 = time.perf_counter()
+            t0 = timer.clock()
             try:
                 out = orig(*args, **kwargs)
                 if consume:  # (Executor.map returns a lazy iterator: the wait is in its use)
                     out = iter(list(out))
                 return out
             finally:
-                dt = time.perf_counter() - t0
+                dt = timer.clock() - t0
                 child = timer._stack.pop()[0]
                 timer.excl[part] += dt - child
                 timer.calls[part] += 1
@@ -147,10 +150,15 @@ def instrument(timer: PartTimer) -> None:
 
 
 def profile_training(overrides: Sequence[str], rollouts: int, config: Path | None = None,
-                     reference: Path | None = None) -> dict:  # fmt: skip
+                     reference: Path | None = None, cpu: bool = False,
+                     warmup: int = 0) -> dict:  # fmt: skip
     """Train ``rollouts`` rollouts of the recipe ``config`` (default ``configs/policy/
     default.toml``) with ``overrides`` on ``reference`` (default: the bundled sample); returns
-    the breakdown (seconds and shares per part, env steps/s)."""
+    the breakdown (seconds and shares per part, env steps/s; ``cpu``: seconds of the main
+    thread's CPU time instead of wall time). With ``warmup``, that many rollouts run first and
+    are not counted (the caches of clips and subjects fill in them)."""
+    from stable_baselines3 import PPO
+
     from envs.factory import make_tracking_env
     from envs.tracking_env import SAMPLE_REFERENCE
     from grip.config import load_config
@@ -159,21 +167,36 @@ def profile_training(overrides: Sequence[str], rollouts: int, config: Path | Non
 
     config = config or ROOT / "configs" / "policy" / "default.toml"
     cfg = load_config(config, PolicyRunConfig(), list(overrides))
-    steps = rollouts * cfg.ppo.n_steps * cfg.ppo.n_envs
+    steps = (warmup + rollouts) * cfg.ppo.n_steps * cfg.ppo.n_envs
     cfg = dataclasses.replace(
         cfg, stage1=dataclasses.replace(cfg.stage1, timesteps=steps, categories=()),
         stage2=dataclasses.replace(cfg.stage2, timesteps=0), checkpoint_every=10**6,
     )  # fmt: skip
     run = Path(tempfile.mkdtemp(prefix="grip_prof_"))
-    timer = PartTimer()
+    timer = PartTimer(time.thread_time if cpu else time.perf_counter)
+    start = {"t": 0.0, "done": 0, "trains": 0}
+    ppo_train = PPO.train
     try:
         tr = PolicyTrainer(cfg, run, reference or SAMPLE_REFERENCE, make_tracking_env)
         instrument(timer)
-        t0 = time.perf_counter()
+        timed_train = PPO.train
+
+        def counted_train(model, *a, **k):  # (the count starts after the warm-up rollouts)
+            out = timed_train(model, *a, **k)
+            start["trains"] += 1
+            if start["trains"] == warmup:
+                timer.excl.clear()
+                timer.calls.clear()
+                start["t"], start["done"] = timer.clock(), model.num_timesteps
+            return out
+
+        PPO.train = counted_train
+        start["t"] = timer.clock()
         tr.train()
-        total = time.perf_counter() - t0
-        done = tr.total_done()
+        total = timer.clock() - start["t"]
+        done = tr.total_done() - start["done"]
     finally:
+        PPO.train = ppo_train
         timer.restore()
         shutil.rmtree(run, ignore_errors=True)
     parts = {p: timer.excl.get(p, 0.0) for p in PARTS}
@@ -191,6 +214,12 @@ def profile_training(overrides: Sequence[str], rollouts: int, config: Path | Non
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--rollouts", type=int, default=4, help="PPO rollouts to time (default 4)")
+    ap.add_argument(
+        "--warmup-rollouts",
+        type=int,
+        default=0,
+        help="untimed rollouts first (the caches of clips and subjects fill)",
+    )
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="override one setting of the default recipe (repeatable)")  # fmt: skip
     ap.add_argument(
@@ -202,11 +231,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="training reference set (default: the bundled sample)",
     )
+    ap.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="wall time, or the main thread's CPU time (a shared machine; with "
+        "ppo.threads=1 and ppo.env_threads=1 all the work is on that thread)",
+    )
     ap.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
     args = ap.parse_args(argv)
     if args.rollouts < 1:
         ap.error("--rollouts must be >= 1")
-    res = profile_training(args.overrides, args.rollouts, args.config, args.reference)
+    res = profile_training(
+        args.overrides, args.rollouts, args.config, args.reference, args.clock == "cpu"
+    )
+    res["clock"] = args.clock
     print(
         f"{res['vec_env']}:{res['n_envs']}, action repeat {res['action_repeat']}: "
         f"{res['decisions']} decisions in {res['wall_s']:.1f} s, "
