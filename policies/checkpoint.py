@@ -103,7 +103,7 @@ def read_ppo_zip(path: str | os.PathLike) -> PPOCheckpoint:
         check_zip(path, active_limits(), "PPO checkpoint")
     except LimitExceeded as e:
         raise ValueError(f"{path}: {e}") from None
-    except zipfile.BadZipFile as e:
+    except (zipfile.BadZipFile, OSError, EOFError, zlib.error) as e:
         raise ValueError(f"{path}: not a PPO checkpoint (not a readable zip: {e})") from e
     try:
         with zipfile.ZipFile(path) as archive:
@@ -165,7 +165,7 @@ def read_vecnorm(path: str | os.PathLike) -> dict[str, np.ndarray]:
         check_npz(path, active_limits())
     except LimitExceeded as e:
         raise ValueError(f"{path}: {e}") from None
-    except ValueError as e:
+    except (ValueError, OSError, EOFError, zlib.error) as e:  # a damaged zip
         raise ValueError(f"{path}: not a normaliser file ({str(e)[:200]})") from e
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -228,8 +228,9 @@ def _refuse_foreign(run_dir: Path, out_dir: Path, state: dict) -> None:
     hint = "choose another --out, or pass --overwrite to replace it"
     theirs = out_dir / CONFIG_FILE
     if not theirs.is_file() or theirs.read_bytes() != (run_dir / CONFIG_FILE).read_bytes():
-        raise ValueError(f"{out_dir}: holds the resume state of another run (its {CONFIG_FILE} "
-                         f"differs from {run_dir}'s); packing would overwrite it: {hint}")  # fmt: skip
+        raise ValueError(f"{out_dir}: holds the resume state of another run (its "
+                         f"{CONFIG_FILE} differs from {run_dir}'s); packing would overwrite it: "
+                         f"{hint}")  # fmt: skip
     try:
         old = _progress(target.read_state())
     except ValueError:

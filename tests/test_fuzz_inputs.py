@@ -5,10 +5,13 @@ reconstruction, a policy file, a KinematicsNet checkpoint) are mutated by a seed
 flipped, cut, repeated or inserted; numbers in text formats replaced by extreme values; arrays of
 ``.npz`` members replaced by non-finite, huge, reshaped or retyped ones; JSON metadata nested deeply
 or given absurd integers; a lone surrogate put into a string of a recording or a reconstruction (the
-names they expose must come back encodable); hostile pickles planted. Each mutant is loaded through
-the public loader and must either load or be refused with a clean error (a ``ValueError`` or
-``OSError``) whose message names the file. No other exception (no traceback), no hang (each load is
-bounded by an alarm) and no marker file written by a planted payload.
+names they expose must come back encodable); hostile pickles planted; zip members (npz, torch
+files, a run's ``model.zip``) claiming gigabytes; model files with extreme settings, declared
+layer sizes and observation keys; a device CSV (also with a line of megabytes). Each mutant is
+loaded through the public loader and must either load or be refused with a clean error (a
+``ValueError`` or ``OSError``) whose message names the file. No other exception (no
+traceback), no hang (each load is bounded by an alarm) and no marker file written by a planted
+payload.
 
 The default suite runs a bounded number of mutants per kind (about a minute in all); the ``slow``
 test runs ten times as many with other seeds.
@@ -28,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.fuzz_model_mutators import long_line, torch_settings, zip_size_lie
 from tests.fuzz_mutators import (
     BYTE_MUTATORS,
     NPZ_MUTATORS,
@@ -184,6 +188,28 @@ def _load_kin(p: Path) -> None:
     KinematicsEstimator.from_checkpoint(p)
 
 
+def _load_imu_csv(p: Path) -> None:
+    from prism_tools.devices import ImuCsvOptions, read_imu_csv
+
+    read_imu_csv(p, ImuCsvOptions(acc_unit="g", gyro_unit="deg"))
+
+
+def _imu_csv_seed(root: Path) -> Path:
+    """A generic IMU CSV of 2 s at 100 Hz (a slow turn about z, gravity along z)."""
+    from grip.core.rotations import axis_angle_to_quat
+    from prism_tools.devices import ImuCsv, ImuCsvOptions, write_imu_csv
+
+    t = np.arange(200) / 100.0
+    aa = np.zeros((200, 3))
+    aa[:, 2] = 0.5 * t
+    data = ImuCsv(time_s=t, acc_mps2=np.tile([0.0, 0.0, 9.81], (200, 1)),
+                  acc_kind="specific_force", gyr_rad_s=np.tile([0.0, 0.0, 0.5], (200, 1)),
+                  quat_wxyz=axis_angle_to_quat(aa))  # fmt: skip
+    p = root / "imu.csv"
+    write_imu_csv(p, data, "generic", ImuCsvOptions(acc_unit="g", gyro_unit="deg"))
+    return p
+
+
 # --------------------------------------------------------------------------- harness
 class _Alarm(Exception):
     pass
@@ -307,10 +333,14 @@ def _run_all(tmp_path: Path, n: int, seed: int) -> list[str]:
         problem = _try(loader, p, marker, p.name)
         if problem:
             problems.append(problem)
+    # model files: bytes, members claiming gigabytes, extreme settings and declared sizes
+    models = (*BYTE_MUTATORS, zip_size_lie, torch_settings, torch_settings, torch_settings)
     small = [(REPO / "grip" / "assets" / "policy_default.pt", _load_policy),
              (REPO / "grip" / "assets" / "kinematics_default.pt", _load_kin)]
     for src, loader in small:
-        problems += _fuzz(src, loader, BYTE_MUTATORS, max(4, n // 8), seed + 40, marker, work)
+        problems += _fuzz(src, loader, models, max(8, n // 8), seed + 40, marker, work)
+    problems += _fuzz(_imu_csv_seed(tmp_path), _load_imu_csv, (*TEXT_MUTATORS, long_line),
+                      max(8, n // 4), seed + 50, marker, work)  # fmt: skip
     return problems
 
 
@@ -362,8 +392,10 @@ def _fuzz_run_folder(run: Path, n: int, seed: int, marker: Path, work: Path) -> 
                                           _zip_member_mutator("data", _json_mutator),
                                           _zip_member_mutator("data", payload),
                                           _zip_member_mutator("policy.pth", flip),
-                                          _zip_member_mutator("policy.pth", cut)),
-        ck / "checkpoint" / "vecnorm.npz": NPZ_MUTATORS,
+                                          _zip_member_mutator("policy.pth", cut),
+                                          zip_size_lie,
+                                          _zip_member_mutator("policy.pth", zip_size_lie)),
+        ck / "checkpoint" / "vecnorm.npz": (*NPZ_MUTATORS, zip_size_lie),
         ck / "config.json": (*BYTE_MUTATORS, _json_mutator, _json_mutator),
         ck / "checkpoint" / "state.json": (*BYTE_MUTATORS, _json_mutator, _json_mutator),
     }  # fmt: skip
