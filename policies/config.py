@@ -174,8 +174,8 @@ class StageConfig:
             when that is 0) and replaces the stage's distance and its curriculum.
         termination_category_max_m: The loosest per-category distance, m.
         termination_category_band: ``(low, high)`` share of a category's episodes that reach
-            their limit (decayed over the last rollouts): below ``low`` the distance loosens,
-            above ``high`` it tightens.
+            their limit (over about its last ten episodes): below ``low`` the distance
+            loosens, above ``high`` it tightens.
         termination_category_step: Relative change of a category's distance per rollout.
     """
 

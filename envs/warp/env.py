@@ -35,8 +35,10 @@ What differs from the CPU env, and why:
 The API is :class:`envs.batched.BatchedTrackingEnv`'s, in tensors: :meth:`step` takes ``(N, 69)``
 actions and returns ``obs`` (dict of ``(N, ...)`` float32 tensors), ``reward``, ``terminated``,
 ``truncated`` and one info dict of ``(N, ...)`` tensors; :meth:`reset` starts new episodes in
-the worlds of a mask. Nothing is reset automatically. :meth:`set_termination_dist` and
-:meth:`set_clip_weights` (hard-clip mining) are the CPU env's, for the trainer's curricula.
+the worlds of a mask. Nothing is reset automatically. :meth:`set_termination_dist`,
+:meth:`set_clip_weights` (hard-clip mining), :meth:`set_start_bin_weights` (failure-weighted
+starts) and :meth:`set_clip_termination_dists` (per-category termination) are the CPU env's,
+for the trainer's curricula.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ from envs.warp import torch_task as T
 from envs.warp.scenes import SLOT_FIELDS, scene_slots, scenes_xml
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceSource
-from grip.core.reference_sets import clip_probabilities
+from grip.core.reference_sets import clip_probabilities, start_bin_table
 from grip.sim.model import HumanoidIndex
 from grip.task import amp as A
 from grip.task import observations as O
@@ -363,6 +365,9 @@ class WarpTrackingEnv:
         self._good_rot = torch.zeros(n, _NJ, 3, 3, **f32)
         self._good_t = torch.zeros(n, **i64)
         self.termination_dist_m = torch.full((n,), cfg.termination_dist_m, **f32)
+        self._clip_tau: torch.Tensor | None = None  # (C,) per-clip distances, m
+        self._start_p: torch.Tensor | None = None  # (C, B) start-bin probabilities
+        self._start_bin_frames = 1
         self._field = torch.full((n,), -1, **i64)  # the height field each world's clip shows
         self._z_hi = torch.full((n,), cfg.blowup_height_m, **f32)  # highest pelvis allowed, m
         self.blowups = 0
@@ -431,7 +436,9 @@ class WarpTrackingEnv:
         clip = clip.to(self.device, torch.int64)
         if start is None:
             last = (c.n_frames[clip] - 1 - cfg.min_episode_frames).clamp(min=0)
-            if cfg.random_start:
+            if cfg.random_start and self._start_p is not None:
+                start = self._draw_binned_starts(clip, last)
+            elif cfg.random_start:
                 u = torch.rand(m, generator=self._gen, device=self.device, dtype=torch.float64)
                 start = (u * (last + 1)).long().minimum(last)
             else:
@@ -454,6 +461,8 @@ class WarpTrackingEnv:
             self._geom_xmat[at] = (
                 self._scene_xmat[scene].to(self._geom_xmat.dtype).reshape(m, g.numel(), 3, 3)
             )
+        if self._clip_tau is not None:
+            self.termination_dist_m[idx] = self._clip_tau[clip]
         self._field[idx] = self._clip_field[clip]
         self._z_hi[idx] = self._clip_z_hi[clip]
         for a in self._clear:
@@ -498,6 +507,50 @@ class WarpTrackingEnv:
         if not dist_m >= 0:
             raise ValueError(f"termination distance must be >= 0 m, got {dist_m}")
         self.termination_dist_m.fill_(float(dist_m))
+
+    def set_clip_termination_dists(self, dists: ArrayLike | None) -> None:
+        """A termination distance per clip (m, 0 = off), from now on and at every reset
+        (:meth:`envs.tracking_env.GripTrackingEnv.set_clip_termination_dists`); ``None``: the
+        env's one distance from the next :meth:`set_termination_dist`."""
+        if dists is None:
+            self._clip_tau = None
+            return
+        d = np.asarray(dists, dtype=np.float64)
+        if d.shape != self._clip_len.shape or not (d >= 0).all():
+            raise ValueError(f"clip termination distances must be {self._clip_len.size} "
+                             f"values >= 0 m, got shape {d.shape}")  # fmt: skip
+        self._clip_tau = torch.as_tensor(d, dtype=torch.float32, device=self.device)
+        self.termination_dist_m.copy_(self._clip_tau[self.clip_index])
+
+    def set_start_bin_weights(self, bin_frames: int, weights) -> None:
+        """Random starts within clip ``i`` pick a bin of ``bin_frames`` frames by its start
+        frames times ``weights[i][b]``, then a frame uniformly in it, from the next reset on
+        (:meth:`envs.tracking_env.GripTrackingEnv.set_start_bin_weights`; a clip's ``None``:
+        uniform); ``weights`` ``None``: every start frame equally. The probabilities are made
+        on the host (:func:`grip.core.reference_sets.start_bin_probabilities`) and copied to the
+        device once, as a ``(C, most bins)`` table."""
+        if weights is None:
+            self._start_p = None
+            return
+        n_clips = self._clip_len.size
+        if len(weights) != n_clips:
+            raise ValueError(f"start bin weights: one entry per clip ({n_clips}), got "
+                             f"{len(weights)}")  # fmt: skip
+        last = np.maximum(self._clip_len.astype(np.int64) - 1 - self.cfg.min_episode_frames, 0)
+        self._start_bin_frames = int(bin_frames)
+        self._start_p = torch.as_tensor(start_bin_table(last, int(bin_frames), weights),
+                                        device=self.device)  # fmt: skip
+
+    def _draw_binned_starts(self, clip: torch.Tensor, last: torch.Tensor) -> torch.Tensor:
+        """``(M,)`` start frames of clips ``clip (M,)`` (last starts ``last (M,)``) drawn by the
+        start-bin table of :meth:`set_start_bin_weights`."""
+        f = self._start_bin_frames
+        b = torch.multinomial(self._start_p[clip], 1, generator=self._gen).squeeze(1)
+        lo = b * f
+        n = torch.minimum(lo + f, last + 1) - lo
+        u = torch.rand(clip.numel(), generator=self._gen, device=self.device,
+                       dtype=torch.float64)  # fmt: skip
+        return lo + (u * n).long().minimum(n - 1)
 
     # ------------------------------------------------------------------ stepping
     def step(self, actions: torch.Tensor):

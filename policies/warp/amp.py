@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import torch
 
-from policies.amp import AmpTrainer, Discriminator, discriminator_step
+from policies.amp import AmpTrainer, Discriminator, discriminator_step, real_clip_probabilities
 from policies.config import AmpConfig
 
 
@@ -35,17 +36,29 @@ class DeviceAmpTrainer:
         clip_start: ``(F,)`` int, the first row of each frame's clip (windows never cross clips).
         device: The torch device.
         seed: Seed of the device generator (real and replay draws).
+        clip_offset, clip_len: ``(C,)`` int, each clip's first row and frames (for
+            :meth:`set_real_clip_probabilities`); ``None``: one clip of all frames.
+        active: As :class:`policies.amp.AmpTrainer` (``False``: AMP off, nothing run or
+            trained).
     """
 
     def __init__(self, cfg: AmpConfig, disc: Discriminator, real_frames: torch.Tensor,
-                 clip_start: torch.Tensor, device: torch.device,
-                 seed: int = 0) -> None:  # fmt: skip
+                 clip_start: torch.Tensor, device: torch.device, seed: int = 0,
+                 clip_offset: torch.Tensor | None = None, clip_len: torch.Tensor | None = None,
+                 active: bool = True) -> None:  # fmt: skip
         self.cfg, self.device = cfg, device
+        self.active = bool(active)
         self.disc = disc.to(device)
         self.opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr,
                                     weight_decay=cfg.weight_decay)  # fmt: skip
         self.frames = real_frames.to(device, torch.float32)
         self.clip_start = clip_start.to(device, torch.int64)
+        n = len(self.frames)
+        self.clip_offset = (torch.zeros(1, dtype=torch.int64) if clip_offset is None
+                            else clip_offset).to(device, torch.int64)  # fmt: skip
+        self.clip_len = (torch.full((1,), n, dtype=torch.int64) if clip_len is None
+                         else clip_len).to(device, torch.int64)  # fmt: skip
+        self.clip_p: torch.Tensor | None = None  # (None: every frame equally)
         self._back = torch.arange(-cfg.window + 1, 1, device=device)
         dim = disc.in_dim
         self.replay = torch.zeros(cfg.replay_size, dim, dtype=torch.float32, device=device)
@@ -58,14 +71,33 @@ class DeviceAmpTrainer:
     def from_cpu(cls, amp: AmpTrainer, device: torch.device, seed: int = 0) -> DeviceAmpTrainer:
         """The device trainer of a freshly built :class:`policies.amp.AmpTrainer` (its
         discriminator, normaliser included, and its real windows)."""
-        return cls(amp.cfg, amp.disc, torch.as_tensor(amp.real.frames),
-                   torch.as_tensor(amp.real.clip_start), device, seed)  # fmt: skip
+        real = amp.real
+        return cls(amp.cfg, amp.disc, torch.as_tensor(real.frames),
+                   torch.as_tensor(real.clip_start), device, seed,
+                   torch.as_tensor(real.clip_offset), torch.as_tensor(real.clip_len),
+                   amp.active)  # fmt: skip
 
     # ------------------------------------------------------------------ samples
+    def set_real_clip_probabilities(self, p: np.ndarray | None) -> None:
+        """Draw real windows' clips with probabilities ``p (C,)``, then a frame uniformly in
+        the clip; ``None``: every frame equally (:meth:`policies.amp.RealSampler.
+        set_clip_probabilities`, whose checks apply)."""
+        if p is None:
+            self.clip_p = None
+            return
+        q = real_clip_probabilities(p, self.clip_len.cpu().numpy())
+        self.clip_p = torch.as_tensor(q, device=self.device)
+
     def sample_real(self, n: int) -> torch.Tensor:
         """``(n, window * FRAME_DIM)`` random windows of the ground truth (as
         :meth:`policies.amp.RealSampler.sample`)."""
-        t = torch.randint(0, len(self.frames), (n,), generator=self.gen, device=self.device)
+        if self.clip_p is None:
+            t = torch.randint(0, len(self.frames), (n,), generator=self.gen, device=self.device)
+        else:
+            c = torch.multinomial(self.clip_p, n, replacement=True, generator=self.gen)
+            u = torch.rand(n, generator=self.gen, device=self.device, dtype=torch.float64)
+            k = (u * self.clip_len[c]).long().minimum(self.clip_len[c] - 1)
+            t = self.clip_offset[c] + k
         idx = torch.maximum(t[:, None] + self._back, self.clip_start[t][:, None])
         return self.frames[idx].reshape(n, -1)
 
@@ -86,17 +118,22 @@ class DeviceAmpTrainer:
     # ------------------------------------------------------------------ reward, update
     @torch.no_grad()
     def reward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B,)`` ``reward_scale`` x the style reward of raw windows ``(B, dim)``."""
+        """``(B,)`` ``reward_scale`` x the style reward of raw windows ``(B, dim)`` (0 with AMP
+        off)."""
+        if not self.active:
+            return torch.zeros(len(x), dtype=torch.float32, device=self.device)
         return self.cfg.reward_scale * style_reward(self.disc(x), self.cfg.loss)
 
     def update(self, fake: torch.Tensor) -> dict[str, float]:
         """Add a rollout's policy windows ``(B, dim)`` and train the discriminator
         (:meth:`policies.amp.AmpTrainer.update`; the same statistics, one host copy)."""
         cfg = self.cfg
+        keys = ("loss", "grad_penalty", "acc_real", "acc_fake", "score_real", "score_fake")
+        if not self.active:
+            return dict.fromkeys(keys, 0.0)
         if len(fake):
             self.add_fake(fake)
             self.disc.norm.update(fake)
-        keys = ("loss", "grad_penalty", "acc_real", "acc_fake", "score_real", "score_fake")
         if self.replay_n == 0:
             return dict.fromkeys(keys, 0.0)
         n = cfg.updates_per_rollout

@@ -16,12 +16,16 @@ update (:class:`policies.warp.amp.DeviceAmpTrainer`) and the collect loop (auto-
 time-limit bootstrap of SB3's ``collect_rollouts``, episode statistics, and each clip's ended
 and failed episodes, copied to the host once per rollout).
 
-Hard-clip mining (``stage*.mining_mix``) is the CPU trainer's: the miner
-(:class:`policies.mining.ClipFailureStats`) is built and restored from the checkpoint by
+The stage's curricula are the CPU trainer's (:class:`policies.curriculum.StageCurriculum`:
+hard-clip mining, failure-weighted starts, per-category termination, the real windows'
+clip probabilities), built and restored from the checkpoint by
 :meth:`PolicyTrainer._begin_stage_clips` and saved by :meth:`PolicyTrainer.save_checkpoint`;
-after each rollout it takes the per-clip counts, decays, and its weights go to the env
-(``set_clip_weights``). History rows carry the CPU rows' ``"by_category"`` counts
-(:func:`policies.train.episodes_by_category`).
+after each rollout they take the per-clip counts (and, for start bins and per-category
+termination, each ended episode's clip, start and end frame, copied to the host with them),
+decay, and go to the env (``set_clip_weights``, ``set_start_bin_weights``,
+``set_clip_termination_dists``). History rows carry the CPU rows' ``"by_category"`` counts
+(:func:`policies.train.episodes_by_category`). With ``env.reward.weights.amp = 0`` the
+discriminator is neither run nor trained.
 
 The ``amp.pt`` of a device run keeps a torch generator state, so a run folder is resumed by the
 backend that started it (``config.json`` records ``"backend": "warp"``). Clips with their own
@@ -198,12 +202,16 @@ class WarpPolicyTrainer(PolicyTrainer):
         model, env, norm = self.model, self.env, self.venv
         n, dev = env.num_envs, self.device
         start = model.num_timesteps
+        cur = self.curriculum
         tau = stage.termination_at(self.stage_done)
         env.set_termination_dist(tau)
         model.lr_schedule = ConstantLearningRate(self.learning_rate_now())
         self.set_actor_frozen(self.in_critic_warmup())
-        if self.mining is not None:  # (a resumed run's counts apply from its first rollout)
-            env.set_clip_weights(self.mining.weights())
+        # (a resumed run's counts apply from its first rollout; per-category distances replace
+        # the stage's one)
+        cur.push(lambda method, *args: getattr(env, method)(*args))
+        if cur.termination is not None:
+            tau = cur.termination_m()
         obs = env.observe()
         norm.returns.zero_()
         norm.update_obs(obs)
@@ -214,7 +222,7 @@ class WarpPolicyTrainer(PolicyTrainer):
         while self.stage_done < stage.timesteps:
             last, starts, stats = self._collect(last, starts, ep, bar, start)
             amp_stats = self.amp.update(stats.pop("amp_windows"))
-            self._mine(*stats["clips"])
+            self._end_rollout_curricula(stats)
             row = self._log_rollout(name, tau, stats, amp_stats)
             if bar is not None:
                 d_acc = (amp_stats["acc_real"] + amp_stats["acc_fake"]) / 2
@@ -223,7 +231,9 @@ class WarpPolicyTrainer(PolicyTrainer):
                                 d_acc=f"{d_acc:.2f}")  # fmt: skip
             rollouts += 1
             new_tau = stage.termination_at(self.stage_done)
-            if new_tau != tau:
+            if cur.termination is not None:
+                tau = cur.termination_m()
+            elif new_tau != tau:
                 env.set_termination_dist(new_tau)
                 tau = new_tau
             model.lr_schedule = ConstantLearningRate(self.learning_rate_now())
@@ -255,7 +265,8 @@ class WarpPolicyTrainer(PolicyTrainer):
         episodes = torch.zeros(4, dtype=torch.float64, device=dev)  # count, ok, MPJPE, frames
         n_clips = len(self.stage_clip_categories)
         per_clip = torch.zeros(2, n_clips, dtype=torch.float64, device=dev)  # ended, failed
-        windows = []
+        windows, ended = [], []  # AMP windows; (clip, start, end, failed) of ended episodes
+        keep_episodes = self.curriculum.needs_episodes
         done = torch.zeros(n, dtype=torch.bool, device=dev)
         for _ in range(p.n_steps):
             actions, values, log_probs = pol(last)
@@ -263,7 +274,8 @@ class WarpPolicyTrainer(PolicyTrainer):
             done = term | trunc
             x = info["amp_obs"]
             r_amp = amp.reward(x)
-            windows.append(x)
+            if amp.active:
+                windows.append(x)
             terms += torch.stack([info[f"reward/{k}"].to(torch.float64) for k in INFO_TERMS[:-1]]
                                  + [r_amp.to(torch.float64)]).sum(dim=1)  # fmt: skip
             err = info["mpjpe_m"].to(torch.float64)
@@ -272,6 +284,10 @@ class WarpPolicyTrainer(PolicyTrainer):
             ep[1] += fin
             ep[2] += info["frames"]
             ok = trunc & ~term
+            if keep_episodes:  # (each episode started the frames it played before its end)
+                end_frame = info["frame"]
+                rec = torch.stack([info["clip_index"], end_frame - ep[2].long(), end_frame,
+                                   (done & ~ok).long()])  # fmt: skip
             d = done.to(torch.float64)
             episodes += torch.stack([d.sum(), (ok & done).to(torch.float64).sum(),
                                      (d * ep[0] / ep[1].clamp(min=1)).sum(),
@@ -281,6 +297,8 @@ class WarpPolicyTrainer(PolicyTrainer):
             per_clip[0].index_add_(0, ci, d)
             per_clip[1].index_add_(0, ci, (done & ~ok).to(torch.float64))
             if bool(done.any()):
+                if keep_episodes:
+                    ended.append(rec[:, done])
                 env.reset(done)
                 nxt = env.observe()
             else:
@@ -300,29 +318,34 @@ class WarpPolicyTrainer(PolicyTrainer):
         buf.compute_returns_and_advantage(pol.predict_values(last), done)
         host = torch.cat([terms, episodes, per_clip.reshape(-1)]).cpu().numpy()  # (one copy)
         k = len(INFO_TERMS)
+        fake = torch.cat(windows) if windows else torch.zeros(0, amp.disc.in_dim, device=dev)
+        ends = torch.cat(ended, dim=1).cpu().numpy() if ended else np.zeros((4, 0), np.int64)
         stats = {"terms": host[:k].tolist(), "episodes": host[k : k + 4].tolist(),
                  "clips": host[k + 4 :].reshape(2, n_clips), "decisions": p.n_steps * n,
-                 "amp_windows": torch.cat(windows)}  # fmt: skip
+                 "amp_windows": fake, "ended": ends}  # fmt: skip
         return last, starts, stats
 
-    def _mine(self, ended: np.ndarray, failed: np.ndarray) -> None:
-        """Hard-clip mining after a rollout (the CPU trainer's ``TrainingCallback``): count the
-        episodes that ended per clip, decay, and give the env the new clip weights.
+    def _end_rollout_curricula(self, stats: dict) -> None:
+        """The stage's curricula after a rollout (the CPU trainer's ``TrainingCallback``): count
+        the episodes that ended (mining per clip; start bins and per-category termination per
+        episode), decay, and give the env and the real windows the new settings.
 
         Args:
-            ended, failed: ``(C,)`` the rollout's ended and failed episodes of each clip.
+            stats: :meth:`_collect`'s: ``"clips"``, ``(2, C)`` the ended and failed episodes of
+                each clip; ``"ended"``, ``(4, E)`` each ended episode's clip, start and end
+                frame, and whether it failed (when the curricula need them).
         """
-        mining = self.mining
-        if mining is None:
-            return
-        # (ClipFailureStats.add of each episode, summed: all of them come before end_rollout)
-        mining.episodes += ended
-        mining.fails += failed
-        mining.end_rollout()
-        w = mining.weights()
-        self.model.logger.record("mining/max_weight", float(w.max()))
-        self.model.logger.record("mining/min_weight", float(w.min()))
-        self.env.set_clip_weights(w)
+        cur, env = self.curriculum, self.env
+        cur.add_clip_counts(*stats["clips"])  # (all of them come before end_rollout)
+        clip, start, end, failed = stats["ended"]
+        if clip.size:
+            cur.add(clip, start, end, failed.astype(bool), mining=False)
+        if cur.termination is not None:  # (the distances of this rollout, for its row)
+            stats["termination_by_category"] = cur.termination_by_category()
+        for k, v in cur.end_rollout().items():
+            self.model.logger.record(k, v)
+        cur.push(lambda method, *args: getattr(env, method)(*args))
+        self.set_real_probabilities()
 
     def _log_rollout(self, name: str, tau: float, stats: dict, amp_stats: dict) -> dict:
         """TensorBoard scalars and the history row of a rollout (the CPU trainer's keys)."""
@@ -349,6 +372,8 @@ class WarpPolicyTrainer(PolicyTrainer):
             row["by_category"] = episodes_by_category(
                 (c, e, f) for c, e, f in zip(cats, ended, failed, strict=True) if e > 0
             )
+        if "termination_by_category" in stats:
+            row["termination_by_category"] = stats["termination_by_category"]
             log("episode/success_rate", row["success_rate"])
             log("episode/mpjpe_mm", row["mpjpe_mm"])
             log("episode/count", int(count))

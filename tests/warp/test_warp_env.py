@@ -319,3 +319,42 @@ def test_clip_weights_choose_the_clips_drawn():
     for bad in ([1.0], [1.0, -0.5], [1.0, np.nan], [0.0, 0.0]):
         with pytest.raises(ValueError, match="clip weights"):
             env.set_clip_weights(bad)
+
+
+def test_start_bins_and_clip_termination_distances():
+    """``set_start_bin_weights``: resets draw their start frames in the weighted bins (clip 0
+    only in its second second, clip 1 only in its third), ``None`` restores the uniform draw;
+    ``set_clip_termination_dists``: every world's distance is its clip's, now and after each
+    reset (the CPU env's hooks, for failure-weighted starts and per-category termination)."""
+    import torch
+    import warp as wp
+
+    from envs.tracking_env import SAMPLE_REFERENCE
+    from envs.warp.env import WarpTrackingEnv
+    from grip.core.reference import ReferenceSet
+    from grip.task.config import TrackingEnvConfig
+
+    wp.config.quiet = True
+    n = 16
+    env = WarpTrackingEnv(TrackingEnvConfig(), ReferenceSet.load(SAMPLE_REFERENCE), n, seed=5)
+    everyone = torch.ones(n, dtype=torch.bool)
+    env.set_start_bin_weights(100, [np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 3.0])])
+    for _ in range(3):
+        env.reset(everyone)
+        clip, frame = env.clip_index.numpy(), env.frame.numpy()
+        lo = np.where(clip == 0, 100, 200)
+        assert ((frame >= lo) & (frame < lo + 100) & (frame <= 239)).all(), (clip, frame)
+    env.set_start_bin_weights(100, None)
+    env.reset(everyone)
+    assert (env.frame.numpy() < 100).any()
+    env.set_clip_termination_dists([0.3, 0.0])
+    np.testing.assert_allclose(env.termination_dist_m.numpy(),
+                               np.where(env.clip_index.numpy() == 0, 0.3, 0.0))  # fmt: skip
+    env.set_clip_termination_dists([0.0, 0.7])
+    env.reset(everyone)
+    np.testing.assert_allclose(env.termination_dist_m.numpy(),
+                               np.where(env.clip_index.numpy() == 0, 0.0, 0.7), rtol=1e-6)
+    with pytest.raises(ValueError, match="clip termination"):
+        env.set_clip_termination_dists([0.1])
+    with pytest.raises(ValueError, match="one entry per clip"):
+        env.set_start_bin_weights(100, [np.ones(3)])

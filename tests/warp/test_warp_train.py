@@ -350,3 +350,97 @@ def test_teacher_recipe_mines_hard_clips_checkpoints_and_resumes(tmp_path):
     assert new > 0
     assert again.mining.episodes.sum() == pytest.approx((sum(state["mining"]["episodes"]) + new)
                                                         * cfg.stage2.mining_decay)  # fmt: skip
+
+
+def _spy_curricula(calls: list):
+    """The warp env constructor, recording every curriculum call (name, args) in ``calls``
+    (and each env made, as ``("env", env)``)."""
+    from envs.warp.factory import make_warp_tracking_env
+
+    def make(*args, **kwargs):
+        env = make_warp_tracking_env(*args, **kwargs)
+        calls.append(("env", env))
+        for method in ("set_start_bin_weights", "set_clip_termination_dists"):
+            orig = getattr(env, method)
+
+            def spy(*a, _orig=orig, _name=method):
+                calls.append((_name, a))
+                return _orig(*a)
+
+            setattr(env, method, spy)
+        return env
+
+    return make
+
+
+def test_issue47_curricula_and_real_sampling_on_the_device(tmp_path):
+    """Failure-weighted starts, per-category termination and real windows drawn as the
+    episodes, on the device trainer: after every rollout the env gets the bins' weights and
+    each clip's distance, the discriminator's real clips follow the stage (``walk*`` only:
+    the run clip gets probability 0), all of it is saved and a resumed run starts from it."""
+    from policies.mining import StartBinStats
+
+    cfg = _tiny()
+    cfg = dataclasses.replace(
+        cfg, amp=dataclasses.replace(cfg.amp, real_sampling="episodes"),
+        stage1=dataclasses.replace(cfg.stage1, timesteps=0),
+        stage2=dataclasses.replace(cfg.stage2, timesteps=64, max_episode_frames=6,
+                                   categories=("walk*",), mining_bins_mix=1.0,
+                                   termination_category_min_m=0.05,
+                                   termination_category_max_m=0.4,
+                                   termination_category_step=0.3))  # fmt: skip
+    run = tmp_path / "run"
+    _write_config(run, cfg)
+    calls: list = []
+    tr = _trainer(cfg, run, make_env=_spy_curricula(calls))
+    tr.train()
+    cur = tr.curriculum
+    assert cur.bins.episodes.sum() > 0 and cur.termination.categories == ["walk"]
+    bins = [a for name, a in calls if name == "set_start_bin_weights"]
+    dists = [a[0] for name, a in calls if name == "set_clip_termination_dists"]
+    assert len(bins) == len(dists) == 1 + len(tr.history)
+    for got, want in zip(bins[-1][1], cur.bins.weights(), strict=True):
+        np.testing.assert_allclose(got, want)
+    np.testing.assert_allclose(dists[-1], cur.termination.clip_dists())
+    env = [a for name, a in calls if name == "env"][-1]
+    np.testing.assert_allclose(env.termination_dist_m.numpy(),
+                               cur.termination.clip_dists()[env.clip_index.numpy()],
+                               rtol=1e-6)  # fmt: skip
+    assert tr.history[0]["termination_by_category"] == {"walk": 0.4}
+    np.testing.assert_allclose(tr.amp.clip_p.cpu().numpy(), [1.0, 0.0])
+    state = json.loads((run / "checkpoint" / "state.json").read_text())
+    assert state["start_bins"]["stage_index"] == state["termination"]["stage_index"] == 1
+    saved = StartBinStats(cur.bins.names, [250], 100, 1.0)
+    saved.load_state_dict(state["start_bins"])
+    longer = dataclasses.replace(cfg, stage2=dataclasses.replace(cfg.stage2, timesteps=96))
+    again: list = []
+    tr2 = _trainer(longer, run, make_env=_spy_curricula(again))
+    tr2.train()
+    first_bins = next(a for name, a in again if name == "set_start_bin_weights")[1]
+    for got, want in zip(first_bins, saved.weights(), strict=True):
+        np.testing.assert_allclose(got, want)
+    first_dists = next(a[0] for name, a in again if name == "set_clip_termination_dists")
+    np.testing.assert_allclose(first_dists, state["termination"]["dist_m"])
+
+
+def test_amp_weight_zero_skips_the_discriminator_on_the_device(tmp_path):
+    """``env.reward.weights.amp = 0`` on the device trainer: no discriminator update, no
+    replay, style reward 0 in every row."""
+    import torch
+
+    cfg = _tiny()
+    weights = dataclasses.replace(cfg.env.reward.weights, amp=0.0)
+    env = dataclasses.replace(cfg.env, reward=dataclasses.replace(cfg.env.reward,
+                                                                  weights=weights))  # fmt: skip
+    cfg = dataclasses.replace(cfg, env=env,
+                              stage1=dataclasses.replace(cfg.stage1, timesteps=32),
+                              stage2=dataclasses.replace(cfg.stage2, timesteps=0))  # fmt: skip
+    run = tmp_path / "run"
+    _write_config(run, cfg)
+    tr = _trainer(cfg, run)
+    before = {k: v.clone() for k, v in tr.amp.disc.state_dict().items()}
+    tr.train()
+    assert tr.amp.replay_n == 0 and not tr.amp.opt.state
+    for k, v in tr.amp.disc.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    assert all(h["reward/amp"] == 0.0 and h["amp/loss"] == 0.0 for h in tr.history)
