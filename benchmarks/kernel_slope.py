@@ -158,8 +158,14 @@ def analytic(mpjpe_mm: list[float], rcfg: RewardConfig) -> list[dict]:
     rows = []
     for mm in mpjpe_mm:
         r, s = kernel_value_slope(mm / 1000.0, k, rcfg.form)
-        rows.append({"mpjpe_mm": mm, "imit_pos": float(r), "slope_per_m": float(s),
-                     "slope_share_of_steepest": float(abs(s) / steepest_slope(k, rcfg.form))})
+        rows.append(
+            {
+                "mpjpe_mm": mm,
+                "imit_pos": float(r),
+                "slope_per_m": float(s),
+                "slope_share_of_steepest": float(abs(s) / steepest_slope(k, rcfg.form)),
+            }
+        )
     return rows
 
 
@@ -175,8 +181,13 @@ def main() -> None:
     ap.add_argument("--fall-below", type=float, default=0.2)
     ap.add_argument("--max-frames", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--before-s", type=float, nargs="*", default=[0.3, 1.0],
-                    help="also report the kernels this long before each failure, s")
+    ap.add_argument(
+        "--before-s",
+        type=float,
+        nargs="*",
+        default=[0.3, 1.0],
+        help="also report the kernels this long before each failure, s",
+    )
     ap.add_argument("--mpjpe-mm", type=float, nargs="*", help="only the kernels at these errors")
     ap.add_argument("--json", type=Path, help="write the results here")
     args = ap.parse_args()
@@ -190,8 +201,10 @@ def main() -> None:
         if not args.policy or not args.reference:
             ap.error("--policy and --reference (or --mpjpe-mm)")
         out = play(args)
-        print(f"{out['episodes']} episodes, {out['failures']} failures "
-              f"(termination {args.termination_m} m); by category: {out['by_category']}")
+        print(
+            f"{out['episodes']} episodes, {out['failures']} failures "
+            f"(termination {args.termination_m} m); by category: {out['by_category']}"
+        )
         if "at_failure" in out:
             print(f"median MPJPE at the failing frame: {out['mpjpe_at_failure_mm']:.0f} mm")
         wheres = ["at_failure", *(f"{s:g}s_before_failure" for s in args.before_s),

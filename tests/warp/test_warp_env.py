@@ -353,7 +353,8 @@ def test_start_bins_and_clip_termination_distances():
     env.set_clip_termination_dists([0.0, 0.7])
     env.reset(everyone)
     np.testing.assert_allclose(env.termination_dist_m.numpy(),
-                               np.where(env.clip_index.numpy() == 0, 0.0, 0.7), rtol=1e-6)
+                               np.where(env.clip_index.numpy() == 0, 0.0, 0.7),
+                               rtol=1e-6)  # fmt: skip
     with pytest.raises(ValueError, match="clip termination"):
         env.set_clip_termination_dists([0.1])
     with pytest.raises(ValueError, match="one entry per clip"):
