@@ -9,8 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks import kernel_slope as K
 from grip.task.config import RewardConfig
+from tests.cli.test_data_cli import _benchmark
+
+K = _benchmark("kernel_slope")
 
 
 def test_kernel_value_slope_and_the_error_read_back():
