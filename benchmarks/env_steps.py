@@ -6,10 +6,11 @@ compiled model from the same start state. The ratio env_steps_per_s x substeps /
 raw_mj_steps_per_s is the share of time left to physics (target >= 0.5: observation building
 and reward must not dominate). The raw rate depends on the state (contacts, solver iterations),
 so one env also reports its own physics: the states it stepped, replayed in a tight loop of raw
-mj_step (``own_states_us_per_mj_step``), the same physics timed inside the env
-(``in_env_us_per_mj_step``: slower, as the env's work between the calls evicts MuJoCo's data
-from the caches) and the share of the env's time spent inside MuJoCo's step calls
-(``in_env_physics_time_share``).
+mj_step, each on the model it was stepped with (``own_states_us_per_mj_step``; the env's humanoid
+switches subjects in place: until issue 48 every state was replayed on the last episode's
+subject, which put the other subjects' states in the air and made them look 1.7x cheaper
+than inside the env), the same physics timed inside the env (``in_env_us_per_mj_step``) and
+the share of the env's time spent inside MuJoCo's step calls (``in_env_physics_time_share``).
 
     python benchmarks/env_steps.py [--steps 3000] [--reference REF.npz] [--json out.json]
     python benchmarks/env_steps.py --batch 16 --threads 1   # the batched env (envs/batched.py)
@@ -36,29 +37,38 @@ _STATE = (_mj.mjtState.mjSTATE_FULLPHYSICS | _mj.mjtState.mjSTATE_CTRL
 
 
 def _env_states(env, action, steps: int) -> list:
-    """The full physics state (with controls and warm start) before each of the env's physics
-    steps over ``steps`` env steps of ``action`` (resets as in the timing)."""
+    """``(model, state)`` before each of the env's physics steps over ``steps`` env steps of
+    ``action`` (resets as in the timing): the full physics state with controls and warm start,
+    and a copy of the model it was stepped with (the humanoid switches subjects in place, so
+    the model of the env's last episode is not every state's)."""
+    import copy
+
     import mujoco
     import numpy as np
 
-    spec = _STATE
-    sim, states = env._sim, []
-    size = mujoco.mj_stateSize(sim.model, spec)
+    from grip.sim.humanoid import Humanoid
 
-    def recording_step() -> None:
+    spec = _STATE
+    states, models = [], {}
+    orig = Humanoid.step
+
+    def recording_step(sim) -> None:
         m, d = sim.model, sim.data
+        key = (id(sim), sim.key)
+        if key not in models:
+            models[key] = copy.copy(m)
         for _ in range(sim.cfg.substeps):
-            s = np.empty(size)
+            s = np.empty(mujoco.mj_stateSize(m, spec))
             mujoco.mj_getState(m, d, s, spec)
-            states.append(s)
+            states.append((models[key], s))
             mujoco.mj_step2(m, d)
             mujoco.mj_step1(m, d)
 
-    sim.step = recording_step
+    Humanoid.step = recording_step
     try:
         _play(env, action, steps)
     finally:
-        del sim.step
+        Humanoid.step = orig
     return states
 
 
@@ -81,19 +91,21 @@ def _physics_time_in_env(env, action, steps: int) -> tuple[float, float]:
     ``steps`` env steps of ``action`` (a pass of its own: the timer costs ~1 us a call)."""
     import time
 
-    sim, inside = env._sim, [0.0]
-    step = sim.step
+    from grip.sim.humanoid import Humanoid
 
-    def timed_step() -> None:
+    inside = [0.0]
+    step = Humanoid.step
+
+    def timed_step(sim) -> None:
         t0 = time.perf_counter()
-        step()
+        step(sim)
         inside[0] += time.perf_counter() - t0
 
-    sim.step = timed_step
+    Humanoid.step = timed_step
     try:
         total = _play(env, action, steps)
     finally:
-        del sim.step
+        Humanoid.step = step
     return inside[0], total
 
 
@@ -162,13 +174,14 @@ def bench_env(steps: int, reference: str | None = None, repeats: int = 5,
     own = {}
     if batch == 0:
         states = _env_states(env, action, steps)
-        replay = mujoco.MjData(model)
+        datas = {id(m): mujoco.MjData(m) for m, _ in states}
 
         def run_own() -> float:
             t0 = time.perf_counter()
-            for s in states:
-                mujoco.mj_setState(model, replay, s, _STATE)
-                mujoco.mj_step(model, replay)
+            for m, s in states:
+                d = datas[id(m)]
+                mujoco.mj_setState(m, d, s, _STATE)
+                mujoco.mj_step(m, d)
             return time.perf_counter() - t0
 
         own_sps = len(states) / min(run_own() for _ in range(repeats))
