@@ -22,6 +22,7 @@ from envs.terrain import make_scene, split_overhangs
 from grip.core.body import BodyParams
 from grip.core.mjcf import SIM_TEXTURE_PX, MjcfConfig, build_mjcf
 from grip.sim.humanoid import Humanoid, HumanoidConfig
+from grip.sim.model import ModelArrays
 from grip.task.config import TrackingEnvConfig
 
 SceneObjects = dict  # {name: (vertices (V, 3), faces (F, 3))}
@@ -60,12 +61,15 @@ class HumanoidScenes:
 
     def _compile(self, body: BodyParams, objects: SceneObjects | None, kind: str):
         hf, overhangs = scene_parts(kind, objects, self.cell_m)
-        return compile_scene(body, self.mjcf, hf, overhangs), hf
+        model = compile_scene(body, self.mjcf, hf, overhangs)
+        # (its arrays, compared once against each humanoid that switches to it: shared by the
+        # environments that share the compiled models)
+        return model, hf, ModelArrays(model)
 
     def _compiled_model(self, body: BodyParams, objects: SceneObjects | None, skey: tuple,
                         bkey: tuple):  # fmt: skip
-        """The model (read only: copy it to simulate) and height field of a scene and subject,
-        compiled once."""
+        """The model (read only: copy it to simulate), height field and
+        :class:`grip.sim.model.ModelArrays` of a scene and subject, compiled once."""
         key = (skey, bkey)
         hit = self._compiled.get(key)
         if hit is None:
@@ -82,14 +86,15 @@ class HumanoidScenes:
         if h is not None:
             if h.key != bkey:
                 if not h.has(bkey):
-                    h.add(bkey, self._compiled_model(body, objects, skey, bkey)[0])
+                    model, _, arrays = self._compiled_model(body, objects, skey, bkey)
+                    h.add(bkey, model, arrays)
                 h.switch(bkey)
             return h
-        model, hf = self._compiled_model(body, objects, skey, bkey)
+        model, hf, arrays = self._compiled_model(body, objects, skey, bkey)
         model = copy.copy(model)  # (switching subjects changes a humanoid's model in place)
         terrain = None if hf is None else functools.partial(sample_heightmap, hf)
         top = 0.0 if hf is None else float(hf.heights.max())
-        h = Humanoid(model, self.cfg, bkey, terrain, top)
+        h = Humanoid(model, self.cfg, bkey, terrain, top, arrays)
         if len(self._scenes) >= self.max_scenes:
             self._scenes.pop(next(iter(self._scenes)))
         self._scenes[skey] = h

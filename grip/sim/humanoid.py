@@ -26,6 +26,7 @@ from grip.core import skeleton as sk
 from grip.sim.model import (
     FootContacts,
     HumanoidIndex,
+    ModelArrays,
     ModelVariants,
     write_pose_vector,
     write_velocity_vector,
@@ -178,11 +179,14 @@ class Humanoid:
             mass_kg)``).
         terrain: Heights of the scene's terrain (``None``: the flat floor z = 0).
         terrain_top_m: Highest terrain point, m (bounds the blow-up check).
+        arrays: :class:`grip.sim.model.ModelArrays` of ``model`` when already made (of the
+            compiled model ``model`` is an unchanged copy of: shared, read only).
     """
 
     def __init__(self, model: mujoco.MjModel, cfg: HumanoidConfig = HumanoidConfig(),
                  key: Hashable = None, terrain: HeightSampler | None = None,
-                 terrain_top_m: float = 0.0) -> None:  # fmt: skip
+                 terrain_top_m: float = 0.0,
+                 arrays: ModelArrays | None = None) -> None:  # fmt: skip
         self.model, self.cfg, self.terrain = model, cfg, terrain
         self.index = ix = HumanoidIndex.from_model(model)
         self.data = d = mujoco.MjData(model)
@@ -191,7 +195,7 @@ class Humanoid:
         self.lo, self.hi = rng[:, 0].copy(), rng[:, 1].copy()  # (69,) hinge limits, rad
         self.half = 0.5 * (rng[:, 1] - rng[:, 0])  # (69,) half the hinge ranges, rad
         self.pelvis_body = int(ix.body_ids[0])
-        self.variants = ModelVariants(model, key)
+        self.variants = ModelVariants(model, key, arrays)
         self.kd_over_kp = self._kd_over_kp()
         # views of MjData arrays, taken once (attribute access through the bindings is slow)
         self.xpos, self.xmat, self.cvel = d.xpos, d.xmat, d.cvel
@@ -262,9 +266,11 @@ class Humanoid:
         """Whether subject ``key`` was added."""
         return key in self.variants
 
-    def add(self, key: Hashable, compiled: mujoco.MjModel) -> None:
-        """Register another subject from its compiled model (same topology)."""
-        self.variants.add(key, compiled)
+    def add(self, key: Hashable, compiled: mujoco.MjModel,
+            arrays: ModelArrays | None = None) -> None:  # fmt: skip
+        """Register another subject from its compiled model (same topology; ``arrays``: its
+        :class:`grip.sim.model.ModelArrays` when already made)."""
+        self.variants.add(key, compiled, arrays)
 
     def switch(self, key: Hashable) -> None:
         """Make the model that of subject ``key`` (added before)."""

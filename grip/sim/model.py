@@ -286,6 +286,32 @@ def _model_arrays(model: mujoco.MjModel) -> dict[str, np.ndarray]:
     return out
 
 
+class ModelArrays:
+    """Copies of a model's numeric arrays (:func:`_model_arrays`) and their bytes laid end to
+    end, so that two models of one topology are compared in one pass. Built once per compiled
+    model, it can be shared by every :class:`ModelVariants` that adds or starts from that
+    model (read only).
+
+    Args:
+        model: The model (not changed).
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.arrays = _model_arrays(model)
+        self._names = [n for n, a in self.arrays.items() if a.size]
+        parts = [self.arrays[n].reshape(-1).view(np.uint8) for n in self._names]
+        self._bytes = np.concatenate(parts)
+        self._starts = np.cumsum([0] + [p.size for p in parts[:-1]])
+
+    def differing(self, other: ModelArrays) -> list[str]:
+        """Names of the arrays whose bytes differ from ``other``'s (same shapes: checked by
+        the caller). A NaN of another bit pattern, or -0.0 against 0.0, counts as different."""
+        if self._bytes.size != other._bytes.size or self._names != other._names:
+            raise ValueError("models of different topology")
+        neq = np.add.reduceat(self._bytes != other._bytes, self._starts, dtype=np.intp)
+        return [n for n, c in zip(self._names, neq.tolist(), strict=True) if c]
+
+
 class ModelVariants:
     """Switch one compiled ``MjModel`` between variants of the same topology (the humanoid of
     other subjects: other segment lengths, masses and gains) by copying the arrays that differ,
@@ -298,34 +324,36 @@ class ModelVariants:
     Args:
         model: The compiled model, modified in place by :meth:`switch`.
         key: The variant it was compiled for.
+        arrays: ``ModelArrays(model)`` when already made (e.g. of the compiled model that
+            ``model`` is an unchanged copy of; shared, read only).
     """
 
-    def __init__(self, model: mujoco.MjModel, key) -> None:
+    def __init__(self, model: mujoco.MjModel, key, arrays: ModelArrays | None = None) -> None:
         self.model = model
         self.key = key
-        self._base = _model_arrays(model)
+        self._base_arrays = arrays if arrays is not None else ModelArrays(model)
+        self._base = self._base_arrays.arrays
         self._diffs: dict = {key: {}}
         self._touched: set[str] = set()
 
     def __contains__(self, key) -> bool:
         return key in self._diffs
 
-    def add(self, key, compiled: mujoco.MjModel) -> None:
-        """Register a variant from the model compiled for it (which is then not needed).
+    def add(self, key, compiled: mujoco.MjModel, arrays: ModelArrays | None = None) -> None:
+        """Register a variant from the model compiled for it (which is then not needed;
+        ``arrays``: its :class:`ModelArrays` when already made, shared and read only).
 
         Raises:
             ValueError: The model's topology (array sizes) differs from the first one's.
         """
-        arrays = _model_arrays(compiled)
-        diff = {}
+        got = arrays if arrays is not None else ModelArrays(compiled)
         for name, base in self._base.items():
-            a = arrays.get(name)
+            a = got.arrays.get(name)
             if a is None or a.shape != base.shape:
                 raise ValueError(f"model variant {key!r}: {name} has shape "
                                  f"{None if a is None else a.shape}, the model's is {base.shape}"
                                  " (a variant must have the same topology)")  # fmt: skip
-            if not np.array_equal(a, base, equal_nan=True):
-                diff[name] = a
+        diff = {name: got.arrays[name] for name in self._base_arrays.differing(got)}
         self._diffs[key] = diff
         self._touched |= diff.keys()
 

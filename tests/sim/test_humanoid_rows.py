@@ -100,3 +100,28 @@ def test_the_tracking_env_turns_sensors_off() -> None:
     env = GripTrackingEnv()
     env.reset(seed=0)
     assert not env.humanoid.sensors
+
+
+def test_model_arrays_find_the_differing_arrays_and_are_shared_read_only() -> None:
+    """One pass over the bytes finds the arrays that differ between two subjects (those an
+    array-by-array comparison finds); two humanoids switching with shared arrays end with the
+    other subject's model, bit for bit, and leave the shared arrays as they were."""
+    from grip.core.body import BodyParams
+    from grip.sim.model import ModelArrays, _model_arrays
+
+    short, tall = load_model(BodyParams(1.62, 58.0)), load_model(BodyParams(1.88, 92.0))
+    a, b = ModelArrays(short), ModelArrays(tall)
+    want = {n for n, v in _model_arrays(short).items()
+            if not np.array_equal(v, _model_arrays(tall)[n], equal_nan=True)}  # fmt: skip
+    assert set(a.differing(b)) == want and "body_mass" in want and not a.differing(a)
+    kept = {n: v.copy() for n, v in b.arrays.items()}
+    humans = [Humanoid(mujoco.MjModel.__copy__(short), key="short", arrays=a) for _ in range(2)]
+    for h in humans:
+        h.add("tall", tall, b)
+        h.switch("tall")
+        for n, v in _model_arrays(tall).items():
+            np.testing.assert_array_equal(_model_arrays(h.model)[n], v, err_msg=n)
+        h.switch("short")
+        np.testing.assert_array_equal(h.model.body_mass, short.body_mass)
+    for n, v in kept.items():
+        np.testing.assert_array_equal(b.arrays[n], v)
