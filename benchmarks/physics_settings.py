@@ -21,10 +21,11 @@ recipe's setting; one that misses them changes the motion.
     python benchmarks/physics_settings.py --reference REF.npz --json F
     python benchmarks/physics_settings.py --variants recipe,sensors_off,pads_off
 
-Variants: ``recipe``; ``sensors_off`` (what training does: the same motion bit for bit);
-``iterations3`` (at most 3 Newton iterations instead of 100); ``islands_off`` (no constraint
-islands); ``tolerance1e-6``; ``pads_off`` (box feet without the 32 sole pads);
-``self_collision_off``; ``step10ms`` (one 10 ms step per frame instead of two of 5 ms).
+Variants: ``recipe`` (MuJoCo's defaults: sensors and islands on); ``sensors_off`` and
+``islands_off`` (what the training env does since issue 48: the same motion bit for bit);
+``iterations3`` (at most 3 Newton iterations instead of 100); ``tolerance1e-6``; ``pads_off``
+(box feet without the 32 sole pads); ``self_collision_off``; ``step10ms`` (one 10 ms step per
+frame instead of two of 5 ms).
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ def _config(cfg, changes: dict):
 
 class _Env:
     """A tracking env of one variant whose humanoids get the variant's ``opt`` change (and
-    the recipe's sensors, so that only the variant differs), and whose physics is timed."""
+    MuJoCo's defaults otherwise, sensors and islands on, which the training env turns off:
+    only the variant differs), and whose physics is timed."""
 
     def __init__(self, cfg, reference, opt_change: Callable | None) -> None:
         from envs.tracking_env import GripTrackingEnv
@@ -78,7 +80,7 @@ class _Env:
 
         def humanoid_for(clip, i):
             h = get(clip, i)
-            h.sensors = True
+            h.sensors = h.islands = True
             if opt_change is not None:
                 opt_change(h.model.opt)
             if not getattr(h, "_timed", False):

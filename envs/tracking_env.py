@@ -206,9 +206,11 @@ class GripTrackingEnv(gym.Env):
     def _humanoid_for(self, clip: ReferenceClip, i: int) -> Humanoid:
         """The humanoid of the clip's subject in the clip's scene (:class:`envs.scenes.
         HumanoidScenes`: one model per scene, subjects switched in). The task reads none of
-        its sensors: they are off (bit-identical physics, cheaper steps)."""
+        its sensors, and one body tree needs no constraint islands: both are off (the same
+        physics bit for bit, cheaper steps: :attr:`Humanoid.sensors`, :attr:`Humanoid.
+        islands`)."""
         h = self._scenes.get(clip.body, clip.objects, i)
-        h.sensors = False
+        h.sensors = h.islands = False
         return h
 
     @property

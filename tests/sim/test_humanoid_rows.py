@@ -94,12 +94,12 @@ def test_sensors_off_keep_the_physics_and_the_foot_forces() -> None:
     assert not off.sensors
 
 
-def test_the_tracking_env_turns_sensors_off() -> None:
+def test_the_tracking_env_turns_sensors_and_islands_off() -> None:
     from envs.tracking_env import GripTrackingEnv
 
     env = GripTrackingEnv()
     env.reset(seed=0)
-    assert not env.humanoid.sensors
+    assert not env.humanoid.sensors and not env.humanoid.islands
 
 
 def test_model_arrays_find_the_differing_arrays_and_are_shared_read_only() -> None:
@@ -125,3 +125,20 @@ def test_model_arrays_find_the_differing_arrays_and_are_shared_read_only() -> No
         np.testing.assert_array_equal(h.model.body_mass, short.body_mass)
     for n, v in kept.items():
         np.testing.assert_array_equal(b.arrays[n], v)
+
+
+def test_islands_off_keep_the_physics() -> None:
+    """One body tree on the floor is one island: without island discovery the steps are bit
+    for bit the same, contacts and PD included (the tracking env turns it off)."""
+    on, off = _moving_humanoid(), _moving_humanoid()
+    off.islands = False
+    assert on.islands and not off.islands
+    rng = np.random.default_rng(1)
+    for _ in range(60):
+        target = np.clip(on.hinge_angles() + rng.normal(0.0, 0.3, 69), on.lo, on.hi)
+        for h in (on, off):
+            h.set_targets(target)
+            h.step()
+    assert on.data.ncon > 0  # (it fell onto the floor: contacts were solved)
+    np.testing.assert_array_equal(off.data.qpos, on.data.qpos)
+    np.testing.assert_array_equal(off.data.qvel, on.data.qvel)
