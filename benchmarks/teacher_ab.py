@@ -12,8 +12,9 @@ before a change), run this file with that checkout first on ``PYTHONPATH``::
         --decisions 400000 [--set ppo.n_epochs=2 ...]
 
 ``plot``: the runs' training success, MPJPE, episode length and style reward (smoothed over
-``--window`` rollouts) against decisions, and against wall time, with a summary per run (the
-means over the last ``--tail`` decisions; the mean over the whole curve) in JSON::
+``--window`` rollouts) against decisions, with a summary per run (the means over the last
+``--tail`` decisions; the mean over the whole curve; wall seconds, which depend on what else
+ran on the machine: speed is ``benchmarks/policy_throughput.py``'s to measure) in JSON::
 
     python benchmarks/teacher_ab.py plot --run before=runs/ab_before --run after=runs/ab_after \\
         --png docs/teacher_ab.png --json docs/perf/teacher_ab.json
@@ -83,26 +84,22 @@ def plot(args) -> int:
     for item in args.runs:
         name, _, path = item.partition("=")
         runs[name] = history(Path(path))
-    fig, axes = plt.subplots(2, len(SERIES), figsize=(4.2 * len(SERIES), 7), squeeze=False)
+    fig, axes = plt.subplots(1, len(SERIES), figsize=(4.2 * len(SERIES), 3.8), squeeze=False)
     out = {"window": args.window, "tail": args.tail, "runs": {}}
     for name, rows in runs.items():
         t = np.array([r["timesteps"] for r in rows], dtype=float)
-        wall = np.array([r["wall_s"] for r in rows], dtype=float)
         for j, (key, label) in enumerate(SERIES):
             v = np.array([r.get(key, np.nan) for r in rows], dtype=float)
             ok = np.isfinite(v)
             s = np.convolve(np.where(ok, v, 0.0), np.ones(args.window), "full")[: len(v)]
             cnt = np.convolve(ok.astype(float), np.ones(args.window), "full")[: len(v)]
-            sm = s / np.maximum(cnt, 1)
-            axes[0, j].plot(t / 1e6, sm, label=name)
-            axes[1, j].plot(wall / 3600, sm, label=name)
+            axes[0, j].plot(t / 1e6, s / np.maximum(cnt, 1), label=name)
             axes[0, j].set_title(label)
             axes[0, j].set_xlabel("decisions (M)")
-            axes[1, j].set_xlabel("wall time (h, one core each, shared machine)")
         out["runs"][name] = summary(rows, args.tail)
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
-        ax.legend()
+    axes[0, 0].legend(fontsize="small")
     fig.suptitle(f"teacher recipe, stage 1, seed 0 (smoothed over {args.window} rollouts)")
     fig.tight_layout()
     args.png.parent.mkdir(parents=True, exist_ok=True)
