@@ -95,9 +95,9 @@ def summarise(r_values: np.ndarray, rcfg: RewardConfig) -> dict:
     return out
 
 
+@torch.no_grad()
 def play(args) -> dict:
     """Roll out the policy and collect the kernels at every failure (and at every decision)."""
-    torch.set_grad_enabled(False)
     runner = load_controller(args.policy)
     ref = select_clips(load_reference(args.reference), tuple(args.category or ()))
     truth = args.truth or runner.info.get("follow") == "truth"
