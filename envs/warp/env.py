@@ -12,7 +12,7 @@ What differs from the CPU env, and why:
   From the same state and controls the two agree to about 1e-6 m over 400 physics steps on flat
   ground; on a height field they drift apart faster (MuJoCo Warp keeps at most 4 contacts per
   geom-hfield pair where MuJoCo C keeps every prism's), see ``docs/gpu.md``.
-* Subjects: every clip's body is compiled once (:mod:`envs.scenes`); the model arrays that
+* Subjects: every clip's body is compiled once (:mod:`envs.warp.build`); the model arrays that
   differ between subjects (segment lengths, masses, gains) are batched per world and written
   at each reset, so worlds of different subjects step together.
 * Scenes: one model for all worlds, where the CPU env switches models. A fixed terrain
@@ -43,10 +43,6 @@ for the trainer's curricula.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
-
-import mujoco
 import mujoco_warp as mjw
 import numpy as np
 import torch
@@ -54,13 +50,12 @@ import warp as wp
 from numpy.typing import ArrayLike
 
 from envs import rewards as R
-from envs.scenes import compile_scene, humanoid_scenes, humanoid_xml, scene_parts
 from envs.warp import torch_task as T
-from envs.warp.scenes import SLOT_FIELDS, scene_slots, scenes_xml
+from envs.warp.build import Models, build_clips, build_models
+from envs.warp.scenes import SLOT_FIELDS
 from grip.core import skeleton as sk
 from grip.core.reference import ReferenceSource
 from grip.core.reference_sets import clip_probabilities, start_bin_table
-from grip.sim.model import HumanoidIndex
 from grip.task import amp as A
 from grip.task import observations as O
 from grip.task.config import TrackingEnvConfig
@@ -69,46 +64,11 @@ _NJ = sk.N_JOINTS
 _N_TERMS = len(R.TERMS)
 _ROOT = O.OBS_ROW["est_root_pos"]
 
-UNBATCHED_OK = frozenset(("site_size", "key_qpos", "dof_length"))
-"""Model arrays that may differ between subjects and that MuJoCo Warp does not batch per world:
-none of them is read by a step with sensors off (site sizes are the insole touch zones, the
-keyframe is never loaded, dof_length only scales the sleeping and set_const heuristics)."""
-
-
 NCONMAX, NJMAX = 64, 400
 """Contacts and constraint rows allocated per world on the flat floor."""
 NCONMAX_TERRAIN, NJMAX_TERRAIN = 256, 1200
 """... where a scene has a height field or overhangs (the sole pads touch both the floor and the
 field's flat part: 64 pairs standing, docs/gpu.md)."""
-
-
-def _batchable_fields() -> dict[str, bool]:
-    """MuJoCo Warp's ``Model`` array fields: name -> whether they can hold one row per world."""
-    out = {}
-    for f in dataclasses.fields(mjw.Model):
-        shape = getattr(f.type, "shape", None)
-        if shape is not None:
-            out[f.name] = bool(shape) and shape[0] == "*"
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class _Clips:
-    """Every clip's per-frame arrays, concatenated along frames (clip ``c`` starts at row
-    ``offset[c]``), float32 on the device unless said otherwise."""
-
-    offset: torch.Tensor  # (C,) int64
-    n_frames: torch.Tensor  # (C,) int64
-    subject: torch.Tensor  # (C,) int64: index into the subjects
-    gt_pvw: torch.Tensor  # (F, 3, J, 3) ground-truth positions, velocities, angular velocities
-    gt_rot: torch.Tensor  # (F, J, 3, 3)
-    qpos: torch.Tensor  # (F, nq) ground-truth pose in MuJoCo's qpos order
-    qvel: torch.Tensor  # (F, nv)
-    obs_rows: torch.Tensor  # (F, OBS_ROW_DIM) the estimate (EstimateFrames.obs_rows)
-    target: torch.Tensor  # (F, 69) PD target of a relative action of 0, rad
-    sensor: torch.Tensor  # (F, S) KinematicsNet inputs
-    est_root: torch.Tensor  # (F, 3) integrated estimated root, m
-    amp: torch.Tensor  # (F, FRAME_DIM) ground-truth AMP frames
 
 
 class WarpTrackingEnv:
@@ -157,10 +117,14 @@ class WarpTrackingEnv:
         self._vel_s = cfg.reward.root_vel_window_frames * cfg.control_dt_s
         self._w = torch.tensor([float(getattr(cfg.reward.weights, k)) for k in R.TERMS],
                                device=self.device)  # fmt: skip
-        self._build_models(cfg, reference)
-        self._build_clips(reference)
-        terrain = self._has_terrain
+        mo = build_models(cfg, reference, self.device)
+        self.index, self.subject_models, self.mj_model = mo.index, mo.subject_models, mo.mj_model
+        self._subject_fields, self._hf = mo.subject_fields, mo.heightfields
+        self.clips, lengths = build_clips(cfg, reference, mo, self.device)
+        self._action_tables(mo.lo, mo.hi, lengths)
+        terrain = mo.has_terrain
         self._alloc_sim(
+            mo,
             (NCONMAX_TERRAIN if terrain else NCONMAX) if nconmax is None else nconmax,
             (NJMAX_TERRAIN if terrain else NJMAX) if njmax is None else njmax,
         )
@@ -168,151 +132,24 @@ class WarpTrackingEnv:
         self.reset(torch.ones(n, dtype=torch.bool, device=self.device))
 
     # ------------------------------------------------------------------ construction
-    def _build_models(self, cfg: TrackingEnvConfig, reference: ReferenceSource) -> None:
-        """Compile each subject's humanoid in the scene; keep the first as the warp model and
-        the arrays that differ as per-subject tables. Clips with their own scene objects
-        (``terrain = "auto"``) get one model of every scene and per-scene tables of its slot
-        geoms (:mod:`envs.warp.scenes`)."""
-        n_clips = len(reference)
-        # the scenes: one per props clip (as the CPU env's HumanoidScenes, keyed by clip), or
-        # the fixed terrain of every clip
-        parts: list = []
-        clip_scene = np.full(n_clips, -1, dtype=np.int64)
-        if cfg.terrain == "auto":
-            for i in range(n_clips):
-                objects = reference.clip(i).objects
-                if objects:
-                    clip_scene[i] = len(parts)
-                    parts.append(scene_parts("objects", objects, cfg.heightfield_cell_m))
-            fixed = None
-        else:
-            fixed = scene_parts(cfg.terrain, None, cfg.heightfield_cell_m)
-        scenes = humanoid_scenes(cfg)
-        subjects: dict[tuple, int] = {}
-        models: list[mujoco.MjModel] = []
-        self._clip_subject = []
-        kd_over_kp = []
-        for i in range(n_clips):
-            clip = reference.clip(i)
-            key = (clip.body.height_m, clip.body.mass_kg)
-            if key not in subjects:
-                h = scenes.get(clip.body)
-                subjects[key] = len(models)
-                if parts:
-                    xml = scenes_xml(humanoid_xml(clip.body, cfg.mjcf), parts)
-                    models.append(mujoco.MjModel.from_xml_string(xml))
-                else:
-                    models.append(copy.copy(h.model))  # (a snapshot: switching changes h.model)
-                kd_over_kp.append(h.kd_over_kp.copy())
-                if len(models) == 1:
-                    self.index = HumanoidIndex.from_model(models[0])
-                    self._lo_np, self._hi_np = h.lo.copy(), h.hi.copy()
-                    body0 = clip.body
-            self._clip_subject.append(subjects[key])
-        self._kd_over_kp = kd_over_kp
-        self.subject_models = models
-        self.mj_model = mjm = copy.copy(models[0])
-        mjm.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-        # the slot geoms of each scene; the height map's field and the blow-up height of each
-        # clip's scene
-        self._slots = None
-        if parts:
-            own = [compile_scene(body0, cfg.mjcf, hf, over) for hf, over in parts]
-            self._slots = scene_slots(models[0], parts, own)
-        scene_list = parts if fixed is None else [fixed]
-        fields = [hf for hf, _ in scene_list if hf is not None]
-        has_field = np.array([hf is not None for hf, _ in scene_list], dtype=bool)
-        # (index -1, a flat clip, reads the -1 appended)
-        scene_field = np.append(np.where(has_field, np.cumsum(has_field) - 1, -1), -1)
-        clip_field = scene_field[clip_scene if fixed is None else np.zeros(n_clips, np.int64)]
-        tops = np.append([hf.max_height for hf in fields], 0.0)
-        self._clip_scene_np, self._clip_field_np = clip_scene, clip_field.astype(np.int64)
-        self._clip_z_hi_np = tops[clip_field] + cfg.blowup_height_m
-        self._hf = T.TorchHeightFields(fields, self.device) if fields else None
-        self._has_terrain = bool(fields) or any(over for _, over in scene_list)
-        # the arrays that differ between subjects, per subject
-        batchable = _batchable_fields()
-        self._subject_fields: dict[str, torch.Tensor] = {}
-        for name, can_batch in batchable.items():
-            base = getattr(mjm, name, None)
-            if not isinstance(base, np.ndarray):
-                continue
-            rows = [getattr(m, name) for m in models]
-            if all(np.array_equal(r, base) for r in rows[1:]):
-                continue
-            if not can_batch:
-                if name in UNBATCHED_OK:
-                    continue
-                raise NotImplementedError(f"WarpTrackingEnv: subjects differ in {name}, which "
-                                          "MuJoCo Warp cannot hold per world")  # fmt: skip
-            self._subject_fields[name] = torch.as_tensor(np.stack(rows), device=self.device)
-
-    def _build_clips(self, reference: ReferenceSource) -> None:
-        """Concatenate every clip's per-frame arrays on the device (:class:`_Clips`)."""
-        cfg, ix, m = self.cfg, self.index, self.mj_model
-        parts: dict[str, list[np.ndarray]] = {
-            k: []
-            for k in (
-                "gt_pvw",
-                "gt_rot",
-                "qpos",
-                "qvel",
-                "obs_rows",
-                "target",
-                "sensor",
-                "est_root",
-                "amp",
-            )
-        }
-        lengths = []
-        for i in range(len(reference)):
-            clip = reference.clip(i)
-            t = clip.n_frames
-            lengths.append(t)
-            est = O.EstimateFrames()
-            est.update(clip, self._kd_over_kp[self._clip_subject[i]], cfg.velocity_feedforward)
-            parts["gt_pvw"].append(np.stack([clip.gt_pos, clip.gt_vel, clip.gt_angvel], axis=1))
-            parts["gt_rot"].append(clip.gt_rot)
-            q = np.tile(m.qpos0, (t, 1))
-            r = ix.root_qpos_adr
-            q[:, r : r + 7] = clip.gt_qpos[:, :7]
-            q[:, ix.hinge_qpos_adr] = clip.gt_qpos[:, 7:]
-            v = np.zeros((t, m.nv))
-            rv = ix.root_dof_adr
-            v[:, rv : rv + 6] = clip.gt_qvel[:, :6]
-            v[:, ix.hinge_dof_adr] = clip.gt_qvel[:, 6:]
-            parts["qpos"].append(q)
-            parts["qvel"].append(v)
-            parts["obs_rows"].append(est.obs_rows[:t])
-            parts["target"].append(est.target[:t])
-            parts["sensor"].append(clip.sensor[:t])
-            parts["est_root"].append(clip.est_root_pos[:t])
-            parts["amp"].append(A.reference_amp_features(clip))
-        dev = self.device
-
-        def cat(k: str) -> torch.Tensor:
-            return torch.as_tensor(np.concatenate(parts[k]), dtype=torch.float32, device=dev)
-
-        lengths_t = torch.as_tensor(lengths, dtype=torch.int64, device=dev)
-        self.clips = _Clips(
-            offset=torch.cumsum(lengths_t, 0) - lengths_t, n_frames=lengths_t,
-            subject=torch.as_tensor(self._clip_subject, dtype=torch.int64, device=dev),
-            **{k: cat(k) for k in parts})  # fmt: skip
-        self._clip_len = np.asarray(lengths, dtype=np.float64)
+    def _action_tables(self, lo: np.ndarray, hi: np.ndarray, lengths: np.ndarray) -> None:
+        """The clip draw, the PD target range and the height map grid as tensors."""
+        cfg, dev = self.cfg, self.device
+        self._clip_len = lengths
         self._clip_p = torch.as_tensor(self._clip_len / self._clip_len.sum(), device=dev)
         f32 = dict(dtype=torch.float32, device=dev)
-        self._lo = torch.as_tensor(self._lo_np, **f32)
-        self._hi = torch.as_tensor(self._hi_np, **f32)
-        half = 0.5 * (self._hi_np - self._lo_np)
+        self._lo = torch.as_tensor(lo, **f32)
+        self._hi = torch.as_tensor(hi, **f32)
+        half = 0.5 * (hi - lo)
         self._half = torch.as_tensor(half, **f32)
         self._gain = torch.as_tensor(cfg.action_scale * half, **f32)
         self._grid = torch.as_tensor(O.heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m),
                                      **f32)  # fmt: skip
 
-    def _alloc_sim(self, nconmax: int, njmax: int) -> None:
+    def _alloc_sim(self, mo: Models, nconmax: int, njmax: int) -> None:
         """The warp model (subject arrays batched per world), data, and torch views of it."""
         n, ix = self.num_envs, self.index
-        batched = set(self._subject_fields) | set(SLOT_FIELDS if self._slots else ())
+        batched = set(self._subject_fields) | set(SLOT_FIELDS if mo.slots else ())
         with wp.ScopedDevice(self.wp_device):
             self.model = mjw.put_model(self.mj_model, batch_sizes=dict.fromkeys(batched, n))
             self.data = mjw.make_data(self.mj_model, nworld=n, nconmax=nconmax, njmax=njmax)
@@ -335,13 +172,13 @@ class WarpTrackingEnv:
         ang = np.setdiff1d(np.arange(self.mj_model.nv), np.arange(rv, rv + 3))
         self._ang = torch.as_tensor(ang, device=dev)
         self._root_z = ix.root_qpos_adr + 2
-        self._clip_field = torch.as_tensor(self._clip_field_np, device=dev)
-        self._clip_z_hi = torch.as_tensor(self._clip_z_hi_np, dtype=torch.float32, device=dev)
+        self._clip_field = torch.as_tensor(mo.clip_field, device=dev)
+        self._clip_z_hi = torch.as_tensor(mo.clip_z_hi, dtype=torch.float32, device=dev)
         self._scene_tables = None
-        if self._slots is not None:
-            sl = self._slots
+        if mo.slots is not None:
+            sl = mo.slots
             # (a clip without objects, scene -1, reads the last rows: every slot parked)
-            scene = np.where(self._clip_scene_np >= 0, self._clip_scene_np, len(sl.xpos) - 1)
+            scene = np.where(mo.clip_scene >= 0, mo.clip_scene, len(sl.xpos) - 1)
             self._clip_scene = torch.as_tensor(scene, device=dev)
             self._slot_geoms = torch.as_tensor(sl.geoms, device=dev)
             self._scene_tables = {k: torch.as_tensor(v, device=dev) for k, v in sl.model.items()}

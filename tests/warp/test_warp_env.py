@@ -191,7 +191,8 @@ def test_each_world_has_its_subjects_model():
     import warp as wp
 
     from envs.tracking_env import SAMPLE_REFERENCE
-    from envs.warp.env import UNBATCHED_OK, WarpTrackingEnv
+    from envs.warp.build import UNBATCHED_OK
+    from envs.warp.env import WarpTrackingEnv
     from grip.core.reference import ReferenceSet
     from grip.task.config import TrackingEnvConfig
 
