@@ -103,6 +103,7 @@ SIDE_STEP_M = 0.9
 WEB_FILES: dict[str, str] = {
     "three_module": "three.module.min.js",
     "orbit_controls": "OrbitControls.js",
+    "plots": "plots.js",
     "pace": "pace.js",
     "viewer": "viewer.js",
     "license": "THREE_LICENSE",
@@ -129,6 +130,7 @@ class WebAssets:
         three_module: three.js's minified ES module build (one self-contained module).
         orbit_controls: three.js's ``OrbitControls`` ES module of the same release; it imports
             only ``'three'``, which the page points at the inlined build.
+        plots: The GRF plots and the falls timeline (defines ``gripPlots``).
         pace: The pace plot and 3D marks (defines ``gripPacePlot``, ``gripPaceMarks``).
         viewer: The viewer's script (defines ``gripViewer``).
         license: three.js's licence text, inlined next to it.
@@ -136,6 +138,7 @@ class WebAssets:
 
     three_module: str
     orbit_controls: str
+    plots: str
     pace: str
     viewer: str
     license: str
@@ -527,6 +530,8 @@ def viewer_html(data: Mapping[str, Any], assets: WebAssets) -> str:
         assets.orbit_controls,
         "</script>\n",
         "<script>",
+        assets.plots,
+        "\n",
         assets.pace,
         "\n",
         assets.viewer,
