@@ -47,6 +47,7 @@ ALLOWED: dict[str, tuple[str, ...] | str] = {
     "grip.nn": ("numpy", "torch", "grip.core"),
     "grip.kinematics": ("numpy", "torch", "grip.core", "grip.config", "grip.nn", "prism_tools"),
     "grip.kinematics.features": ("numpy", "grip.core", "prism_tools"),  # numpy only
+    "grip.kinematics.feature_stream": ("numpy", "grip.core", "grip.kinematics.features"),
     "grip.sim": ("numpy", "mujoco", "grip.core", "grip.config"),
     # numpy ring shared by the env, the policies and the pipeline: the tracking task's settings
     # and its observation and AMP layouts (the env computes them, the policies read them)

@@ -1,7 +1,7 @@
 """Streaming GRIP: one frame of sensors in, one frame of simulated motion out, state carried.
 
 The stream runs the same computation as the offline path (:mod:`grip.eval.reconstruct`), frame
-by frame: :class:`grip.kinematics.features.FeatureStream` builds the network inputs,
+by frame: :class:`grip.kinematics.feature_stream.FeatureStream` builds the network inputs,
 KinematicsNet steps its LSTMs once per frame, a :class:`grip.core.reference.LiveEstimate` grows
 by the estimate, and :class:`grip.pipeline.Player` advances the policy and the humanoid one
 control step with GRIP's fall recovery. No ground truth is read: the calibration frames give the
@@ -47,14 +47,8 @@ from grip.core.limits import InputLimits, LimitExceeded, active_limits
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import LiveEstimate
 from grip.core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
-from grip.kinematics.features import (
-    FeatureStream,
-    SensorFrame,
-    SensorStream,
-    first_state,
-    sensor_frame_arrays,
-    sensor_stream,
-)
+from grip.kinematics.feature_stream import FeatureStream, sensor_frame_arrays
+from grip.kinematics.features import SensorFrame, SensorStream, first_state, sensor_stream
 from grip.kinematics.inference import decode_outputs
 from grip.pipeline import GripPipeline, Player, RecoveryConfig, start_from_calibration
 

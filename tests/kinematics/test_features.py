@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from grip.core.rotations import sixd_to_matrix
+from grip.kinematics.feature_stream import FeatureStream
 from grip.kinematics.features import (
     FeatureConfig,
-    FeatureStream,
     SensorFrame,
     input_features,
     sensor_frames,
