@@ -57,16 +57,17 @@ class RecoveryConfig:
         restart: Where the humanoid's root restarts after a fall (:data:`RESTARTS`):
             ``"simulated"``, GRIP's rule (the simulated pelvis N frames before the fall plus
             the estimated displacement since: a body that had fallen behind stays behind);
-            ``"estimate"``, the estimate's own pelvis (its root integrated from the start, the
-            pelvis the controller follows), so a fall does not inherit the distance lost
-            before it (docs/pace.md, "Recovery").
+            ``"estimate"`` (the default), the estimate's own pelvis (its root integrated from
+            the start, the pelvis the controller follows), so a fall does not inherit the
+            distance lost before it: on the 90 test segments of the split by person GRIP's
+            MPJPE fell from 1,020 to 775 mm with the shipped policy (docs/pace.md, "Recovery").
     """
 
     enabled: bool = True
     history_frames: int = 30
     fall_height_m: float = 0.30
     fall_probability: float = 0.7
-    restart: str = "simulated"
+    restart: str = "estimate"
 
     def __post_init__(self) -> None:
         check(self, (self.history_frames >= 1, "history_frames must be >= 1"),

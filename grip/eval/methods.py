@@ -99,7 +99,7 @@ class MethodOptions:
     transpose_checkpoint: Path | None = None
     pip_checkpoint: Path | None = None
     init: str = "truth"
-    restart: str = "simulated"
+    restart: str = "estimate"
 
     def __post_init__(self) -> None:
         from grip.kinematics.features import INITS

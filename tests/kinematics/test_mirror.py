@@ -27,7 +27,13 @@ def _motion(n: int = 160, seed: int = 3) -> Motion:
 
     q = axis_angle_to_quat(np.asarray(rec.smpl_params.poses, dtype=np.float64).reshape(n, 24, 3))
     root = np.asarray(rec.smpl_params.trans, dtype=np.float64) + rec.smpl_params.root_offset
-    return Motion(fps=100.0, root_pos=root, local_quat=q, name="m", category="walk")
+    m = Motion(fps=100.0, root_pos=root, local_quat=q, name="m", category="walk")
+    # On the floor: the sensor synthesis refuses a body whose soles never come near it.
+    from prism_tools.synth.props import insole_cell_positions
+
+    body = m.body_model()
+    lowest = insole_cell_positions(*m.fk(body), body)[..., 2].min()
+    return dataclasses.replace(m, root_pos=root - np.array([0.0, 0.0, lowest]))
 
 
 def _mirror_motion(m: Motion) -> Motion:
