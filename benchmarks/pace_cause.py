@@ -146,7 +146,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--policy", default=str(SHIPPED_POLICY))
     ap.add_argument("--kin", default=str(SHIPPED_KIN))
     ap.add_argument("--categories", default="walk*,run*")
-    ap.add_argument("--segments", type=int, default=0, help="at most this many (0: all)")
+    ap.add_argument("--split", default="test", choices=("train", "test"),
+                    help="the dataset's split to play (train: is the pace a matter of people the "
+                    "controller never saw?)")
+    ap.add_argument("--segments", type=int, default=0,
+                    help="at most this many, evenly over the split's list (0: all)")
     ap.add_argument("--segment-frames", type=int, default=500)
     ap.add_argument("--references", default="estimate,truth")
     ap.add_argument("--json", required=True)
@@ -155,12 +159,12 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     torch.set_num_threads(1)
-    files = split_files(args.data, "test")
+    files = split_files(args.data, args.split)
     segs = list_segments(files, args.segment_frames, args.categories.split(","))
-    if args.segments:
-        segs = segs[: args.segments]
+    if 0 < args.segments < len(segs):
+        segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
     setup = PolicySetup((args.policy,), args.kin)
-    out: dict = {"policy": args.policy, "kin": args.kin, "data": args.data,
+    out: dict = {"policy": args.policy, "kin": args.kin, "data": args.data, "split": args.split,
                  "segments": len(segs), "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
         rows = play(setup, segs, ref)
