@@ -250,6 +250,14 @@ class PolicyRunConfig:
     such a policy with ``grip policy eval --reference truth``. ``"both"``: every training clip
     twice, once with the estimates and once with the ground truth as the reference (named
     ``<clip>#truth``): a controller that tracks motion rather than one estimator's errors."""
+    speed_factors: tuple[float, ...] = ()
+    """The reference set also holds the training clips of ``speed_categories`` played each of
+    these times faster (:meth:`grip.motion.motion.Motion.time_scaled`, sensors synthesised and
+    estimated like the other clips; names ``<clip>@x<factor>``, categories unchanged): walking
+    speeds the training people never walked (docs/pace.md). Each in [0.5, 2], not 1. Empty:
+    none."""
+    speed_categories: tuple[str, ...] = ("walk*",)
+    """Category globs of the clips ``speed_factors`` plays faster."""
     holdout_fraction: float = 0.0
     """Share of the training split's clips (whole clips, all their chunks) kept out of the
     reference set, drawn with ``seed`` (:func:`grip.kinematics.dataset.holdout_names`): a
@@ -273,6 +281,11 @@ class PolicyRunConfig:
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
             (self.follow in FOLLOW, f"follow must be one of {FOLLOW}"),
+            (all(0.5 <= float(f) <= 2.0 and float(f) != 1.0 for f in self.speed_factors)
+             and len(set(map(float, self.speed_factors))) == len(self.speed_factors),
+             "speed_factors must be distinct numbers in [0.5, 2], none of them 1"),
+            (not self.speed_factors or len(self.speed_categories) > 0,
+             "speed_categories must name at least one category glob when speed_factors is set"),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip

@@ -282,7 +282,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     ref_path = out / "reference_train.npz"
     files = training_files(split_paths(args.data, "train"), cfg, out)
     build_training_reference(ref_path, args.data, files, kins, mirror=cfg.mirror_references,
-                             follow=cfg.follow)  # fmt: skip
+                             follow=cfg.follow, speed_factors=tuple(cfg.speed_factors),
+                             speed_categories=tuple(cfg.speed_categories))  # fmt: skip
     resuming = RunDir(out).has_checkpoint()
     if resuming:
         was = (RunDir(out).read_config() or {}).get("backend", "cpu")

@@ -34,19 +34,38 @@ def training_files(files: list[Path], cfg, out: Path) -> list[Path]:
 
 def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins: list[Path],
                              reverse_categories: tuple[str, ...] = (),
-                             mirror: bool = False, follow: str = "estimate") -> None:  # fmt: skip
+                             mirror: bool = False, follow: str = "estimate",
+                             speed_factors: tuple[float, ...] = (),
+                             speed_categories: tuple[str, ...] = ()) -> None:  # fmt: skip
     """Write the training reference set ``ref_path`` (the recordings ``files`` of dataset
     ``data`` with the estimates of each KinematicsNet checkpoint in ``kins``; training clips of
     ``reverse_categories`` played backwards, and every clip's mirror image with ``mirror``;
     with ``follow="truth"`` the ground truth is the reference, with the feature settings of
     ``kins[0]``; with ``follow="both"`` the estimates and, as ``<clip>#truth``, the ground
-    truth) unless it exists. Shared by ``grip policy train`` and ``grip policy distill``."""
+    truth; training clips of ``speed_categories`` also played each of ``speed_factors`` times
+    faster) unless it exists. The augmentation settings are written beside it
+    (``reference_train.json``): an existing set made with other settings is refused, not
+    silently reused. Shared by ``grip policy train`` and ``grip policy distill``."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
     from grip.cli.recordings import load_recordings
+    from grip.core.atomic import atomic_write_text
 
+    made = {"reverse_categories": list(reverse_categories), "mirror": bool(mirror),
+            "follow": follow, "speed_factors": [float(f) for f in speed_factors],
+            "speed_categories": list(speed_categories) if speed_factors else []}  # fmt: skip
+    sidecar = ref_path.with_suffix(".json")
     if ref_path.is_file():
+        try:
+            was = json.loads(sidecar.read_text()) if sidecar.is_file() else None
+        except (OSError, ValueError):
+            was = None
+        if was is not None and was != made:
+            changed = sorted(k for k in made if was.get(k) != made[k])
+            raise CliError(f"{ref_path} was made with other settings ({', '.join(changed)}: "
+                           f"{ {k: was.get(k) for k in changed} } -> { {k: made[k] for k in changed} }); "
+                           "delete it to rebuild the reference set, or use a new run folder")  # fmt: skip
         return
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
@@ -56,6 +75,10 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.cli.recordings import reversed_training_recordings
 
         recs += reversed_training_recordings(data, files, reverse_categories)
+    if speed_factors:
+        from grip.cli.recordings import speed_scaled_training_recordings
+
+        recs += speed_scaled_training_recordings(data, files, speed_categories, speed_factors)
     sets, est = [], None
     for kin in kins:
         try:
@@ -84,4 +107,5 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
 
         ref = with_mirrored_clips(ref)
     ref.save(ref_path)
+    atomic_write_text(sidecar, json.dumps(made, indent=1))
     print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")

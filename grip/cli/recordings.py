@@ -213,21 +213,44 @@ def reversed_training_recordings(data: Path, files: Sequence[Path | str],
     """The time-reversed recordings of the clips of ``categories`` among the training sequence
     files (or file stems) ``files`` (``reverse_categories`` of ``grip policy distill``,
     :mod:`grip.dataset.augment`), with a progress bar; refuses globs that select nothing."""
+    from grip.dataset.augment import time_reversed_recordings
+
+    return _augmented(data, files, categories, "reverse_categories", "time-reversed", 1,
+                      lambda stems, bar: time_reversed_recordings(data, stems, categories,
+                                                                  progress=bar))  # fmt: skip
+
+
+def speed_scaled_training_recordings(data: Path, files: Sequence[Path | str],
+                                     categories: Sequence[str],
+                                     factors: Sequence[float]) -> list:  # fmt: skip
+    """The recordings of the clips of ``categories`` among the training sequence files
+    ``files`` played each of ``factors`` times faster (``speed_factors`` of ``grip policy
+    train``, :mod:`grip.dataset.augment`), with a progress bar; refuses globs that select
+    nothing."""
+    from grip.dataset.augment import time_scaled_recordings
+
+    return _augmented(data, files, categories, "speed_categories", "speed-scaled", len(factors),
+                      lambda stems, bar: time_scaled_recordings(data, stems, categories, factors,
+                                                                progress=bar))  # fmt: skip
+
+
+def _augmented(data: Path, files: Sequence[Path | str], categories: Sequence[str], setting: str,
+               what: str, per_clip: int, make) -> list:  # fmt: skip
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
-    from grip.dataset.augment import reversed_clip_ids, time_reversed_recordings
+    from grip.dataset.augment import reversed_clip_ids
 
     stems = [Path(f).stem for f in files]
     try:
         n = len(reversed_clip_ids(data, stems, categories))
         if n == 0:
-            raise CliError(f"reverse_categories={list(categories)}: no training clip of {data} "
+            raise CliError(f"{setting}={list(categories)}: no training clip of {data} "
                            "has such a category")  # fmt: skip
-        with tqdm(total=n, unit="clip", desc="time-reversed motions") as bar:
-            recs = time_reversed_recordings(data, stems, categories, progress=bar.update)
+        with tqdm(total=n * per_clip, unit="clip", desc=f"{what} motions") as bar:
+            recs = make(stems, bar.update)
     except ValueError as e:
         raise CliError(str(e)) from e
-    print(f"{len(recs)} time-reversed recordings of {n} training clips "
+    print(f"{len(recs)} {what} recordings of {n} training clips "
           f"({', '.join(categories)})")  # fmt: skip
     return recs

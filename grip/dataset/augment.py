@@ -1,4 +1,4 @@
-"""Recordings made from a dataset's motions played backwards (training augmentation).
+"""Recordings made from a dataset's motions played backwards or faster (training augmentation).
 
 ``grip data build`` keeps every clip's retargeted motion (``DATA/motions/<clip>.npz``). Played
 backwards (:meth:`grip.motion.motion.Motion.time_reversed`), a forward walk becomes a backward
@@ -7,6 +7,10 @@ the dataset's (:func:`prism_tools.synth.recording_from_motion`) and chunked as t
 The distillation's reference set (``grip policy distill``, ``reverse_categories = ["walk"]``)
 uses them to see many more backward walks than the few recorded ones. They are made in memory
 from the clips of the given training sequences only, so a test clip never contributes.
+
+Played faster (:meth:`grip.motion.motion.Motion.time_scaled`, ``speed_factors`` of ``grip
+policy train``), a walk becomes a faster walk of the same person: the controller's training set
+then covers the walking speeds it is asked for on other people (docs/pace.md).
 """
 
 from __future__ import annotations
@@ -72,6 +76,37 @@ def time_reversed_recordings(
         ValueError: No manifest, or a selected clip's motion file is missing or unreadable (the
             message names the file).
     """
+    return _variant_recordings(data_dir, sequence_stems, categories,
+                               [("reversed", "-reversed", lambda m: m.time_reversed())],
+                               progress)  # fmt: skip
+
+
+def speed_suffix(factor: float) -> str:
+    """The name suffix of a clip played ``factor`` times faster, e.g. ``"@x1.25"``."""
+    return f"@x{float(factor):g}"
+
+
+def time_scaled_recordings(
+    data_dir: str | Path,
+    sequence_stems: Sequence[str],
+    categories: Sequence[str],
+    factors: Sequence[float],
+    progress: Callable[[int], object] | None = None,
+) -> list:
+    """Recordings of the selected clips' motions played ``factor`` times faster, one per clip
+    and factor (the category unchanged, names ``"<take>@x<factor>_seqNNN"``); arguments and
+    errors as :func:`time_reversed_recordings`'s, ``progress`` called once per clip and
+    factor."""
+    variants = [(f"x{float(f):g}", speed_suffix(f),
+                 lambda m, f=float(f): m.time_scaled(f)) for f in factors]  # fmt: skip
+    return _variant_recordings(data_dir, sequence_stems, categories, variants, progress)
+
+
+def _variant_recordings(data_dir: str | Path, sequence_stems: Sequence[str],
+                        categories: Sequence[str], variants: list[tuple[str, str, Callable]],
+                        progress: Callable[[int], object] | None) -> list:  # fmt: skip
+    """The recordings of every selected clip's motion under each ``(seed tag, name suffix,
+    transform)`` of ``variants``, sensors synthesised as the build synthesises them."""
     from grip.motion.motion import Motion
     from prism_tools.chunking import chunk_recording
     from prism_tools.schema import recording_as_float32
@@ -85,13 +120,14 @@ def time_reversed_recordings(
         if not path.is_file():
             raise ValueError(f"{path}: motion file of clip {clip_id!r} is missing (rebuild the "
                              "dataset with 'grip data build')")  # fmt: skip
-        fwd = Motion.load(path)
-        rev = replace(fwd.time_reversed(), name=f"{fwd.name}-reversed")
-        seed = clip_seed(f"{clip_id}/reversed", cfg.seed)
-        rec = recording_from_motion(rev, SynthConfig(), seed=seed, noise=True)
-        if cfg.float32:
-            rec = recording_as_float32(rec)
-        recs += chunk_recording(rec, cfg.chunk_frames, min_length=cfg.min_chunk_frames)
-        if progress is not None:
-            progress(1)
+        src = Motion.load(path)
+        for tag, suffix, transform in variants:
+            motion = replace(transform(src), name=f"{src.name}{suffix}")
+            seed = clip_seed(f"{clip_id}/{tag}", cfg.seed)
+            rec = recording_from_motion(motion, SynthConfig(), seed=seed, noise=True)
+            if cfg.float32:
+                rec = recording_as_float32(rec)
+            recs += chunk_recording(rec, cfg.chunk_frames, min_length=cfg.min_chunk_frames)
+            if progress is not None:
+                progress(1)
     return recs

@@ -14,12 +14,16 @@ from grip.core.atomic import atomic_write
 from grip.core.body import BodyModel, BodyParams, build_body
 from grip.core.fk import forward_kinematics
 from grip.core.limits import InputLimits, LimitExceeded, active_limits, check_npz, safe_json_loads
-from grip.core.rotations import quat_to_matrix
+from grip.core.rotations import quat_to_matrix, resample_linear, resample_quats
 
 _FORMAT_VERSION = 1
 
 
 REVERSED_SUFFIX = "-reversed"
+
+TIME_SCALE_RANGE = (0.5, 2.0)
+"""The factors :meth:`Motion.time_scaled` accepts: beyond them a motion is no longer a plausible
+faster or slower performance of itself."""
 """Appended to the category of a time-reversed motion (:meth:`Motion.time_reversed`)."""
 
 
@@ -92,6 +96,28 @@ class Motion:
         return replace(self, root_pos=self.root_pos[::-1].copy(),
                        local_quat=self.local_quat[::-1].copy(), category=cat,
                        meta=meta)  # fmt: skip
+
+    def time_scaled(self, factor: float) -> Motion:
+        """The motion played ``factor`` times faster at the same frame rate (slerp for the
+        rotations, linear for the root; ``1/factor`` of the duration, ``factor`` times the
+        speed; ``meta["time_scale"]`` multiplied by it). A walk played 1.25-1.5 times faster is
+        a faster walk of the same person (stride and cadence both up; the category stays).
+
+        Raises:
+            ValueError: ``factor`` outside :data:`TIME_SCALE_RANGE`, or a motion of one frame.
+        """
+        lo, hi = TIME_SCALE_RANGE
+        if not lo <= float(factor) <= hi:
+            raise ValueError(f"{self.name}: a time scale must be in [{lo:g}, {hi:g}], got {factor!r}")
+        if self.n_frames < 2:
+            raise ValueError(f"{self.name}: a motion of one frame cannot be time-scaled")
+        t = np.arange(self.n_frames) / self.fps
+        n = int(np.floor((self.n_frames - 1) / float(factor) + 1e-9)) + 1
+        new_t = np.arange(n) * float(factor) / self.fps
+        meta = dict(self.meta)
+        meta["time_scale"] = float(meta.get("time_scale", 1.0)) * float(factor)
+        return replace(self, root_pos=resample_linear(t, self.root_pos, new_t),
+                       local_quat=resample_quats(t, self.local_quat, new_t), meta=meta)  # fmt: skip
 
     # ------------------------------------------------------------------ I/O
     def save(self, path: str | os.PathLike) -> None:

@@ -1,0 +1,97 @@
+"""Speed-scaled training references (``speed_factors`` of ``grip policy train``): the training
+clips played faster, so that the controller trains on walking speeds its training people never
+walked (docs/pace.md)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grip.core.reference import ReferenceSet
+
+
+def _train_clip(built: Path) -> tuple[dict, dict]:
+    manifest = json.loads((built / "manifest.json").read_text())
+    split = json.loads((built / "split.json").read_text())
+    clip = next(c for c in manifest["clips"] if len(c["sequences"]) == 1
+                and c["sequences"][0] in split["train"])  # fmt: skip
+    return clip, split
+
+
+def test_a_time_scaled_motion_is_the_same_motion_faster(built: Path) -> None:
+    from grip.dataset.build import safe_name
+    from grip.motion.motion import Motion
+
+    clip, _ = _train_clip(built)
+    m = Motion.load(built / "motions" / f"{safe_name(clip['clip_id'])}.npz")
+    f = 1.5
+    fast = m.time_scaled(f)
+    assert fast.fps == m.fps and fast.category == m.category
+    assert fast.n_frames == int(np.floor((m.n_frames - 1) / f)) + 1
+    assert fast.meta["time_scale"] == pytest.approx(f)
+    # frame k of the fast motion is the original at time k f / fps: every second frame of the
+    # fast one is every third of the original
+    np.testing.assert_allclose(fast.root_pos[::2], m.root_pos[::3][: len(fast.root_pos[::2])],
+                               atol=1e-9)  # fmt: skip
+    dist = np.linalg.norm(np.diff(m.root_pos[:, :2], axis=0), axis=1).sum()
+    dist_fast = np.linalg.norm(np.diff(fast.root_pos[:, :2], axis=0), axis=1).sum()
+    speed, speed_fast = dist / m.duration_s, dist_fast / fast.duration_s
+    assert speed_fast == pytest.approx(f * speed, rel=0.05)
+    np.testing.assert_allclose(np.linalg.norm(fast.local_quat, axis=-1), 1.0, atol=1e-9)
+    for bad in (0.4, 2.5, float("nan")):
+        with pytest.raises(ValueError, match="time scale"):
+            m.time_scaled(bad)
+
+
+def test_speed_scaled_recordings_join_the_reference_set(built: Path, tmp_path: Path,
+                                                        capsys) -> None:  # fmt: skip
+    from grip.cli.errors import CliError
+    from grip.cli.policy_runs import build_training_reference
+    from grip.cli.recordings import kin_checkpoint, split_paths
+    from grip.dataset.augment import time_scaled_recordings
+
+    clip, split = _train_clip(built)
+    cat = clip["category"]
+    recs = time_scaled_recordings(built, split["train"], [cat], (1.25, 1.5))
+    assert sorted({r.name.split("_seq")[0] for r in recs}) == [
+        f"synthetic_{clip['clip_id']}@x1.25", f"synthetic_{clip['clip_id']}@x1.5"]
+    assert all(r.category == cat for r in recs)  # the stages' category filters keep them
+    # a test clip never contributes
+    assert not any(clip["clip_id"] in r.name
+                   for r in time_scaled_recordings(built, split["test"], [cat], (1.5,)))  # fmt: skip
+    files, kin = split_paths(built, "train"), [kin_checkpoint(None)]
+    ref_path = tmp_path / "speed.npz"
+    build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
+                             speed_categories=(cat,))  # fmt: skip
+    names = [c.name for c in ReferenceSet.load(ref_path).clips]
+    assert len(names) == len(files) + len(recs)
+    assert sum("@x" in n for n in names) == len(recs)
+    assert "speed-scaled recordings" in capsys.readouterr().out
+    # the same folder with other settings is refused, not silently reused
+    with pytest.raises(CliError, match="speed_factors.*delete it"):
+        build_training_reference(ref_path, built, files, kin, speed_factors=(1.5,),
+                                 speed_categories=(cat,))  # fmt: skip
+    build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
+                             speed_categories=(cat,))  # the same settings: kept  # fmt: skip
+    with pytest.raises(CliError, match="speed_categories.*no training clip"):
+        build_training_reference(tmp_path / "none.npz", built, files, kin, speed_factors=(1.5,),
+                                 speed_categories=("no-such-category",))  # fmt: skip
+
+
+def test_speed_factors_are_checked_and_old_configs_load() -> None:
+    import dataclasses
+
+    from policies.config import PolicyRunConfig, policy_config_from_dict
+
+    assert PolicyRunConfig(speed_factors=(1.25, 1.5)).speed_categories == ("walk*",)
+    for bad in ((1.0,), (2.5,), (1.25, 1.25), (0.3,)):
+        with pytest.raises(ValueError, match="speed_factors"):
+            PolicyRunConfig(speed_factors=bad)
+    with pytest.raises(ValueError, match="speed_categories"):
+        PolicyRunConfig(speed_factors=(1.5,), speed_categories=())
+    old = dataclasses.asdict(PolicyRunConfig())
+    del old["speed_factors"], old["speed_categories"]
+    assert policy_config_from_dict(old, "old run").speed_factors == ()
