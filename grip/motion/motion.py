@@ -20,11 +20,11 @@ _FORMAT_VERSION = 1
 
 
 REVERSED_SUFFIX = "-reversed"
+"""Appended to the category of a time-reversed motion (:meth:`Motion.time_reversed`)."""
 
 TIME_SCALE_RANGE = (0.5, 2.0)
 """The factors :meth:`Motion.time_scaled` accepts: beyond them a motion is no longer a plausible
 faster or slower performance of itself."""
-"""Appended to the category of a time-reversed motion (:meth:`Motion.time_reversed`)."""
 
 
 class MotionError(ValueError):
@@ -108,7 +108,8 @@ class Motion:
         """
         lo, hi = TIME_SCALE_RANGE
         if not lo <= float(factor) <= hi:
-            raise ValueError(f"{self.name}: a time scale must be in [{lo:g}, {hi:g}], got {factor!r}")
+            raise ValueError(f"{self.name}: a time scale must be in [{lo:g}, {hi:g}], got "
+                             f"{factor!r}")  # fmt: skip
         if self.n_frames < 2:
             raise ValueError(f"{self.name}: a motion of one frame cannot be time-scaled")
         t = np.arange(self.n_frames) / self.fps
