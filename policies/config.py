@@ -21,8 +21,36 @@ VEC_ENVS: tuple[str, ...] = ("subproc", "dummy", "batched")
 FOLLOW: tuple[str, ...] = ("estimate", "truth", "both")
 """What a run's controller follows (:attr:`PolicyRunConfig.follow`)."""
 
+SPEED_FACTOR_RANGE: tuple[float, float] = (0.5, 2.0)
+"""The factors ``speed_factors`` accepts: :data:`grip.motion.motion.TIME_SCALE_RANGE`, which
+the policies may not import."""
+
 GRIP_NET_ARCH: tuple[int, ...] = (2048, 1536, 1024, 1024, 512, 512)
 """GRIP's policy MLP (8.6M parameters); ``--set ppo.net_arch=[2048,1536,1024,1024,512,512]``."""
+
+
+def speed_rules(factors: tuple, categories: tuple) -> tuple[tuple[bool, str], ...]:
+    """The :func:`grip.core.checks.check` rules of ``speed_factors`` and ``speed_categories``
+    (:class:`PolicyRunConfig`'s and :class:`policies.distill.DistillConfig`'s).
+
+    Args:
+        factors: The speed factors: distinct numbers (as their clips' names write them, e.g.
+            ``@x1.25``) in :data:`SPEED_FACTOR_RANGE`, none of them 1.
+        categories: Category globs of the clips played faster; at least one with factors.
+
+    Returns:
+        ``(condition, message)`` pairs, the messages naming the setting and the values given.
+    """
+    lo, hi = SPEED_FACTOR_RANGE
+    nums = [f for f in factors if isinstance(f, int | float) and not isinstance(f, bool)]
+    ok = (len(nums) == len(factors) and all(lo <= f <= hi and f != 1 for f in nums)
+          and len({f"{float(f):g}" for f in nums}) == len(nums))  # fmt: skip
+    return (
+        (ok, f"speed_factors must be distinct numbers in [{lo:g}, {hi:g}], none of them 1, got "
+             f"{list(factors)}"),
+        (not factors or len(categories) > 0,
+         "speed_categories must name at least one category glob when speed_factors is set"),
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -281,11 +309,7 @@ class PolicyRunConfig:
             (self.checkpoint_every >= 1, "checkpoint_every must be >= 1"),
             (0.0 <= self.holdout_fraction < 1.0, "holdout_fraction must be in [0, 1)"),
             (self.follow in FOLLOW, f"follow must be one of {FOLLOW}"),
-            (all(0.5 <= float(f) <= 2.0 and float(f) != 1.0 for f in self.speed_factors)
-             and len(set(map(float, self.speed_factors))) == len(self.speed_factors),
-             "speed_factors must be distinct numbers in [0.5, 2], none of them 1"),
-            (not self.speed_factors or len(self.speed_categories) > 0,
-             "speed_categories must name at least one category glob when speed_factors is set"),
+            *speed_rules(self.speed_factors, self.speed_categories),
             (self.ppo.learning_rate_decay_steps >= 0 and self.ppo.learning_rate_final >= 0,
              "ppo.learning_rate_decay_steps and ppo.learning_rate_final must be >= 0"),
         )  # fmt: skip

@@ -43,7 +43,7 @@ from grip.config import REMOVED_ANY_VALUE, RemovedSetting, drop_removed
 from grip.core.atomic import atomic_write
 from grip.core.checks import check
 from grip.core.rundir import RunDir
-from policies.config import REMOVED_IN
+from policies.config import REMOVED_IN, speed_rules
 
 VEC_ENVS: tuple[str, ...] = ("batched", "dummy")
 """How :class:`Distiller` steps its rollout environments (:attr:`DistillConfig.vec_env`)."""
@@ -96,6 +96,10 @@ class DistillConfig:
         reverse_categories: As ``grip policy train``'s: training clips of these categories,
             played backwards, join the reference set (``RUN/reference_train.npz``).
         mirror_references: As ``grip policy train``'s: the mirror image of every clip joins.
+        speed_factors: As ``grip policy train``'s: training clips of ``speed_categories``
+            played each of these times faster join the reference set (names
+            ``<clip>@x<factor>``, categories unchanged). Empty: none.
+        speed_categories: Category globs of the clips ``speed_factors`` plays faster.
         truth_references: The student also follows the ground truth of every training clip
             (the reference set holds each clip twice, ``follow = "both"`` of ``grip policy
             train``): rollouts on the truth, where the teacher's label needs no shift, mixed
@@ -126,6 +130,8 @@ class DistillConfig:
     fall_below_reference_m: float = 0.0
     reverse_categories: tuple[str, ...] = ("walk",)
     mirror_references: bool = True
+    speed_factors: tuple[float, ...] = ()
+    speed_categories: tuple[str, ...] = ("walk*",)
     truth_references: bool = False
     action_noise: float = 0.0
     threads: int = 0
@@ -150,6 +156,7 @@ class DistillConfig:
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
              "fall_height_m and max_episode_frames must be >= 0"),
             (self.vec_env in VEC_ENVS, f"vec_env must be one of {list(VEC_ENVS)}"),
+            *speed_rules(self.speed_factors, self.speed_categories),
         )  # fmt: skip
 
     def beta(self, iteration: int) -> float:

@@ -72,7 +72,9 @@ def cmd_distill(args: argparse.Namespace) -> int:
     ref_path = out / "reference_train.npz"
     build_training_reference(ref_path, args.data, split_paths(args.data, "train"), [kin],
                              cfg.reverse_categories, cfg.mirror_references,
-                             follow="both" if cfg.truth_references else "estimate")  # fmt: skip
+                             follow="both" if cfg.truth_references else "estimate",
+                             speed_factors=tuple(cfg.speed_factors),
+                             speed_categories=tuple(cfg.speed_categories))  # fmt: skip
     try:  # (refuses to resume with other settings than iterations changed, or other teachers)
         dist = Distiller(cfg, teachers, out, ref_path, make_tracking_env, progress=tqdm,
                          log=tqdm.write)
