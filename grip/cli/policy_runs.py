@@ -45,7 +45,8 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     truth; training clips of ``speed_categories`` also played each of ``speed_factors`` times
     faster) unless it exists. The augmentation settings are written beside it
     (``reference_train.json``): an existing set made with other settings is refused, not
-    silently reused. Shared by ``grip policy train`` and ``grip policy distill``."""
+    silently reused (a set without that record predates ``speed_factors``: it holds no
+    speed-scaled clips). Shared by ``grip policy train`` and ``grip policy distill``."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
@@ -61,11 +62,16 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
             was = json.loads(sidecar.read_text()) if sidecar.is_file() else None
         except (OSError, ValueError):
             was = None
-        if was is not None and was != made:
+        note = ""
+        if not isinstance(was, dict):  # (older: the rest unknown, no speed-scaled clips)
+            was = {**made, "speed_factors": [], "speed_categories": []}
+            note = f"; no readable {sidecar.name}: made before speed_factors existed"
+        if was != made:
             changed = sorted(k for k in made if was.get(k) != made[k])
+            before, now = ({k: d.get(k) for k in changed} for d in (was, made))
             raise CliError(f"{ref_path} was made with other settings ({', '.join(changed)}: "
-                           f"{ {k: was.get(k) for k in changed} } -> { {k: made[k] for k in changed} }); "
-                           "delete it to rebuild the reference set, or use a new run folder")  # fmt: skip
+                           f"{before} -> {now}{note}); delete it to rebuild the reference set, "
+                           "or use a new run folder")  # fmt: skip
         return
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
@@ -106,6 +112,6 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.kinematics.reference import with_mirrored_clips
 
         ref = with_mirrored_clips(ref)
+    atomic_write_text(sidecar, json.dumps(made, indent=1))  # (first: never a set without it)
     ref.save(ref_path)
-    atomic_write_text(sidecar, json.dumps(made, indent=1))
     print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
