@@ -60,8 +60,8 @@ def test_speed_scaled_recordings_join_the_reference_set(built: Path, tmp_path: P
         f"synthetic_{clip['clip_id']}@x1.25", f"synthetic_{clip['clip_id']}@x1.5"]
     assert all(r.category == cat for r in recs)  # the stages' category filters keep them
     # a test clip never contributes
-    assert not any(clip["clip_id"] in r.name
-                   for r in time_scaled_recordings(built, split["test"], [cat], (1.5,)))  # fmt: skip
+    test_recs = time_scaled_recordings(built, split["test"], [cat], (1.5,))
+    assert not any(clip["clip_id"] in r.name for r in test_recs)
     files, kin = split_paths(built, "train"), [kin_checkpoint(None)]
     ref_path = tmp_path / "speed.npz"
     build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
@@ -71,14 +71,23 @@ def test_speed_scaled_recordings_join_the_reference_set(built: Path, tmp_path: P
     assert sum("@x" in n for n in names) == len(recs)
     assert "speed-scaled recordings" in capsys.readouterr().out
     # the same folder with other settings is refused, not silently reused
-    with pytest.raises(CliError, match="speed_factors.*delete it"):
+    with pytest.raises(CliError, match=r"speed_factors.*delete it"):
         build_training_reference(ref_path, built, files, kin, speed_factors=(1.5,),
                                  speed_categories=(cat,))  # fmt: skip
     build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
                              speed_categories=(cat,))  # the same settings: kept  # fmt: skip
-    with pytest.raises(CliError, match="speed_categories.*no training clip"):
+    with pytest.raises(CliError, match=r"speed_categories.*no training clip"):
         build_training_reference(tmp_path / "none.npz", built, files, kin, speed_factors=(1.5,),
                                  speed_categories=("no-such-category",))  # fmt: skip
+    # a set made before its settings were recorded holds no speed-scaled clips: kept without
+    # speed_factors, refused with them
+    old_path = tmp_path / "old.npz"
+    build_training_reference(old_path, built, files, kin)
+    old_path.with_suffix(".json").unlink()
+    build_training_reference(old_path, built, files, kin)
+    with pytest.raises(CliError, match=r"speed_factors.*made before speed_factors existed"):
+        build_training_reference(old_path, built, files, kin, speed_factors=(1.5,),
+                                 speed_categories=(cat,))  # fmt: skip
 
 
 def test_speed_factors_are_checked_and_old_configs_load() -> None:
@@ -95,3 +104,32 @@ def test_speed_factors_are_checked_and_old_configs_load() -> None:
     old = dataclasses.asdict(PolicyRunConfig())
     del old["speed_factors"], old["speed_categories"]
     assert policy_config_from_dict(old, "old run").speed_factors == ()
+
+
+def test_distill_takes_the_speed_settings_and_set_spells_them() -> None:
+    import dataclasses
+
+    from grip.cli.errors import CliError
+    from grip.cli.paths import REPO_ROOT, load_run_config
+    from grip.motion.motion import TIME_SCALE_RANGE
+    from policies.config import SPEED_FACTOR_RANGE, PolicyRunConfig
+    from policies.distill import DistillConfig
+
+    assert SPEED_FACTOR_RANGE == TIME_SCALE_RANGE
+    for cls, kind, toml in ((PolicyRunConfig, "policy", "finetune.toml"),
+                            (DistillConfig, "distill", "distill.toml")):  # fmt: skip
+        path = REPO_ROOT / "configs" / "policy" / toml
+        cfg = load_run_config(path, kind, cls(), ["speed_factors=[1.25,1.5]"])
+        assert cfg.speed_factors == (1.25, 1.5) and cfg.speed_categories == ("walk*",)
+        cfg = load_run_config(path, kind, cls(), ['speed_factors=[2]',
+                                                  'speed_categories=["walk*","run*"]'])  # fmt: skip
+        assert cfg.speed_factors == (2,) and cfg.speed_categories == ("walk*", "run*")
+        for bad in ("speed_factors=1.5", 'speed_factors=["1.5"]', "speed_factors=[true]",
+                    "speed_factors=[1.5,1.50]", "speed_factors=[0.25]"):  # fmt: skip
+            with pytest.raises(CliError, match="speed_factors"):
+                load_run_config(path, kind, cls(), [bad])
+    with pytest.raises(ValueError, match="speed_categories"):
+        DistillConfig(speed_factors=(1.5,), speed_categories=())
+    old = dataclasses.asdict(DistillConfig())
+    del old["speed_factors"], old["speed_categories"]
+    assert DistillConfig(**old).speed_factors == ()
