@@ -25,14 +25,7 @@ function gripPacePlot(data, canvas, opts) {
   const shown = () => pace.series.filter((s) => opts.visible(s.body));
 
   function drawStatic(w, h) {
-    const off = document.createElement("canvas");
-    const dpr = window.devicePixelRatio || 1;
-    off.width = Math.round(w * dpr);
-    off.height = Math.round(h * dpr);
-    const ctx = off.getContext("2d");
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    ctx.fillStyle = "#ffffff";
-    ctx.fillRect(0, 0, w, h);
+    const { off, ctx } = gripOffscreenCanvas(w, h);
     const ph = h - top - bottom;
     const series = shown();
     let ymax = 0.2;

@@ -1,6 +1,7 @@
 /* The 2D plots of the GRIP viewer (grip/export/html.py inlines this file next to viewer.js).
  *
- * A classic script: it only defines gripPlots(), which gripViewer() calls once:
+ * A classic script: it only defines gripPlots(), which gripViewer() calls once, and
+ * gripOffscreenCanvas() (pace.js draws with it too):
  *   - the vertical ground reaction force of each foot ("grf-left", "grf-right" canvases): every
  *     shown body's against the insole force (dashed), GRIP's fall events shaded, with a cursor
  *     and the values at the current frame;
@@ -11,6 +12,20 @@
  * the data is drawn on a canvas, never put in as HTML.
  */
 "use strict";
+
+function gripOffscreenCanvas(w, h) {
+  // A white canvas of w x h CSS pixels at the screen's pixel ratio, for a plot's static layer
+  // (drawn once, then copied under the cursor on every frame). Also used by pace.js.
+  const off = document.createElement("canvas");
+  const dpr = window.devicePixelRatio || 1;
+  off.width = Math.round(w * dpr);
+  off.height = Math.round(h * dpr);
+  const ctx = off.getContext("2d");
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.fillStyle = "#ffffff";
+  ctx.fillRect(0, 0, w, h);
+  return { off, ctx };
+}
 
 function gripPlots(data, state, opts) {
   // opts: cssSize(canvas), niceStep(span, n)
@@ -45,14 +60,7 @@ function gripPlots(data, state, opts) {
   function drawGrfStatic(foot) {
     const canvas = $(`grf-${footNames[foot]}`);
     const { w, h } = cssSize(canvas);
-    const off = document.createElement("canvas");
-    const dpr = window.devicePixelRatio || 1;
-    off.width = Math.round(w * dpr);
-    off.height = Math.round(h * dpr);
-    const ctx = off.getContext("2d");
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    ctx.fillStyle = "#ffffff";
-    ctx.fillRect(0, 0, w, h);
+    const { off, ctx } = gripOffscreenCanvas(w, h);
     const m = plotMargin;
     const pw = w - m.l - m.r;
     const ph = h - m.t - m.b;
