@@ -19,6 +19,20 @@ TINY_POLICY = ["--set", "ppo.n_envs=2", "--set", "ppo.n_steps=32", "--set", "ppo
 _WALK = ("cmu", "bvh", "07_05.bvh")
 
 
+@pytest.fixture(autouse=True)
+def _input_limits_restored(monkeypatch):
+    """Every test starts with the input limits the suite was started with: a training command in a
+    test raises ``max_total_bytes`` for its run's reference set (``$GRIP_LIMITS``,
+    :func:`grip.cli.policy_runs.allow_reference_size`), which must not reach the next test."""
+    import os
+
+    from grip.cli import policy_runs
+    from grip.core.limits import LIMITS_ENV
+
+    monkeypatch.setenv(LIMITS_ENV, os.environ.get(LIMITS_ENV, ""))  # (restored after the test)
+    monkeypatch.setattr(policy_runs, "_ONE_INPUT", {})
+
+
 @pytest.fixture(scope="session")
 def cmu_walk_or_none():
     """CMU 07_05 (a slow walk, 4.3 s) from the shared clips, retargeted onto the default body

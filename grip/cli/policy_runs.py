@@ -7,6 +7,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+_ONE_INPUT: dict[str, float] = {}
+"""``max_total_bytes`` as this process had it before :func:`allow_reference_size` raised it."""
+
 HOLDOUT_FILE = "holdout.json"
 """Sequence names held out of a policy run's training (``holdout_fraction``), in the run folder."""
 
@@ -72,6 +75,7 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
             raise CliError(f"{ref_path} was made with other settings ({', '.join(changed)}: "
                            f"{before} -> {now}{note}); delete it to rebuild the reference set, "
                            "or use a new run folder")  # fmt: skip
+        allow_reference_size(reference_copies(made, len(kins)))
         return
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
@@ -114,4 +118,31 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         ref = with_mirrored_clips(ref)
     atomic_write_text(sidecar, json.dumps(made, indent=1))  # (first: never a set without it)
     ref.save(ref_path)
+    allow_reference_size(reference_copies(made, len(kins)))
     print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
+
+
+def reference_copies(made: dict, n_kins: int) -> int:
+    """How many copies of the training recordings a reference set made with the settings
+    ``made`` (the record :func:`build_training_reference` writes) and ``n_kins`` KinematicsNet
+    checkpoints holds at most: one per estimator (one for the truth alone; one more for the
+    truth beside the estimates), times one more per speed factor and one for the clips played
+    backwards, times two with mirror images."""
+    sets = 1 if made["follow"] == "truth" else max(1, n_kins) + (made["follow"] == "both")
+    per_set = 1 + len(made["speed_factors"]) + bool(made["reverse_categories"])
+    return sets * per_set * (2 if made["mirror"] else 1)
+
+
+def allow_reference_size(copies: int) -> None:
+    """Let this process and its workers read a training reference set of ``copies`` copies of
+    the training recordings: ``max_total_bytes`` (what one input file may expand to, 1 GiB by
+    default, ``$GRIP_LIMITS`` included) is raised to ``copies`` times itself. The limit is meant
+    for one input; the run's own set holds several by its recorded settings (a speed-scaled set
+    of the whole corpus is 1.07 GB), and those settings are the command's, checked against the
+    set's record, not read from a file the run was handed."""
+    from grip.core.limits import active_limits, set_active_limits
+
+    limits = active_limits()
+    base = _ONE_INPUT.setdefault("max_total_bytes", limits.max_total_bytes)  # (not compounded)
+    if base * copies > limits.max_total_bytes:
+        set_active_limits(limits.with_overrides({"max_total_bytes": base * copies}))

@@ -133,3 +133,36 @@ def test_distill_takes_the_speed_settings_and_set_spells_them() -> None:
     old = dataclasses.asdict(DistillConfig())
     del old["speed_factors"], old["speed_categories"]
     assert DistillConfig(**old).speed_factors == ()
+
+
+def test_a_runs_own_reference_set_may_hold_several_copies(built: Path, tmp_path: Path,
+                                                           monkeypatch) -> None:  # fmt: skip
+    """``max_total_bytes`` is a limit for one input; a run's speed-scaled set holds three
+    copies of the training walks (the whole corpus' set is 1.07 GB), and the run reads it back
+    under that limit times the copies its settings make, however often the set is opened."""
+    from grip.cli.policy_runs import build_training_reference, reference_copies
+    from grip.cli.recordings import kin_checkpoint, split_paths
+    from grip.core.limits import LIMITS_ENV, active_limits, check_npz
+    from grip.core.reference import ReferenceError as RefError
+
+    clip, _ = _train_clip(built)
+    files, kin = split_paths(built, "train"), [kin_checkpoint(None)]
+    ref_path = tmp_path / "speed.npz"
+    build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
+                             speed_categories=(clip["category"],))  # fmt: skip
+    size = sum(np.prod(s) * d.itemsize for s, d in check_npz(ref_path, active_limits()).values())
+    one = int(size * 0.6)  # a limit the set is over, as the corpus' set is over 1 GiB
+    monkeypatch.setenv(LIMITS_ENV, f"max_total_bytes={one}")
+    monkeypatch.setattr("grip.cli.policy_runs._ONE_INPUT", {})
+    with pytest.raises(RefError, match="max_total_bytes"):
+        ReferenceSet.load(ref_path)
+    for _ in range(2):  # the resumed run: the set is kept, the limit raised once, not twice
+        build_training_reference(ref_path, built, files, kin, speed_factors=(1.25, 1.5),
+                                 speed_categories=(clip["category"],))  # fmt: skip
+        assert active_limits().max_total_bytes == 3 * one
+    assert len(ReferenceSet.load(ref_path).clips) > len(files)
+    made = {"follow": "estimate", "speed_factors": [1.5], "reverse_categories": ["walk"],
+            "mirror": True}  # fmt: skip
+    assert reference_copies(made, 1) == 6 and reference_copies(made, 2) == 12
+    assert reference_copies({**made, "follow": "truth"}, 3) == 6
+    assert reference_copies({**made, "follow": "both"}, 1) == 12
