@@ -190,6 +190,8 @@ class Distiller:
             passes :func:`envs.factory.make_tracking_env`).
         progress: tqdm-like factory ``progress(total=..., initial=...)`` (None: no bar).
         log: Where each iteration's summary line goes (None: nowhere).
+        specialists: Families whose clips learn from their own teacher instead
+            (:class:`policies.teachers.TeacherRouter`; issue 47's specialists).
 
     Raises:
         ValueError: naming the file, when a teacher file is not a policy, its members act
@@ -200,14 +202,19 @@ class Distiller:
     def __init__(self, cfg: DistillConfig, teacher: Sequence[str | os.PathLike],
                  run_dir: str | os.PathLike, reference: str | os.PathLike,
                  make_env: Callable, progress: Callable | None = None,
-                 log: Callable[[str], None] | None = None) -> None:  # fmt: skip
+                 log: Callable[[str], None] | None = None,
+                 specialists: Sequence = ()) -> None:  # fmt: skip
         from policies.ensemble import PolicyEnsemble
         from policies.runner import PolicyRunner
+        from policies.teachers import TeacherRouter
 
         self.cfg = cfg
         self.rundir = RunDir(run_dir, RESUMABLE, "'grip policy distill' run")
         self.teacher_resolved = [str(Path(t).resolve()) for t in teacher]
-        self.rundir.check_resume(cfg, DistillConfig(), {"teacher": self.teacher_resolved},
+        self.specialists_resolved = [[list(s.categories), str(Path(s.policy).resolve())]
+                                     for s in specialists] or None  # fmt: skip
+        self.rundir.check_resume(cfg, DistillConfig(), {"teacher": self.teacher_resolved,
+                                                        "specialists": self.specialists_resolved},
                                  upgrade=_upgrade_settings)  # fmt: skip
         self.run_dir = self.rundir.path
         self.reference = str(reference)
@@ -228,9 +235,11 @@ class Distiller:
         if len(follows) > 1:
             raise ValueError(f"{', '.join(self.teacher_files)}: the teacher's members follow "
                              "different references (some the ground truth, some the estimate)")
-        self.privileged = follows == {"truth"}
-        """The teacher follows the ground truth (``follow = "truth"``): it acts on the truth's
+        self.router = TeacherRouter(self.teacher, follows == {"truth"}, specialists)
+        self.privileged = self.router.privileged
+        """A teacher follows the ground truth (``follow = "truth"``): it acts on the truth's
         observation of each state and its actions are shifted to the student's estimate."""
+        self._families: dict[str, int] = {}  # clip name -> the router's family
         # the student's file: the member's payload, with the teacher's fall detector (the
         # first member's discriminator) where the member's file stores none
         disc = {k: payloads[0][k] for k in ("disc", "amp_frame_dim") if k in payloads[0]}
@@ -347,11 +356,14 @@ class Distiller:
         ended = falls = 0
         ep_len = np.zeros(c.n_envs, np.int64)
         lens: list[int] = []
+        taught = np.zeros(len(self.router.specialists) + 1, np.int64)  # [-1] the default
         try:
             obs = venv.reset()
+            families = self._clip_families([info["clip"] for info in venv.reset_infos])
             for _ in range(steps):
                 x = self.student._flat(obs)
-                a_t = self._teacher_action(obs)
+                a_t = self.router.act(obs, families)
+                np.add.at(taught, families, 1)
                 with torch.no_grad():
                     a_s = self.student.actor(torch.as_tensor(x, dtype=torch.float32)).numpy()
                 a_s = np.clip(a_s, -1.0, 1.0)
@@ -363,6 +375,9 @@ class Distiller:
                 if c.action_noise > 0:
                     a = np.clip(a + c.action_noise * rng.standard_normal(a.shape), -1.0, 1.0)
                 obs, _r, dones, infos = venv.step(a)
+                families = self._clip_families([
+                    venv.reset_infos[i]["clip"] if d else infos[i]["clip"]
+                    for i, d in enumerate(dones)])  # (a done env has begun its next episode)
                 ep_len += 1
                 for i in np.flatnonzero(dones):
                     ended += 1
@@ -378,16 +393,21 @@ class Distiller:
                  "falls_per_1k": 1000.0 * falls / n,
                  "ep_len": float(np.mean(lens)) if lens else float("nan"),
                  "onpolicy_mse": sq_err / n}  # fmt: skip
+        if self.router.specialists:  # decisions labelled by each specialist, then the default
+            stats["taught"] = [int(t) for t in taught]
         return np.concatenate(xs), np.concatenate(ys), stats
 
-    def _teacher_action(self, obs: dict) -> np.ndarray:
-        """The teacher's action in the student's terms: a privileged teacher acts on the
-        observation against the ground truth, and its action (relative to the truth) becomes
-        the student's (relative to the estimate) with the environment's ``teacher_shift``."""
-        if not self.privileged:
-            return self.teacher.act(obs)
-        a = self.teacher.act({**obs, "kinematic": obs["teacher_kinematic"]})
-        return np.clip(a + obs["teacher_shift"], -1.0, 1.0)
+    def _clip_families(self, clips: Sequence[str]) -> np.ndarray:
+        """The router's family (:meth:`policies.teachers.TeacherRouter.family`) of each of the
+        reference set's ``clips`` (names)."""
+        if not self.router.specialists:
+            return np.full(len(clips), -1, np.int64)
+        if not self._families:
+            from grip.core.reference_sets import load_reference
+
+            self._families = {c.name: self.router.family(c.category)
+                              for c in load_reference(self.reference).clips}  # fmt: skip
+        return np.array([self._families[c] for c in clips], np.int64)
 
     def fit(self, x: np.ndarray, y: np.ndarray) -> float:
         """``epochs`` passes of mean-squared error over ``(x, y)``; returns the last pass's mean
@@ -465,6 +485,8 @@ class Distiller:
         info = json.loads(payload.get("info", "{}"))
         info = {k: v for k, v in info.items() if k == "holdout"}
         info["distilled"] = {"teacher": self.teacher_names, "init_member": self.cfg.init_member,
+                             "specialists": [[cats, Path(f).name] for cats, f in
+                                             self.specialists_resolved or ()],
                              "iterations": self.iteration,
                              "decisions": sum(h["decisions"] for h in self.history),
                              "wall_s": self.wall_s()}  # fmt: skip

@@ -39,6 +39,35 @@ def _driving_settings(cfg: TrackingEnvConfig) -> TrackingEnvConfig:
     return dataclasses.replace(cfg, reward=TrackingEnvConfig().reward, reference="")
 
 
+def check_same_driving(policies: Sequence, names: Sequence[str]) -> None:
+    """Refuse policies that do not drive the humanoid as the first one does: other observation
+    parts or sizes, or other environment settings besides the reward and the reference file
+    (:class:`PolicyEnsemble`'s members, :class:`policies.teachers.TeacherRouter`'s teachers).
+
+    Raises:
+        ValueError: naming the policy and what differs.
+    """
+    first, base = policies[0], _driving_settings(policies[0].env_cfg)
+    for m, name in zip(policies[1:], names[1:], strict=True):
+        if m.obs_keys != first.obs_keys:
+            raise ValueError(f"{name}: observation parts {m.obs_keys} differ from "
+                             f"{names[0]}'s {first.obs_keys}")  # fmt: skip
+        if _obs_size(m) != _obs_size(first):
+            raise ValueError(f"{name}: observations of {_obs_size(m)} values, {names[0]}'s "
+                             f"of {_obs_size(first)} (another sensor set?)")  # fmt: skip
+        mine = _driving_settings(m.env_cfg)
+        if mine != base:
+            diff = [f.name for f in dataclasses.fields(base)
+                    if getattr(base, f.name) != getattr(mine, f.name)]  # fmt: skip
+            raise ValueError(f"{name}: environment settings differ from {names[0]}'s "
+                             f"({', '.join(diff)}): its actions mean something else")
+
+
+def _obs_size(policy) -> int:
+    """How many observation values ``policy`` (one policy or an ensemble) reads."""
+    return int(getattr(policy, "members", [policy])[0]._mean.shape[-1])
+
+
 class PolicyEnsemble:
     """The mean action of several :class:`policies.runner.PolicyRunner`: a
     :class:`policies.controller.Controller`.
@@ -65,20 +94,7 @@ class PolicyEnsemble:
             raise ValueError("an ensemble needs at least one policy")
         names = list(names) if names is not None else [f"policy {i}" for i in range(len(members))]
         first = members[0]
-        base = _driving_settings(first.env_cfg)
-        for m, name in zip(members[1:], names[1:], strict=True):
-            if m.obs_keys != first.obs_keys:
-                raise ValueError(f"{name}: observation parts {m.obs_keys} differ from "
-                                 f"{names[0]}'s {first.obs_keys}")  # fmt: skip
-            if m._mean.shape != first._mean.shape:
-                raise ValueError(f"{name}: observations of {m._mean.size} values, {names[0]}'s "
-                                 f"of {first._mean.size} (another sensor set?)")  # fmt: skip
-            mine = _driving_settings(m.env_cfg)
-            if mine != base:
-                diff = [f.name for f in dataclasses.fields(base)
-                        if getattr(base, f.name) != getattr(mine, f.name)]  # fmt: skip
-                raise ValueError(f"{name}: environment settings differ from {names[0]}'s "
-                                 f"({', '.join(diff)}): its actions mean something else")
+        check_same_driving(members, names)
         self.members = list(members)
         self.obs_keys = list(first.obs_keys)
         self.env_cfg = first.env_cfg

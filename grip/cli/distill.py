@@ -6,6 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from policies.teachers import SPECIALIST_SYNTAX
+
 DEFAULT_CONFIG = "configs/policy/distill.toml"
 
 
@@ -35,6 +37,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--teacher", type=Path, action="append", default=None, metavar="POLICY",
                    help="policy or ensemble file (default: the shipped one); repeat it for the "
                    "mean action of several")  # fmt: skip
+    p.add_argument("--specialist", action="append", default=[], metavar=SPECIALIST_SYNTAX,
+                   help="the teacher of one motion family (repeatable): clips whose category "
+                   "matches one of the globs learn from this policy file, every other clip "
+                   "from --teacher (e.g. walk-back,walk-side=runs/spec_walkbs/policy.pt)")
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
     p.add_argument("--out", required=True, type=Path, help="run folder (created or resumed)")
     p.add_argument("--kin", type=Path, default=None,
@@ -59,6 +65,7 @@ def cmd_distill(args: argparse.Namespace) -> int:
     from grip.cli.policy_runs import build_training_reference
     from grip.cli.recordings import kin_checkpoint, split_paths
     from policies.distill import DistillConfig, Distiller, plot_distill_curves
+    from policies.teachers import Specialist
 
     cfg = load_run_config(args.config or REPO_ROOT / DEFAULT_CONFIG, "distill", DistillConfig(),
                           args.set)  # fmt: skip
@@ -66,6 +73,10 @@ def cmd_distill(args: argparse.Namespace) -> int:
     for t in teachers:
         if not Path(t).is_file():
             raise CliError(f"{t}: no such policy file")
+    try:
+        specialists = [Specialist.parse(text) for text in args.specialist]
+    except ValueError as e:
+        raise CliError(str(e)) from e
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     kin = kin_checkpoint(args.kin)
@@ -77,15 +88,18 @@ def cmd_distill(args: argparse.Namespace) -> int:
                              speed_categories=tuple(cfg.speed_categories))  # fmt: skip
     try:  # (refuses to resume with other settings than iterations changed, or other teachers)
         dist = Distiller(cfg, teachers, out, ref_path, make_tracking_env, progress=tqdm,
-                         log=tqdm.write)
+                         log=tqdm.write, specialists=specialists)
     except ValueError as e:
         raise CliError(str(e)) from e
     dist.rundir.write_config(cfg, teacher=dist.teacher_resolved,
+                             specialists=dist.specialists_resolved,
                              data=str(args.data.resolve()), kin=str(kin.resolve()))  # fmt: skip
     names = dist.teacher_names
     print(f"teacher: {len(names)} polic{'ies' if len(names) > 1 else 'y'}; the student starts "
           f"from member {cfg.init_member}, {names[cfg.init_member]}"
           f"{' (fresh weights)' if cfg.fresh_student else ''}")  # fmt: skip
+    for sp in specialists:
+        print(f"specialist: clips of {', '.join(sp.categories)} learn from {sp.policy}")
     t0 = time.perf_counter()
     try:
         dist.run()
