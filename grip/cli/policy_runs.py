@@ -50,9 +50,11 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     (``reference_train.json``): an existing set made with other settings is refused, not
     silently reused (a set without that record predates ``speed_factors``: it holds no
     speed-scaled clips). Shared by ``grip policy train`` and ``grip policy distill``."""
+    from tqdm import tqdm
 
     from grip.cli.errors import CliError
-    from grip.core.runs import release_freed_memory
+    from grip.cli.recordings import load_recordings
+    from grip.core.atomic import atomic_write_text
 
     made = {"reverse_categories": list(reverse_categories), "mirror": bool(mirror),
             "follow": follow, "speed_factors": [float(f) for f in speed_factors],
@@ -75,21 +77,6 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
                            "or use a new run folder")  # fmt: skip
         allow_reference_size(reference_copies(made, len(kins)))
         return
-    _write_reference_set(ref_path, data, files, kins, reverse_categories, mirror, follow,
-                         speed_factors, speed_categories, made)  # fmt: skip
-    release_freed_memory()  # (the recordings and estimates: gigabytes the run never reads)
-    allow_reference_size(reference_copies(made, len(kins)))
-
-
-def _write_reference_set(ref_path: Path, data: Path, files: list[Path], kins: list[Path],
-                         reverse_categories, mirror, follow, speed_factors, speed_categories,
-                         made: dict) -> None:  # fmt: skip
-    """:func:`build_training_reference`'s build: the set and its settings record ``made``."""
-    from tqdm import tqdm
-
-    from grip.cli.errors import CliError
-    from grip.cli.recordings import load_recordings
-    from grip.core.atomic import atomic_write_text
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
 
@@ -129,8 +116,9 @@ def _write_reference_set(ref_path: Path, data: Path, files: list[Path], kins: li
         from grip.kinematics.reference import with_mirrored_clips
 
         ref = with_mirrored_clips(ref)
-    atomic_write_text(ref_path.with_suffix(".json"), json.dumps(made, indent=1))  # (first)
+    atomic_write_text(sidecar, json.dumps(made, indent=1))  # (first: never a set without it)
     ref.save(ref_path)
+    allow_reference_size(reference_copies(made, len(kins)))
     print(f"wrote {ref_path}: {len(ref)} clips, {ref.total_frames} frames")
 
 

@@ -249,23 +249,6 @@ def exit_with_parent() -> None:
                      name="exit-with-parent").start()  # fmt: skip
 
 
-def release_freed_memory() -> bool:
-    """Hand the memory this process has freed back to the system (glibc's ``malloc_trim``).
-
-    A long run that first builds something large (a training reference set: gigabytes of
-    recordings and estimates) and then frees it keeps those pages otherwise: glibc's heap
-    does not shrink by itself, so the run holds twice what it uses (run P6: 14 GB resident
-    instead of 7). Returns whether anything was done (False off glibc)."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        trim = ctypes.CDLL("libc.so.6").malloc_trim
-    except (OSError, AttributeError):
-        return False
-    trim(0)
-    return True
-
-
 def _watch_parent(parent: int) -> None:
     while True:
         time.sleep(PARENT_POLL_S)

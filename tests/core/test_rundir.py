@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
-import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import pytest
 
@@ -97,25 +94,3 @@ def test_check_names_the_class_and_the_first_broken_rule():
     check_fields(_Opt(), lambda v: v is not None, "must be set")
     with pytest.raises(ValueError, match=r"^_Opt\.arch must be a float, got \(8, 8\)$"):
         check_fields(_Opt(), lambda v: isinstance(v, float), "must be a float")
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc_trim")
-def test_freed_memory_goes_back_to_the_system() -> None:
-    """A run that built something large and freed it holds those pages until
-    :func:`grip.core.runs.release_freed_memory` (glibc's heap does not shrink by itself):
-    many mid-sized arrays, as a reference set's build leaves them, freed and released."""
-    import numpy as np
-
-    from grip.core.runs import release_freed_memory
-
-    def rss_mb() -> float:
-        pages = int(Path("/proc/self/statm").read_text().split()[1])
-        return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
-
-    before = rss_mb()
-    arrays = [np.ones(6000) for _ in range(4000)]  # 48 KB each: 192 MB on the heap
-    keep = [np.ones(3000) for _ in range(50)]  # allocated after them: the heap's top stays up
-    assert rss_mb() > before + 150
-    del arrays
-    assert release_freed_memory()
-    assert rss_mb() < before + 60 and len(keep) == 50
