@@ -8,6 +8,10 @@ docs/controller.md quotes for the environment's PD control and for the energy we
 configs/policy.
 
     python benchmarks/env_pd_tracking.py [--clip ../shared/data/motions/cmu/bvh/07_05.bvh]
+        [--time-scale 1.5]
+
+``--time-scale F`` plays the clip F times faster (``Motion.time_scaled``): can the PD control
+follow a faster gait's swing at all (issue 46: every controller tops out near 1.1 m/s)?
 """
 
 from __future__ import annotations
@@ -31,10 +35,15 @@ def main() -> None:
     root = default_motions_dir()
     ap.add_argument("--clip", default=str(root / "cmu/bvh/07_05.bvh") if root else None,
                     help="motion clip (default: CMU 07_05, a slow walk)")  # fmt: skip
+    ap.add_argument("--time-scale", type=float, default=1.0,
+                    help="play the clip this many times faster (0.5-2)")
     args = ap.parse_args()
     if not args.clip:
         ap.error("no shared motion data found: pass --clip")
-    rec = recording_from_motion(retarget(load_clip(args.clip)), SynthConfig(), seed=0, noise=False)
+    motion = retarget(load_clip(args.clip))
+    if args.time_scale != 1.0:
+        motion = motion.time_scaled(args.time_scale)
+    rec = recording_from_motion(motion, SynthConfig(), seed=0, noise=False)
     ref = ReferenceSet([oracle_reference_clip(rec)], ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist"),
                        True)  # fmt: skip
     for ff in (True, False):

@@ -152,6 +152,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--segments", type=int, default=0,
                     help="at most this many, evenly over the split's list (0: all)")
     ap.add_argument("--segment-frames", type=int, default=500)
+    ap.add_argument("--speed-factor", type=float, default=None,
+                    help="play the split's clips this many times faster (sensors synthesised "
+                    "again, as speed_factors of 'grip policy train' makes its training walks): "
+                    "has a controller trained on the faster training walks learnt their pace?")
     ap.add_argument("--references", default="estimate,truth")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
@@ -160,12 +164,20 @@ def main(argv: list[str] | None = None) -> None:
 
     torch.set_num_threads(1)
     files = split_files(args.data, args.split)
+    tmp = None
+    if args.speed_factor is not None:
+        import tempfile
+
+        tmp = tempfile.TemporaryDirectory(prefix="pace_speed_")
+        files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
+                              Path(tmp.name))  # fmt: skip
     segs = list_segments(files, args.segment_frames, args.categories.split(","))
     if 0 < args.segments < len(segs):
         segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
     setup = PolicySetup((args.policy,), args.kin)
     out: dict = {"policy": args.policy, "kin": args.kin, "data": args.data, "split": args.split,
-                 "segments": len(segs), "by_reference": {}}  # fmt: skip
+                 "speed_factor": args.speed_factor, "segments": len(segs),
+                 "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
         rows = play(setup, segs, ref)
         kept = [r for r in rows if not r["fell"]]
@@ -185,6 +197,22 @@ def main(argv: list[str] | None = None) -> None:
     for ref, r in out["by_reference"].items():
         print(ref, json.dumps(r["median_without_fall"]), "max gap 5 s",
               r["max_gap_5s_without_fall_m"], json.dumps(r["reward_at_median_deficit"]))
+
+
+def _speed_scaled(data: str, files: list[Path], categories: list[str], factor: float,
+                  folder: Path) -> list[Path]:  # fmt: skip
+    """The clips of ``categories`` among ``files`` played ``factor`` times faster, written to
+    ``folder`` (:func:`grip.dataset.augment.time_scaled_recordings`)."""
+    from grip.dataset.augment import time_scaled_recordings
+    from prism_tools.io import save_recording
+
+    recs = time_scaled_recordings(data, [f.stem for f in files], categories, (factor,))
+    out = []
+    for r in recs:
+        path = folder / f"{r.name.replace('/', '__')}.npz"
+        save_recording(r, path)
+        out.append(path)
+    return out
 
 
 if __name__ == "__main__":
