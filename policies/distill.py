@@ -164,20 +164,6 @@ class DistillConfig:
         return self.beta0 * self.beta_decay**iteration
 
 
-def teacher_payloads(paths: Sequence[str | os.PathLike]) -> tuple[list[dict], list[str]]:
-    """The single-policy payloads of every member of the policy or ensemble files ``paths`` and
-    their names (:func:`policies.ensemble.member_payloads`)."""
-    from policies.ensemble import member_payloads
-
-    payloads: list[dict] = []
-    names: list[str] = []
-    for p in paths:
-        for ck, name in member_payloads(p):
-            payloads.append(ck)
-            names.append(name)
-    return payloads, names
-
-
 class Distiller:
     """A resumable DAgger run in ``run_dir``.
 
@@ -204,9 +190,8 @@ class Distiller:
                  make_env: Callable, progress: Callable | None = None,
                  log: Callable[[str], None] | None = None,
                  specialists: Sequence = ()) -> None:  # fmt: skip
-        from policies.ensemble import PolicyEnsemble
         from policies.runner import PolicyRunner
-        from policies.teachers import TeacherRouter
+        from policies.teachers import TeacherRouter, load_teacher
 
         self.cfg = cfg
         self.rundir = RunDir(run_dir, RESUMABLE, "'grip policy distill' run")
@@ -222,20 +207,13 @@ class Distiller:
         self.progress = progress
         self.log = log or (lambda _s: None)
         self.teacher_files = [str(p) for p in teacher]
-        payloads, self.teacher_names = teacher_payloads(self.teacher_files)
+        loaded = load_teacher(self.teacher_files)
+        payloads, self.teacher_names = loaded.payloads, loaded.names
         if not cfg.init_member < len(payloads):
             raise ValueError(f"init_member {cfg.init_member}: the teacher has {len(payloads)} "
                              f"member(s) (0..{len(payloads) - 1})")  # fmt: skip
-        runners = [PolicyRunner.from_payload(ck, n)
-                   for ck, n in zip(payloads, self.teacher_names, strict=True)]  # fmt: skip
-        self.teacher = (
-            runners[0] if len(runners) == 1 else PolicyEnsemble(runners, self.teacher_names)
-        )
-        follows = {r.info.get("follow", "estimate") for r in runners}
-        if len(follows) > 1:
-            raise ValueError(f"{', '.join(self.teacher_files)}: the teacher's members follow "
-                             "different references (some the ground truth, some the estimate)")
-        self.router = TeacherRouter(self.teacher, follows == {"truth"}, specialists)
+        self.teacher = loaded.controller
+        self.router = TeacherRouter(self.teacher, loaded.privileged, specialists)
         self.privileged = self.router.privileged
         """A teacher follows the ground truth (``follow = "truth"``): it acts on the truth's
         observation of each state and its actions are shifted to the student's estimate."""
@@ -375,9 +353,10 @@ class Distiller:
                 if c.action_noise > 0:
                     a = np.clip(a + c.action_noise * rng.standard_normal(a.shape), -1.0, 1.0)
                 obs, _r, dones, infos = venv.step(a)
-                families = self._clip_families([
-                    venv.reset_infos[i]["clip"] if d else infos[i]["clip"]
-                    for i, d in enumerate(dones)])  # (a done env has begun its next episode)
+                if self.router.specialists:  # (a done env has begun its next episode)
+                    families = self._clip_families([
+                        venv.reset_infos[i]["clip"] if d else infos[i]["clip"]
+                        for i, d in enumerate(dones)])  # fmt: skip
                 ep_len += 1
                 for i in np.flatnonzero(dones):
                     ended += 1
@@ -399,7 +378,7 @@ class Distiller:
 
     def _clip_families(self, clips: Sequence[str]) -> np.ndarray:
         """The router's family (:meth:`policies.teachers.TeacherRouter.family`) of each of the
-        reference set's ``clips`` (names)."""
+        reference set's ``clips`` (names); -1 for all without specialists."""
         if not self.router.specialists:
             return np.full(len(clips), -1, np.int64)
         if not self._families:

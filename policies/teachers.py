@@ -53,25 +53,44 @@ class Specialist:
         return any(fnmatch.fnmatch(category, g) for g in self.categories)
 
 
-def _load(path: str | os.PathLike):
-    """The policy or ensemble file ``path`` as one controller, its member names and whether it
-    follows the ground truth.
+@dataclass
+class LoadedTeacher:
+    """Policy or ensemble files read as one teacher (:func:`load_teacher`).
+
+    Attributes:
+        controller: One :class:`policies.runner.PolicyRunner` or a
+            :class:`policies.ensemble.PolicyEnsemble` of every member.
+        privileged: Its members follow the ground truth (``follow = "truth"``).
+        payloads: Every member's single-policy payload, in order.
+        names: Every member's name, in order.
+    """
+
+    controller: object
+    privileged: bool
+    payloads: list[dict]
+    names: list[str]
+
+
+def load_teacher(paths: Sequence[str | os.PathLike]) -> LoadedTeacher:
+    """The members of the policy or ensemble files ``paths`` as one teacher (their mean action).
 
     Raises:
-        ValueError: naming the file, when its members follow different references.
+        FileNotFoundError: A file is missing.
+        ValueError: naming the files, when one is not a policy file, or the members follow
+            different references or drive the humanoid differently.
     """
     from policies.ensemble import PolicyEnsemble, member_payloads
     from policies.runner import PolicyRunner
 
-    members = member_payloads(path)
-    names = [n for _, n in members]
+    members = [m for p in paths for m in member_payloads(p)]
+    payloads, names = [ck for ck, _ in members], [n for _, n in members]
     runners = [PolicyRunner.from_payload(ck, n) for ck, n in members]
     follows = {r.info.get("follow", "estimate") for r in runners}
     if len(follows) > 1:
-        raise ValueError(f"{path}: the teacher's members follow different references (some "
-                         "the ground truth, some the estimate)")  # fmt: skip
-    teacher = runners[0] if len(runners) == 1 else PolicyEnsemble(runners, names)
-    return teacher, follows == {"truth"}
+        raise ValueError(f"{', '.join(str(p) for p in paths)}: the teacher's members follow "
+                         "different references (some the ground truth, some the estimate)")
+    controller = runners[0] if len(runners) == 1 else PolicyEnsemble(runners, names)
+    return LoadedTeacher(controller, follows == {"truth"}, payloads, names)
 
 
 class TeacherRouter:
@@ -86,7 +105,6 @@ class TeacherRouter:
     Attributes:
         privileged: Some teacher follows the ground truth: the rollouts need the teacher's
             observation keys (``teacher_obs``).
-        names: The specialists' file names, in order.
 
     Raises:
         ValueError: naming the file, when a specialist cannot be read, mixes references or
@@ -103,12 +121,11 @@ class TeacherRouter:
         for s in self.specialists:
             if not Path(s.policy).is_file():
                 raise ValueError(f"{s.policy}: no such policy file (--specialist)")
-            t, priv = _load(s.policy)
-            check_same_driving([default, t], ["the default teacher", s.policy])
-            self._teachers.append((t, priv))
+            t = load_teacher([s.policy])
+            check_same_driving([default, t.controller], ["the default teacher", s.policy])
+            self._teachers.append((t.controller, t.privileged))
         self._default_privileged = default_privileged
         self.privileged = default_privileged or any(p for _, p in self._teachers)
-        self.names = [Path(s.policy).name for s in self.specialists]
 
     def family(self, category: str) -> int:
         """The index of the specialist that teaches clips of ``category``; -1: the default."""
