@@ -164,6 +164,38 @@ class DistillConfig:
         return self.beta0 * self.beta_decay**iteration
 
 
+class SampleBuffer:
+    """The newest ``capacity`` samples ``(x, y)`` of a distillation, in one preallocated pair of
+    arrays written in place (a ring): no second copy of the kept samples is ever made, so a
+    student's memory stays at one copy of ``max_samples`` however many iterations it runs.
+    The order of the rows is the ring's, not the samples' (the fit draws them shuffled)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = int(capacity)
+        self.n = self._next = 0
+        self._x: np.ndarray | None = None
+        self._y: np.ndarray | None = None
+
+    def add(self, x: np.ndarray, y: np.ndarray) -> None:
+        """Keep ``x (N, X)``, ``y (N, Y)`` (the oldest kept rows make room)."""
+        if len(x) != len(y):
+            raise ValueError(f"samples: {len(x)} inputs against {len(y)} targets")
+        if self._x is None:
+            self._x = np.empty((self.capacity, *x.shape[1:]), x.dtype)
+            self._y = np.empty((self.capacity, *y.shape[1:]), y.dtype)
+        x, y = x[-self.capacity :], y[-self.capacity :]
+        rows = (self._next + np.arange(len(x))) % self.capacity
+        self._x[rows], self._y[rows] = x, y
+        self._next = int((self._next + len(x)) % self.capacity)
+        self.n = min(self.capacity, self.n + len(x))
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """The kept rows (views, not copies)."""
+        if self._x is None:
+            raise ValueError("no samples kept yet")
+        return self._x[: self.n], self._y[: self.n]
+
+
 class Distiller:
     """A resumable DAgger run in ``run_dir``.
 
@@ -230,7 +262,7 @@ class Distiller:
         self.optim = torch.optim.Adam(self.student.actor.parameters(), lr=cfg.learning_rate)
         self.iteration = 0
         self.history: list[dict] = []
-        self._chunks: list[tuple[np.ndarray, np.ndarray]] | None = None  # newest last
+        self._kept: SampleBuffer | None = None  # the samples fit on (read on first use)
 
     # -------------------------------------------------------------- bookkeeping
     @property
@@ -275,22 +307,19 @@ class Distiller:
 
     def _add_data(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Keep one iteration's samples; returns the newest ``max_samples`` of all iterations
-        done: normalised student inputs and teacher actions (float16). The iterations of a
-        resumed run are read from their files once, later ones kept in memory."""
-        if self._chunks is None:
-            self._chunks = []
+        done (:class:`SampleBuffer`): normalised student inputs and teacher actions (float16).
+        The iterations of a resumed run are read from their files once, later ones kept in
+        memory."""
+        if self._kept is None:
+            self._kept = SampleBuffer(self.cfg.max_samples)
             for f in self._data_files()[:-1]:  # the last one is (x, y)
                 try:
                     with np.load(f, allow_pickle=False) as z:
-                        self._chunks.append((z["x"], z["y"]))
+                        self._kept.add(z["x"], z["y"])
                 except (OSError, ValueError, KeyError) as e:
                     raise ValueError(f"{f}: unreadable distillation data ({e})") from e
-        self._chunks.append((x, y))
-        while sum(len(cx) for cx, _ in self._chunks[1:]) >= self.cfg.max_samples:
-            self._chunks.pop(0)  # older iterations than the newest max_samples need
-        xa = np.concatenate([cx for cx, _ in self._chunks])[-self.cfg.max_samples :]
-        ya = np.concatenate([cy for _, cy in self._chunks])[-self.cfg.max_samples :]
-        return xa, ya
+        self._kept.add(x, y)
+        return self._kept.samples()
 
     def _make_env(self):
         """The iteration's rollout environments: GRIP's stage-2 episodes with the teacher's

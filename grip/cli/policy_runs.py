@@ -99,14 +99,14 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         desc = "ground truth as the reference" if truth else f"KinematicsNet estimates ({kin.name})"
         with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
             sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin),
-                                            truth=truth))  # fmt: skip
+                                            truth=truth, compact=True))  # fmt: skip
         if truth:
             break  # (the truth is the same whichever checkpoint gave the feature settings)
     suffixes = None
     if follow == "both" and est is not None:
         with tqdm(total=len(recs), unit="rec", desc="ground truth as the reference") as bar:
             sets.append(build_reference_set(recs, est, progress=bar.update, source="truth",
-                                            truth=True))  # fmt: skip
+                                            truth=True, compact=True))  # fmt: skip
         suffixes = [f"#{k}" for k in range(len(sets) - 1)] + ["#truth"]
     try:
         ref = merge_reference_sets(sets, source=str(ref_path), suffixes=suffixes)
@@ -116,6 +116,8 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.kinematics.reference import with_mirrored_clips
 
         ref = with_mirrored_clips(ref)
+        for c in ref.clips:
+            c.compact()
     atomic_write_text(sidecar, json.dumps(made, indent=1))  # (first: never a set without it)
     ref.save(ref_path)
     allow_reference_size(reference_copies(made, len(kins)))

@@ -64,6 +64,13 @@ PRIMARY: dict[str, tuple[int, ...]] = {
 }
 
 
+TRAINING_DTYPE = np.float32
+"""What the clips of a training set keep their arrays in, all but ``gt_qpos``
+(:meth:`ReferenceClip.compact`). A training set holds millions of frames: in float64 a
+speed-scaled set of 2,255 clips took 14.6 GB resident and let no second run share the machine;
+compact, 7.3 GB (docs/performance.md § Memory of a training set)."""
+
+
 class ReferenceError(ValueError):
     """A reference file or clip is malformed (the message names the file and the key)."""
 
@@ -188,6 +195,15 @@ class ReferenceClip:
     @property
     def n_frames(self) -> int:
         return int(self.gt_qpos.shape[0])
+
+    def compact(self) -> None:
+        """Keep every array but ``gt_qpos`` in float32 from now on, derived ones included:
+        about half the memory (:data:`TRAINING_DTYPE`). For the clips of a training set; a
+        clip a reconstruction plays stays float64, so that the offline and the streaming
+        paths agree to the last digit."""
+        for k, v in vars(self).items():
+            if k != "gt_qpos" and isinstance(v, np.ndarray) and v.dtype == np.float64:
+                setattr(self, k, v.astype(TRAINING_DTYPE))
 
     def oracle(self) -> ReferenceClip:
         """This clip with its ground truth as the estimate (joints minus the root, global
@@ -543,9 +559,10 @@ class ReferenceSet:
         atomic_write(path, write)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, *, limits: InputLimits | None = None
-             ) -> ReferenceSet:  # fmt: skip
-        """Read a file written by :meth:`save`.
+    def load(cls, path: str | os.PathLike, *, limits: InputLimits | None = None,
+             compact: bool = False) -> ReferenceSet:  # fmt: skip
+        """Read a file written by :meth:`save` (with ``compact``, each clip
+        :meth:`ReferenceClip.compact` as soon as it is built: a training set's memory).
 
         Member sizes are checked from the npy headers before any array is loaded, the JSON
         metadata's depth and integer digits before it is parsed, each clip's frame rate and
@@ -580,8 +597,10 @@ class ReferenceSet:
                 limits.check_take(int(qpos.shape[0]) if qpos.ndim else 0, float(cm["fps"]))
                 clips.append(ReferenceClip(
                     name=str(cm["name"]), category=str(cm["category"]), fps=float(cm["fps"]),
-                    body=body, objects=objects, **{k: data[f"{i}/{k}"] for k in PRIMARY},
+                    body=body, objects=objects, **{k: data.pop(f"{i}/{k}") for k in PRIMARY},
                 ))  # fmt: skip
+                if compact:
+                    clips[-1].compact()
             return cls(clips, tuple(meta["sensor_sites"]), bool(meta["insoles"]), str(path))
         except KeyError as e:
             raise ReferenceError(f"{path}: missing key {e}") from e

@@ -19,11 +19,12 @@ _REFERENCE: dict[str, ReferenceSet] = {}
 
 def load_reference(path: str) -> ReferenceSet:
     """The reference set at ``path``, loaded once per process (the last path asked for is
-    kept; another path replaces it)."""
+    kept; another path replaces it), its clips compact (float32,
+    :meth:`grip.core.reference.ReferenceClip.compact`)."""
     ref = _REFERENCE.get(path)
     if ref is None:
         _REFERENCE.clear()
-        ref = _REFERENCE[path] = ReferenceSet.load(path)
+        ref = _REFERENCE[path] = ReferenceSet.load(path, compact=True)
     return ref
 
 

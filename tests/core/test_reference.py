@@ -25,6 +25,26 @@ def test_round_trip_keeps_the_arrays_and_derives_the_rest(clip, tmp_path) -> Non
     assert back.gt_qvel.shape == (60, 75) and back.est_hinge_vel.shape == (60, 69)
 
 
+def test_a_training_sets_clips_are_compact_and_equal_to_float32_rounding(clip, tmp_path) -> None:
+    from grip.core.reference_sets import load_reference
+
+    rs = ReferenceSet([clip], ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist"), True)
+    rs.save(tmp_path / "r.npz")
+    full = ReferenceSet.load(tmp_path / "r.npz").clip(0)
+    small = load_reference(str(tmp_path / "r.npz")).clip(0)  # the training loader: compact
+    arrays = [k for k, v in vars(full).items() if isinstance(v, np.ndarray)]
+    assert len(arrays) > 10 and full.gt_qpos.dtype == small.gt_qpos.dtype == np.float64
+    for k in arrays:
+        a, b = getattr(full, k), getattr(small, k)
+        assert a.dtype == np.float64 and (k == "gt_qpos" or b.dtype == np.float32), k
+        np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-6, err_msg=k)
+    size = lambda c: sum(getattr(c, k).nbytes for k in arrays)  # noqa: E731
+    assert size(small) < 0.55 * size(full)
+    again = ReferenceSet.load(tmp_path / "r.npz")
+    again.clip(0).compact()
+    np.testing.assert_array_equal(again.clip(0).est_rot, small.est_rot)
+
+
 def test_bad_clips_and_files_are_refused_with_the_key_named(clip, tmp_path) -> None:
     bad = clip.est_vel.copy()
     bad[7, 0, 0] = np.nan

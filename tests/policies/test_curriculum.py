@@ -209,7 +209,7 @@ def test_real_windows_come_only_from_the_stages_category(tmp_path):
     tr.train()
     from grip.core.reference import ReferenceSet
 
-    ref = ReferenceSet.load(SAMPLE_REFERENCE)
+    ref = ReferenceSet.load(SAMPLE_REFERENCE, compact=True)  # (as the trainer holds it)
     assert [c.category for c in ref.clips] == ["walk", "run"]
     frames = [{r.tobytes() for r in A.reference_amp_features(c).astype(np.float32)}
               for c in ref.clips]  # fmt: skip

@@ -34,3 +34,20 @@ def test_batched_rollouts_collect_the_dummy_ones(tmp_path) -> None:
 def test_vec_env_is_checked() -> None:
     with pytest.raises(ValueError, match="vec_env"):
         DistillConfig(vec_env="subproc")
+
+
+def test_the_sample_buffer_keeps_the_newest_in_one_copy() -> None:
+    from policies.distill import SampleBuffer
+
+    buf = SampleBuffer(5)
+    with pytest.raises(ValueError, match="no samples"):
+        buf.samples()
+    buf.add(np.arange(3, dtype=np.float16)[:, None], np.arange(3, dtype=np.float16)[:, None])
+    assert sorted(buf.samples()[0][:, 0]) == [0, 1, 2]
+    buf.add(np.arange(3, 7, dtype=np.float16)[:, None], np.arange(3, 7, dtype=np.float16)[:, None])
+    x, y = buf.samples()
+    assert sorted(x[:, 0]) == [2, 3, 4, 5, 6] and (x == y).all()
+    buf.add(np.arange(10, 18, dtype=np.float16)[:, None], np.zeros((8, 1), np.float16))
+    assert sorted(buf.samples()[0][:, 0]) == [13, 14, 15, 16, 17]  # a chunk above capacity
+    with pytest.raises(ValueError, match="3 inputs against 2"):
+        buf.add(np.zeros((3, 1)), np.zeros((2, 1)))
