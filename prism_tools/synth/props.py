@@ -181,12 +181,12 @@ def _runs(mask: np.ndarray, min_len: int) -> list[slice]:
     return [slice(a, b) for a, b in zip(starts, stops, strict=True) if b - a >= min_len]
 
 
-def _speed(x: np.ndarray, fps: float) -> np.ndarray:
+def horizontal_speed(x: np.ndarray, fps: float) -> np.ndarray:
     """``(T,)`` speed of ``x (T, D)`` (Savitzky-Golay, 0.1 s)."""
     return np.linalg.norm(smooth_derivative(x, fps, 0.1, 2, deriv=1), axis=-1)
 
 
-def _planted(cells: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+def planted_feet(cells: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """``(T, 2)`` planted flags and ``(T, 2)`` median sole heights of both feet."""
     z = cells[..., 2]
     height = np.median(z, axis=-1)
@@ -194,7 +194,7 @@ def _planted(cells: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
     planted = np.empty_like(flat)
     for f in range(2):
         centre = np.concatenate([cells[:, f, :, :2].mean(1), height[:, f, None]], -1)
-        planted[:, f] = flat[:, f] & (_speed(centre, fps) < PLANTED_SPEED_M_S)
+        planted[:, f] = flat[:, f] & (horizontal_speed(centre, fps) < PLANTED_SPEED_M_S)
     return planted, height
 
 
@@ -222,7 +222,7 @@ def _outside_hull(p: np.ndarray, q: np.ndarray) -> float:
 
 def _seat_patches(global_rot, joint_pos, body, cells, fps, floor) -> list[tuple]:
     pelvis = joint_pos[:, 0]
-    still = _speed(pelvis, fps) < SEATED_SPEED_M_S
+    still = horizontal_speed(pelvis, fps) < SEATED_SPEED_M_S
     com = center_of_mass(global_rot, joint_pos, body)
     z = cells[..., 2].reshape(len(cells), -1)
     flat = cells[..., :2].reshape(len(cells), -1, 2)
@@ -362,7 +362,7 @@ def infer_props(global_rot: np.ndarray, joint_pos: np.ndarray, body: BodyModel,
         raise ValueError(f"the body never comes within {FLOATING_M:g} m of the floor (its lowest "
                          f"sole point is {lowest:.2f} m up): no supports can be inferred for a "
                          "floating motion; put it on the floor (z = 0) first")  # fmt: skip
-    planted, height = _planted(cells, fps)
+    planted, height = planted_feet(cells, fps)
     if not planted.any():
         return []
     floor = float(np.percentile(height[planted], FLOOR_PERCENTILE))
