@@ -67,8 +67,8 @@ PRIMARY: dict[str, tuple[int, ...]] = {
 TRAINING_DTYPE = np.float32
 """What the clips of a training set keep their arrays in, all but ``gt_qpos``
 (:meth:`ReferenceClip.compact`). A training set holds millions of frames: in float64 a
-speed-scaled set of 2,255 clips took 14.6 GB resident and let no second run share the machine;
-compact, 7.3 GB (docs/performance.md § Memory of a training set)."""
+speed-scaled set of 2,255 clips took 11.4 GB resident and let no second run share the machine;
+compact, 6.0 GB (docs/performance.md § Memory of a training set)."""
 
 
 class ReferenceError(ValueError):
