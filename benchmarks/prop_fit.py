@@ -29,6 +29,13 @@ ground, for the floor's numbers.
     python benchmarks/prop_fit.py --data DATA --run RUN --json prop_fit.json
     python benchmarks/prop_fit.py --data DATA --clips 'cmu/13_35' --controls 'cmu/07_04'
     python benchmarks/prop_fit.py --reference RUN/reference_train.npz --clips 'cmu/13_3[5-8]'
+
+With ``--infer`` (and ``--data``) each clip's scene holds the props inferred anew by the current
+rules from the dataset's motion file on the clip's own body, as ``grip data build`` would infer
+them now, instead of those its recording was built with: a change of the rules measured without
+rebuilding the dataset.
+
+    python benchmarks/prop_fit.py --data DATA --run RUN --infer --json prop_fit_after.json
 """
 
 from __future__ import annotations
@@ -374,6 +381,20 @@ def clips_from_data(data: Path, patterns: list[str]) -> tuple[list[tuple], tuple
     return out, tuple(feats.sites), feats.insoles
 
 
+def inferred_objects(data: Path, clip_id: str) -> dict | None:
+    """The scene objects of the props inferred anew (:func:`prism_tools.synth.props.
+    infer_props`, the current rules) from a dataset's motion file on the motion's own body, as
+    the dataset build infers them; ``None`` without props."""
+    from grip.motion.motion import Motion
+    from prism_tools.chunking import safe_name
+    from prism_tools.synth.props import infer_props, props_as_objects
+
+    motion = Motion.load(data / "motions" / f"{safe_name(clip_id)}.npz")
+    body = motion.body_model()
+    objs = props_as_objects(infer_props(*motion.fk(body), body, motion.fps))
+    return None if objs is None else {n: (o.vertices, o.faces) for n, o in objs.items()}
+
+
 def clips_from_reference(path: Path, patterns: list[str]) -> tuple[list[tuple], tuple, bool]:
     """``(clip, None)`` of a reference set's clips whose names, less a leading ``synthetic_``
     and from ``_seq`` on, match a glob, with the set's sensor sites and insoles."""
@@ -535,13 +556,23 @@ def main(argv: list[str] | None = None) -> int:
                     help="a policy run folder: its env settings (default: defaults)")  # fmt: skip
     ap.add_argument("--no-default-body", action="store_true",
                     help="skip the playback on the default body")  # fmt: skip
+    ap.add_argument("--infer", action="store_true",
+                    help="with --data: the props inferred anew from the motion files")  # fmt: skip
     ap.add_argument("--json", type=Path, default=None, help="write the results here")
     args = ap.parse_args(argv)
+    if args.infer and args.data is None:
+        ap.error("--infer needs --data")
     pick = clips_from_data if args.data is not None else clips_from_reference
     source = args.data if args.data is not None else args.reference
     chosen, *sensors = pick(source, args.clips)
     n = len(chosen)
     chosen += pick(source, args.controls)[0] if args.controls else []
+    if args.infer:
+        scenes: dict[str, dict | None] = {}
+        for clip, clip_id in chosen:
+            if clip_id not in scenes:
+                scenes[clip_id] = inferred_objects(args.data, clip_id)
+            clip.objects = scenes[clip_id]
     if not chosen:
         print(f"{source}: no clip matches {args.clips + (args.controls or [])}", file=sys.stderr)
         return 2
@@ -553,7 +584,7 @@ def main(argv: list[str] | None = None) -> int:
         paths = {k: None if v is None else str(v)
                  for k, v in (("data", args.data), ("reference", args.reference),
                               ("run", args.run))}  # fmt: skip
-        settings = {**paths, "clips": args.clips, "controls": args.controls,
+        settings = {**paths, "clips": args.clips, "controls": args.controls, "infer": args.infer,
                     "prop_min_m": PROP_MIN_M, "support_gap_m": SUPPORT_GAP_M,
                     "heightfield_cell_m": cfg.heightfield_cell_m}  # fmt: skip
         args.json.write_text(json.dumps({"settings": settings, "clips": results}, indent=1))

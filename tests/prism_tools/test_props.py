@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -106,8 +108,12 @@ def test_sitting_gives_a_seat_under_the_pelvis_and_thighs():
     assert seat.contains(p[150, 0, :2]) and seat.contains(hips[:, :2]).all()
     thigh_bottom = hips[:, 2].mean() - 0.034 * BODY.params.height_m
     assert abs(seat.height_m - thigh_bottom) < 0.04
-    # the feet stay off the seat
-    assert not seat.contains(fk.sole_points(g[150], p[150], BODY)[..., :2]).any()
+    # the feet stand on the floor: the seat reaches under the level thighs up to the shanks, and
+    # so over the heels tucked under the knees (this test used to pin a box that stopped short
+    # of the feet); it is a slab there, which they pass under
+    soles = fk.sole_points(g[150], p[150], BODY).reshape(-1, 3)
+    assert seat.contains(0.5 * (hips[:, :2] + p[150, [4, 5], :2])).all()  # mid-thighs
+    np.testing.assert_array_equal(support_height([seat], soles), 0.0)
 
 
 def test_no_box_holds_the_body():
@@ -232,3 +238,104 @@ def test_a_body_that_never_comes_near_the_floor_gets_no_props(clip):
     with pytest.raises(ValueError, match=r"never comes within 0.5 m of the floor \(its lowest "
                                          r"sole point is 6.4\d m up\)"):  # fmt: skip
         infer_props(g, p, BODY, FPS)
+
+
+def _turned(pose: tuple[np.ndarray, np.ndarray], yaw: float, at) -> tuple[np.ndarray, np.ndarray]:
+    """``pose`` turned by ``yaw`` rad about the vertical through the world origin, then moved
+    by ``at`` (x, y): :func:`_sitting` (facing +y) turned by -pi/2 faces +x."""
+    g, p = pose
+    r = rot_z(np.array(yaw))
+    return r @ g, p @ r.T + np.array([*at, 0.0])
+
+
+def _deepest_in(props, g: np.ndarray, p: np.ndarray) -> float:
+    """How deep any limb or trunk capsule (sampled every 5 mm along its axis, independently of
+    the props rule's samples) reaches into any prop at any frame, m: the sphere's radius less
+    its centre's distance from the box (or slab)."""
+    from grip.core.fk import body_points
+
+    depth = 0.0
+    for geom in BODY.geoms:
+        if geom.kind != "capsule" or geom.body in (7, 8, 10, 11):
+            continue
+        a, b = geom.fromto()[:3], geom.fromto()[3:]
+        local = a + np.linspace(0.0, 1.0, int(np.linalg.norm(b - a) / 0.005) + 2)[:, None] * (b - a)
+        c = body_points(g, p, np.full(len(local), geom.body), local)  # (T, n, 3)
+        for q in props:
+            lo = np.array([*q.lo, q.bottom_m])
+            hi = np.array([*q.hi, q.height_m])
+            dist = np.linalg.norm(np.maximum(0.0, np.maximum(lo - c, c - hi)), axis=-1)
+            depth = max(depth, float((geom.size[0] - dist).max()))
+    return depth
+
+
+def test_two_sittings_facing_opposite_ways_get_a_seat_each_under_the_pelvis():
+    """Sitting facing +x, standing up, then sitting facing -x 10 cm further on (CMU 13_01 sits
+    on one stool twice, turned): each sitting has its own seat under its pelvis and hips at its
+    thighs' height, and no capsule of the body, standing in front of either seat or seated,
+    reaches more than SEAT_INSIDE_M into either."""
+    from prism_tools.synth.props import SEAT_INSIDE_M
+
+    front = np.array(_in_front_of_the_seat())
+    first, second = (-np.pi / 2, (0.0, 0.0)), (np.pi / 2, (0.1, 0.05))
+    parts = []
+    for yaw, at in (first, second):
+        ahead = rot_z(np.array(yaw))[:2, :2] @ front + at
+        sit = _turned(_sitting(200), yaw, at)
+        parts += [_standing(100, at=ahead), sit, _standing(100, at=ahead)]
+    g, p = _concat(*parts)
+    seats = infer_props(g, p, BODY, FPS)
+    assert [s.kind for s in seats] == ["seat", "seat"]  # (the same height: in sitting order)
+    thigh_bottom = p[200, [1, 2], 2].mean() - 0.034 * BODY.params.height_m
+    for seat, t in zip(seats, (200, 600), strict=True):  # seated facing +x, then -x
+        assert seat.contains(p[t, [0, 1, 2], :2]).all()  # the pelvis and both hips
+        thighs = 0.5 * (p[t, [1, 2], :2] + p[t, [4, 5], :2])  # mid-thigh: the seat reaches under
+        assert seat.contains(thighs).all() and abs(seat.height_m - thigh_bottom) < 0.04
+    assert not seats[1].contains(0.5 * (p[200, [1, 2], :2] + p[200, [4, 5], :2])).any()
+    assert _deepest_in(seats, g, p) < SEAT_INSIDE_M + 0.005
+
+
+def test_a_flight_of_steps_leaves_no_gap_and_holds_every_planted_sole_cell():
+    """Climbing three 0.17 m steps 0.38 m apart (the soles are 0.26 m long: 10 cm gaps between
+    the feet's places), then back down: consecutive steps meet (the lower one reaches the
+    higher one's edge), every insole cell of a foot standing on a step stands on its top, and no
+    capsule of the body reaches into a step."""
+    from prism_tools.synth.insole import insole_cell_positions
+    from prism_tools.synth.props import INSIDE_M
+
+    rise, tread = 0.17, 0.38
+    up = [_standing(60, at=(0.0, tread * k), raise_m=rise * k) for k in range(1, 4)]
+    g, p = _concat(_standing(60), *up, *up[-2::-1], _standing(60))
+    steps = infer_props(g, p, BODY, FPS)
+    assert [s.kind for s in steps] == ["step"] * 3
+    np.testing.assert_allclose([s.height_m for s in steps], [rise, 2 * rise, 3 * rise], atol=0.01)
+    for low, high in itertools.pairwise(steps):
+        assert low.hi[1] == pytest.approx(high.lo[1])  # no gap: the lower step meets the higher
+        assert min(low.hi[0], high.hi[0]) - max(low.lo[0], high.lo[0]) > 0.2  # side by side
+    cells = insole_cell_positions(g[60:-60], p[60:-60], BODY)  # (T, 2, 16, 3) every foot on a step
+    under = support_height(steps, cells)
+    assert np.all(np.abs(cells[..., 2] - under) < 0.02)
+    assert _deepest_in(steps, g, p) < INSIDE_M
+    # the floor stances stay off the steps
+    floor = insole_cell_positions(np.concatenate([g[:60], g[-60:]]),
+                                  np.concatenate([p[:60], p[-60:]]), BODY)
+    assert support_height(steps, floor).max() == 0.0
+
+
+def test_the_body_shapes_are_sampled_densely_along_every_capsule():
+    """The props keep clear of spheres sampled along each limb and trunk capsule no further
+    apart than SAMPLE_M (a 5 cm slab cannot pass between two), ends included, with the
+    capsule's radius; the feet are left to their soles."""
+    from prism_tools.synth.props import SAMPLE_M, body_shapes
+
+    g, p = _sitting(1)
+    centre, radius, bodies, where = body_shapes(g, p, BODY)
+    assert SAMPLE_M <= 0.025 and not np.isin(bodies, (7, 8, 10, 11)).any()
+    for geom in BODY.geoms:
+        if geom.kind != "capsule" or geom.body in (7, 8, 10, 11):
+            continue
+        k = bodies == geom.body
+        c = centre[0, k][np.argsort(where[k])]
+        assert np.linalg.norm(np.diff(c, axis=0), axis=-1).max() <= SAMPLE_M + 1e-9
+        np.testing.assert_allclose(radius[k], geom.size[0])
+        np.testing.assert_allclose(np.sort(where[k])[[0, -1]], [0.0, 1.0])
