@@ -487,51 +487,55 @@ def _cm(x) -> str:
     return "-" if x is None else f"{100 * x:.1f}"
 
 
+def _bodies(results: list[dict]):
+    """``(clip result, body key, body result)`` of every clip and body, in order."""
+    for r in results:
+        for key, b in r["bodies"].items():
+            yield r, key, b
+
+
 def print_tables(results: list[dict]) -> None:
     """Markdown tables: contacts per clip and body, then the props' heights."""
     print("\n| clip | body | frames | prop contact frames | max pen. (cm) | median pen. (cm) "
           "| max contacts | parts (frames) | floor pen. max / median (cm) |")  # fmt: skip
     print("|---|---|---:|---:|---:|---:|---:|---|---:|")
-    for r in results:
-        for key, b in r["bodies"].items():
-            p, f = b["prop_contacts"], b["floor_contacts"]
-            parts = ", ".join(f"{k} ({v['frames']})" for k, v in list(p["parts"].items())[:4])
-            tag = " (control)" if r["control"] else ""
-            print(f"| {r['clip']}{tag} | {key} {b['body']['height_m']:g} m | {r['frames']} "
-                  f"| {p['frames']} | {_cm(p['max_depth_m'])} | {_cm(p['median_depth_m'])} "
-                  f"| {p['max_contacts']} | {parts or '-'} | {_cm(f['max_depth_m'])} / "
-                  f"{_cm(f['median_depth_m'])} |")  # fmt: skip
+    for r, key, b in _bodies(results):
+        p, f = b["prop_contacts"], b["floor_contacts"]
+        parts = ", ".join(f"{k} ({v['frames']})" for k, v in list(p["parts"].items())[:4])
+        tag = " (control)" if r["control"] else ""
+        print(f"| {r['clip']}{tag} | {key} {b['body']['height_m']:g} m | {r['frames']} "
+              f"| {p['frames']} | {_cm(p['max_depth_m'])} | {_cm(p['median_depth_m'])} "
+              f"| {p['max_contacts']} | {parts or '-'} | {_cm(f['max_depth_m'])} / "
+              f"{_cm(f['median_depth_m'])} |")  # fmt: skip
     print("\n| clip | body | prop | top (cm) | foot frames | sole - top median / min (cm) "
           "| lowest cell - top min (cm) | cells supported | sitting frames "
           "| seat point - top median (cm) | pelvis - top median (cm) |")  # fmt: skip
     print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in results:
-        for key, b in r["bodies"].items():
-            for s in b["support"]["props"]:
-                ft, st = s["feet"], s["seat"]
-                cs = ft["cells_supported_median"]
-                print(f"| {r['clip']} | {key} | {s['prop']} {s['kind']} | {_cm(s['top_m'])} "
-                      f"| {ft['foot_frames']} | {_cm(ft['sole_minus_top']['median_m'])} / "
-                      f"{_cm(ft['sole_minus_top']['min_m'])} "
-                      f"| {_cm(ft['lowest_cell_minus_top']['min_m'])} "
-                      f"| {'-' if cs is None else f'{cs:.2f}'} | {st['frames']} "
-                      f"| {_cm(st['seat_point_minus_top']['median_m'])} "
-                      f"| {_cm(st['pelvis_minus_top']['median_m'])} |")  # fmt: skip
+    for r, key, b in _bodies(results):
+        for s in b["support"]["props"]:
+            ft, st = s["feet"], s["seat"]
+            cs = ft["cells_supported_median"]
+            print(f"| {r['clip']} | {key} | {s['prop']} {s['kind']} | {_cm(s['top_m'])} "
+                  f"| {ft['foot_frames']} | {_cm(ft['sole_minus_top']['median_m'])} / "
+                  f"{_cm(ft['sole_minus_top']['min_m'])} "
+                  f"| {_cm(ft['lowest_cell_minus_top']['min_m'])} "
+                  f"| {'-' if cs is None else f'{cs:.2f}'} | {st['frames']} "
+                  f"| {_cm(st['seat_point_minus_top']['median_m'])} "
+                  f"| {_cm(st['pelvis_minus_top']['median_m'])} |")  # fmt: skip
     print("\n| clip | body | floor soles: frames, median / min (cm) | raised soles: frames, "
           "cells supported, < half, < all | sitting frames | pelvis / seat point over a prop "
           "| seat gap median / min (cm) | pelvis height (cm) |")  # fmt: skip
     print("|---|---|---|---|---:|---|---:|---:|")
-    for r in results:
-        for key, b in r["bodies"].items():
-            fl, ra, si = (b["support"][k] for k in ("floor", "raised", "sitting"))
-            cs = ra["cells_supported_median"]
-            print(f"| {r['clip']} | {key} | {fl['foot_frames']}, {_cm(fl['sole_m']['median_m'])}"
-                  f" / {_cm(fl['sole_m']['min_m'])} | {ra['foot_frames']}, "
-                  f"{'-' if cs is None else f'{cs:.2f}'}, {ra['under_half_supported']}, "
-                  f"{ra['not_all_supported']} | {si['frames']} "
-                  f"| {si['pelvis_over_prop_share']:.2f} / {si['seat_point_over_prop_share']:.2f} "
-                  f"| {_cm(si['seat_gap_m']['median_m'])} / {_cm(si['seat_gap_m']['min_m'])} "
-                  f"| {_cm(si['pelvis_m']['median_m'])} |")  # fmt: skip
+    for r, key, b in _bodies(results):
+        fl, ra, si = (b["support"][k] for k in ("floor", "raised", "sitting"))
+        cs = ra["cells_supported_median"]
+        print(f"| {r['clip']} | {key} | {fl['foot_frames']}, {_cm(fl['sole_m']['median_m'])}"
+              f" / {_cm(fl['sole_m']['min_m'])} | {ra['foot_frames']}, "
+              f"{'-' if cs is None else f'{cs:.2f}'}, {ra['under_half_supported']}, "
+              f"{ra['not_all_supported']} | {si['frames']} "
+              f"| {si['pelvis_over_prop_share']:.2f} / {si['seat_point_over_prop_share']:.2f} "
+              f"| {_cm(si['seat_gap_m']['median_m'])} / {_cm(si['seat_gap_m']['min_m'])} "
+              f"| {_cm(si['pelvis_m']['median_m'])} |")  # fmt: skip
     refits = [r for r in results if "refit" in r]
     if refits:
         print("\n| take | props refit on own body: max diff (cm) | on default body: tops (cm) "
