@@ -288,6 +288,8 @@ class BatchedTrackingEnv:
         z = pos[:, 0, 2]
         fell = (z < cfg.fall_height_m) & (z < gt[:, 2] - cfg.fall_below_reference_m)
         te = ((tau_d > 0) & (e_max > tau_d)) | fell
+        if cfg.termination_root_gap_m > 0:
+            te |= (gap * gap).sum(axis=1) > cfg.termination_root_gap_m**2
         tr = tn >= self._n_frames[idx] - 1
         if cfg.max_episode_frames > 0:
             tr |= self._steps[idx] >= cfg.max_episode_frames

@@ -402,7 +402,9 @@ class GripTrackingEnv(gym.Env):
         z = float(row[0, 2])
         tau = self.termination_dist_m
         fell = z < cfg.fall_height_m and z < gt[t, 2] - cfg.fall_below_reference_m
-        terminated = (tau > 0 and err > tau) or fell
+        g_max = cfg.termination_root_gap_m
+        strayed = g_max > 0 and float(gap @ gap) > g_max * g_max
+        terminated = (tau > 0 and err > tau) or fell or strayed
         truncated = t >= clip.n_frames - 1 or (
             cfg.max_episode_frames > 0 and self._steps >= cfg.max_episode_frames
         )

@@ -170,6 +170,9 @@ class StageConfig:
         fall_below_reference_m: ... and also this far below the ground truth's pelvis (0:
             always; :attr:`grip.task.config.TrackingEnvConfig.fall_below_reference_m`): clips on
             the floor are followed, not ended.
+        termination_root_gap_m: End the episode when the pelvis is this far, horizontally,
+            from the pelvis it follows, m (0: never;
+            :attr:`grip.task.config.TrackingEnvConfig.termination_root_gap_m`).
         max_episode_frames: Truncate episodes after this many steps (0: the clip's end).
         categories: Train on clips of these motion categories only (empty: all).
         termination_start_m: Termination curriculum: the stage starts with this (looser)
@@ -211,6 +214,7 @@ class StageConfig:
     termination_dist_m: float = 0.25
     fall_height_m: float = 0.0
     fall_below_reference_m: float = 0.0
+    termination_root_gap_m: float = 0.0
     max_episode_frames: int = 300
     categories: tuple[str, ...] = ()
     termination_start_m: float = 0.0
@@ -231,6 +235,7 @@ class StageConfig:
             self,
             (0.0 <= self.mining_bins_mix <= 1.0, "mining_bins_mix must be in [0, 1]"),
             (self.mining_bins_memory > 0, "mining_bins_memory must be > 0 episodes"),
+            (self.termination_root_gap_m >= 0, "termination_root_gap_m must be >= 0 (0 = off)"),
             (self.termination_category_min_m >= 0,
              "termination_category_min_m must be >= 0 (0 = off)"),
             (self.termination_category_max_m >= self.termination_category_min_m,
@@ -326,6 +331,7 @@ class PolicyRunConfig:
             self.env, reference=reference or self.env.reference, random_start=True,
             termination_dist_m=stage.termination_dist_m, fall_height_m=stage.fall_height_m,
             fall_below_reference_m=stage.fall_below_reference_m,
+            termination_root_gap_m=stage.termination_root_gap_m,
             max_episode_frames=stage.max_episode_frames, amp_window=self.amp.window,
         )  # fmt: skip
 

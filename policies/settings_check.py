@@ -91,6 +91,7 @@ ENV_RANGES: dict[str, Range] = {
     "termination_dist_m": Range(0.0, 10.0, "early-termination distance", "m"),
     "fall_height_m": Range(0.0, 2.0, "pelvis height of a fall", "m"),
     "fall_below_reference_m": Range(0.0, 2.0, "pelvis drop below the truth of a fall", "m"),
+    "termination_root_gap_m": Range(0.0, 10.0, "pelvis gap that ends an episode", "m"),
     "max_episode_frames": Range(0, 10_000_000, "episode length limit", "frames"),
     "min_episode_frames": Range(1, 100_000, "frames a random start leaves", "frames"),
     "clip_index": Range(-1, 10_000_000, "clip played (-1: sampled)"),

@@ -51,3 +51,17 @@ def test_policy_recipes_load(name: str) -> None:
         for a, b in ((cfg.stage1, cpu.stage1), (cfg.stage2, cpu.stage2)):
             assert (a.categories, a.mining_mix, a.fall_below_reference_m) == (
                 b.categories, b.mining_mix, b.fall_below_reference_m)  # fmt: skip
+
+
+def test_a_stage_passes_its_pelvis_gap_termination_to_the_environment() -> None:
+    """``stage2.termination_root_gap_m`` reaches the stage's environment settings (and only
+    that stage's); a negative distance is refused with the setting's name."""
+    from grip.cli.errors import CliError
+    from grip.cli.paths import load_run_config
+    from policies.config import PolicyRunConfig
+
+    cfg = load_run_config(None, "policy", PolicyRunConfig(), ["stage2.termination_root_gap_m=0.5"])
+    assert cfg.env_config(cfg.stage2).termination_root_gap_m == 0.5
+    assert cfg.env_config(cfg.stage1).termination_root_gap_m == 0.0
+    with pytest.raises(CliError, match=r"stage2.*termination_root_gap_m must be >= 0"):
+        load_run_config(None, "policy", PolicyRunConfig(), ["stage2.termination_root_gap_m=-1"])

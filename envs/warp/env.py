@@ -491,6 +491,8 @@ class WarpTrackingEnv:
         # fall_below_reference_m below the ground truth's, so clips on the floor are followed)
         fell = (z < cfg.fall_height_m) & (z < c.gt_pvw[row, 0, 0, 2] - cfg.fall_below_reference_m)
         te = ((tau_d > 0) & (e_max > tau_d)) | fell
+        if cfg.termination_root_gap_m > 0:
+            te |= (gap * gap).sum(dim=1) > cfg.termination_root_gap_m**2
         tr = tn >= c.n_frames[self.clip_index] - 1
         if cfg.max_episode_frames > 0:
             tr |= self._steps >= cfg.max_episode_frames

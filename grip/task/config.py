@@ -103,6 +103,13 @@ class TrackingEnvConfig:
             A clip that lies, crawls or rolls on the floor keeps its pelvis below 0.3 m; the
             absolute rule ended every such episode at its first step (the teacher's stage 2:
             failure rate 1.00 on "floor").
+        termination_root_gap_m: End an episode when the simulated pelvis is farther than this,
+            horizontally, from the pelvis it follows (the integrated root of the reference the
+            reward's ``root_pos`` term compares with: the estimate's, or the truth's for a
+            teacher), m; 0 = off. Unlike ``termination_dist_m`` with ``align_root_xy`` (the pose
+            only), it ends an episode that falls behind or strays sideways: PHC's world-frame
+            termination, which makes keeping the reference's pace worth the whole future
+            reward (docs/pace.md § Q2).
         align_root_xy: Compare joint positions with the ground truth (imitation reward and
             termination) after shifting the simulated body horizontally so that its pelvis is
             over the ground truth's. The policy follows a root integrated from the estimated
@@ -156,6 +163,7 @@ class TrackingEnvConfig:
     termination_dist_m: float = 0.25
     fall_height_m: float = 0.0
     fall_below_reference_m: float = 0.0
+    termination_root_gap_m: float = 0.0
     align_root_xy: bool = True
     random_start: bool = True
     clip_index: int = -1
@@ -187,6 +195,7 @@ class TrackingEnvConfig:
             (self.amp_window >= 0, "amp_window must be >= 0 (0 = no AMP observation)"),
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
             (self.fall_below_reference_m >= 0, "fall_below_reference_m must be >= 0 (0 = off)"),
+            (self.termination_root_gap_m >= 0, "termination_root_gap_m must be >= 0 (0 = off)"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),
         )

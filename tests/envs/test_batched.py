@@ -127,3 +127,37 @@ def test_a_low_pelvis_is_a_fall_only_below_the_reference(reference, below):
     assert (lowest < 0.8).all()  # the pelvis went below fall_height_m in every env
     assert fell.all() if below == 0.0 else not fell.any()
     bat.close()
+
+
+@pytest.mark.parametrize("limit", [0.0, 0.3])
+def test_an_episode_ends_when_the_pelvis_strays_from_the_one_it_follows(reference, limit):
+    """``termination_root_gap_m``: a body that does not walk (zero actions: it sinks where it
+    stands) while its reference walks on ends its episode at the first step whose horizontal
+    pelvis gap (read back from the ``root_pos`` kernel, exp(-k g^2)) exceeds the limit, not
+    before; off (0), the same episodes run on. Batched and separate agree."""
+    cfg = TrackingEnvConfig(termination_dist_m=0.0, termination_root_gap_m=limit,
+                            max_episode_frames=200, random_start=False)  # fmt: skip
+    k = cfg.reward.k_root_pos
+    seeds = [7 + 1000 * i for i in range(N)]
+    ref = DummyVecEnv([functools.partial(_single, cfg, reference, s) for s in seeds])
+    bat = _batched(cfg, reference, seeds, 1)
+    ref.reset(), bat.reset()
+    ended = np.zeros(N, dtype=bool)
+    widest = np.zeros(N)
+    for _ in range(150):
+        a = np.zeros((N, 69), np.float32)
+        _, _, d1, i1 = ref.step(a)
+        _, _, d2, _ = bat.step(a)
+        np.testing.assert_array_equal(d2, d1)
+        for j, info in enumerate(i1):
+            if ended[j]:
+                continue
+            gap = np.sqrt(-np.log(info["reward/root_pos"]) / k)
+            widest[j] = max(widest[j], gap)
+            done = d1[j] and not info.get("TimeLimit.truncated", False)
+            if limit > 0:
+                assert done == (gap > limit), (j, gap)
+            ended[j] |= done
+    assert (widest > 0.3).all()  # the reference walked away from every body
+    assert ended.all() if limit > 0 else not ended.any()
+    bat.close()
