@@ -52,11 +52,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_view)
 
 
-def _labels(recons: list[tuple[Path, object]]) -> list[str]:
-    """Each compared reconstruction's method, with its file's name where methods repeat."""
-    methods = [r.method for _, r in recons]
-    return [m if methods.count(m) == 1 else f"{m} ({p.name})" for (p, _), m in
-            zip(recons, methods, strict=True)]  # fmt: skip
+def _labels(main: tuple[Path, object], recons: list[tuple[Path, object]]) -> list[str]:
+    """Each compared reconstruction's method, with its file's name where methods repeat (the
+    shown reconstruction's included: two policies' runs are both "grip"), or its folder's name
+    where the file names repeat too (the same recording reconstructed into two folders), or its
+    path where both do."""
+    everyone = [main, *recons]
+    methods = [r.method for _, r in everyone]
+    names = [p.name for p, _ in everyone]
+    folders = [p.parent.name for p, _ in everyone]
+
+    def where(p: Path) -> str:
+        if names.count(p.name) == 1:
+            return p.name
+        return p.parent.name if folders.count(p.parent.name) == 1 else str(p)
+
+    return [m if methods.count(m) == 1 else f"{m} ({where(p)})" for (p, _), m in
+            zip(recons, methods[1:], strict=True)]  # fmt: skip
 
 
 def _lacks_joints(path: Path) -> bool:
@@ -118,8 +130,9 @@ def cmd_view(args: argparse.Namespace) -> int:
     try:
         for r in (recon, *(r for _, r in compare)):  # (a zero or mirrored rotation: refused)
             check_rotations(r)
+        labels = _labels((args.recon, recon), compare)
         page = write_viewer(recon, args.out, assets, recording=recording,
-                            compare=[r for _, r in compare], compare_labels=_labels(compare),
+                            compare=[r for _, r in compare], compare_labels=labels,
                             title=args.title)  # fmt: skip
     except ExportError as e:
         text = str(e)

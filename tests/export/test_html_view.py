@@ -275,6 +275,17 @@ def test_command_writes_one_page_with_every_body(files, tmp_path, capsys) -> Non
     assert "1 fall event(s)" in out
 
 
+def test_command_tells_two_runs_of_one_method_apart(files, recon, tmp_path) -> None:
+    """Two policies' reconstructions of one recording (both "grip", the same file name in two
+    folders): the compared one is labelled with its folder."""
+    other = tmp_path / "shipped" / files["recon"].name
+    recon.save(other)
+    page = tmp_path / "two.html"
+    assert main(["view", str(files["recon"]), "--compare", str(other), "--out", str(page)]) == 0
+    data = embedded_data(page.read_text(encoding="utf-8"))
+    assert [b["label"] for b in data["bodies"]] == ["grip", "grip (shipped)"]
+
+
 def test_grip_export_writes_the_page_as_its_html_format(files, tmp_path, capsys) -> None:
     out = tmp_path / "ex"
     assert main(["export", str(files["recon"]), "--gt", str(files["rec"]), "--formats", "html",
