@@ -333,7 +333,10 @@ class BatchedTrackingEnv:
         }
         if cfg.teacher_obs:  # a privileged teacher's inputs (TrackingEnvConfig.teacher_obs)
             truth = [e._truth for e in self.envs]
-            obs["teacher_kinematic"] = self._kinematic(truth, self._root_offset_truth, t, h)[0]
+            est_root = cfg.teacher_root == "estimate"  # (TrackingEnvConfig.teacher_root)
+            obs["teacher_kinematic"] = self._kinematic(
+                truth, self._root_offset if est_root else self._root_offset_truth, t, h,
+                [e._est for e in self.envs] if est_root else None)[0]  # fmt: skip
             shift = np.zeros((n, self._gain.shape[1]), np.float32)
             if self._relative:
                 for i, (e, f) in enumerate(zip(self.envs, truth, strict=True)):
@@ -341,14 +344,17 @@ class BatchedTrackingEnv:
             obs["teacher_shift"] = shift
         return obs
 
-    def _kinematic(self, frames: list, offset: np.ndarray, t: list[int],
-                   h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def _kinematic(self, frames: list, offset: np.ndarray, t: list[int], h: np.ndarray,
+                   root_frames: list | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """The kinematic and self observations of the last stable states against reference
         frames ``t`` of ``frames`` (one :class:`grip.task.observations.EstimateFrames` per
-        environment; the root integrated from ``offset (N, 3)``)."""
+        environment; the root integrated from ``offset (N, 3)``, that of ``root_frames``
+        when given)."""
         er = self._est_rows
         for i, f in enumerate(frames):
             er[i] = f.obs_rows[t[i]]
+            if root_frames is not None:
+                er[i, _ROOT] = root_frames[i].obs_rows[t[i], _ROOT]
         er[:, _ROOT] += offset
         n, space = self.num_envs, self.observation_space
         kin = np.empty((n, space["kinematic"].shape[0]), np.float32)

@@ -43,6 +43,7 @@ from grip.config import REMOVED_ANY_VALUE, RemovedSetting, drop_removed
 from grip.core.atomic import atomic_write
 from grip.core.checks import check
 from grip.core.rundir import RunDir
+from grip.task.config import TEACHER_ROOTS
 from policies.config import REMOVED_IN, speed_rules
 
 VEC_ENVS: tuple[str, ...] = ("batched", "dummy")
@@ -105,6 +106,10 @@ class DistillConfig:
             train``): rollouts on the truth, where the teacher's label needs no shift, mixed
             with rollouts on the estimate, so that the student learns to track motion rather
             than one estimator's errors.
+        teacher_root: The pelvis a privileged teacher's observation follows
+            (:attr:`grip.task.config.TrackingEnvConfig.teacher_root`): ``"truth"``, as it
+            trained, or ``"estimate"``, the pelvis the student follows and is judged by (its
+            labels then steer toward what the student sees; docs/pace.md).
         threads: Torch threads (0: all cores).
         vec_env: ``"batched"``: the rollout environments stepped by one call (the env maker's
             ``batched`` form, :class:`envs.batched.BatchedTrackingEnv`; the same transitions
@@ -134,6 +139,7 @@ class DistillConfig:
     speed_categories: tuple[str, ...] = ("walk*",)
     truth_references: bool = False
     action_noise: float = 0.0
+    teacher_root: str = "truth"
     threads: int = 0
     vec_env: str = "batched"
     seed: int = 0
@@ -153,6 +159,7 @@ class DistillConfig:
              "max_samples must hold at least one iteration's decisions"),
             (self.init_member >= 0, "init_member must be >= 0"),
             (self.action_noise >= 0, "action_noise must be >= 0"),
+            (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
              "fall_height_m and max_episode_frames must be >= 0"),
             (self.vec_env in VEC_ENVS, f"vec_env must be one of {list(VEC_ENVS)}"),
@@ -331,7 +338,8 @@ class Distiller:
 
         c = self.cfg
         seed = c.seed + 7919 * self.iteration
-        teacher_env = dataclasses.replace(self.teacher.env_cfg, teacher_obs=self.privileged)
+        teacher_env = dataclasses.replace(self.teacher.env_cfg, teacher_obs=self.privileged,
+                                          teacher_root=c.teacher_root)  # fmt: skip
         if c.vec_env == "dummy":
             return stage2_rollout_env(self.make_env, teacher_env, self.reference,
                                       c.categories, c.n_envs, seed, c.fall_height_m,

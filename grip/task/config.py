@@ -15,6 +15,7 @@ distance already lost to the estimate, which no velocity difference shows; docs/
 ACTION_MODES: tuple[str, ...] = ("relative", "absolute")
 REWARD_FORMS: tuple[str, ...] = ("mean_sq", "norm")
 TERRAINS: tuple[str, ...] = ("auto", "flat", "boxes", "stairs", "chair")
+TEACHER_ROOTS: tuple[str, ...] = ("truth", "estimate")
 
 
 @dataclass(frozen=True)
@@ -146,6 +147,12 @@ class TrackingEnvConfig:
             training), and ``teacher_shift`` (69), the relative action that moves the PD target
             from the estimate's to the truth's (a teacher action ``a`` is the student action
             ``a + teacher_shift``). Not a training setting: policies never see these keys.
+        teacher_root: With ``teacher_obs``: the pelvis position ``teacher_kinematic`` follows,
+            ``"truth"`` (the truth's integrated root, as the teacher saw in training) or
+            ``"estimate"`` (the root the student follows, the estimate's integrated one, with
+            the truth's pose over it): the teacher then steers toward the pelvis the student is
+            judged by, so its labels agree with what the student sees (only the pelvis gap of
+            ``OAV_Jrel_root`` and the offsets of ``OAV_Jglo`` read it).
         mjcf: Humanoid and simulation options.
         reward: Reward settings.
     """
@@ -177,6 +184,7 @@ class TrackingEnvConfig:
     action_repeat: int = 1
     amp_window: int = 10
     teacher_obs: bool = False
+    teacher_root: str = "truth"
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
 
@@ -196,6 +204,7 @@ class TrackingEnvConfig:
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
             (self.fall_below_reference_m >= 0, "fall_below_reference_m must be >= 0 (0 = off)"),
             (self.termination_root_gap_m >= 0, "termination_root_gap_m must be >= 0 (0 = off)"),
+            (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),
         )

@@ -101,3 +101,48 @@ def test_batched_teacher_inputs_match_separate_envs(estimated) -> None:
         o1, *_ = ref.step(a)
         o2, *_ = bat.step(a)
     bat.close()
+
+
+def test_a_teacher_can_follow_the_students_pelvis(estimated) -> None:
+    """``teacher_root = "estimate"``: the teacher's pelvis gap (the last two values of
+    ``OAV_Jrel_root``) is the student's, to the estimate's integrated root (10 % fast here, so it
+    pulls away from the truth's), while the rest of its observation is still the truth's; the
+    batched environments give the same."""
+    base = dataclasses.replace(CFG, teacher_obs=True, kinematic_obs="OAV_Jrel_root")
+    by_root = {}
+    for root in ("truth", "estimate"):
+        env = GripTrackingEnv(dataclasses.replace(base, teacher_root=root), estimated)
+        o, _ = env.reset(seed=3)
+        rows = []
+        for _ in range(25):
+            rows.append({k: o[k].copy() for k in ("kinematic", "teacher_kinematic")})
+            o, *_ = env.step(np.zeros(69))
+        by_root[root] = rows
+    for tr, es in zip(by_root["truth"], by_root["estimate"], strict=True):
+        np.testing.assert_array_equal(es["teacher_kinematic"][-2:], es["kinematic"][-2:])
+        np.testing.assert_array_equal(es["teacher_kinematic"][:-2], tr["teacher_kinematic"][:-2])
+    last_t, last_e = by_root["truth"][-1], by_root["estimate"][-1]
+    assert np.abs(last_t["teacher_kinematic"][-2:] - last_e["teacher_kinematic"][-2:]).max() > 0.01
+    cfg = dataclasses.replace(base, teacher_root="estimate", max_episode_frames=12,
+                              min_episode_frames=12)  # fmt: skip
+    seeds = [11, 12]
+    ref = DummyVecEnv([functools.partial(_reset, cfg, estimated, s) for s in seeds])
+    envs = [_reset(cfg, estimated, s) for s in seeds]
+    bat = BatchedVecEnv(BatchedTrackingEnv(envs, 1))
+    ref.seed(4)
+    bat.seed(4)
+    o1, o2 = ref.reset(), bat.reset()
+    rng = np.random.default_rng(1)
+    for _ in range(15):
+        np.testing.assert_allclose(o2["teacher_kinematic"], o1["teacher_kinematic"], rtol=1e-6,
+                                   atol=1e-6)  # fmt: skip
+        a = rng.uniform(-0.5, 0.5, (2, 69)).astype(np.float32)
+        o1, *_ = ref.step(a)
+        o2, *_ = bat.step(a)
+    bat.close()
+
+
+def _reset(cfg, reference, seed) -> GripTrackingEnv:
+    env = GripTrackingEnv(cfg, reference)
+    env.reset(seed=seed)
+    return env

@@ -34,6 +34,21 @@ def test_batched_rollouts_collect_the_dummy_ones(tmp_path) -> None:
 def test_vec_env_is_checked() -> None:
     with pytest.raises(ValueError, match="vec_env"):
         DistillConfig(vec_env="subproc")
+    with pytest.raises(ValueError, match="teacher_root must be one of"):
+        DistillConfig(teacher_root="pelvis")
+
+
+def test_the_rollouts_take_the_teacher_root(tmp_path) -> None:
+    """``teacher_root`` reaches every rollout environment's settings."""
+    cfg = DistillConfig(iterations=1, decisions_per_iteration=24, n_envs=2, max_samples=64,
+                        categories=(), reverse_categories=(), mirror_references=False,
+                        max_episode_frames=5, teacher_root="estimate")  # fmt: skip
+    dist = Distiller(cfg, [SHIPPED_POLICY], tmp_path / "d", SAMPLE_REFERENCE, make_tracking_env)
+    venv = dist._make_env()
+    try:
+        assert {e.cfg.teacher_root for e in venv.envs} == {"estimate"}
+    finally:
+        venv.close()
 
 
 def test_the_sample_buffer_keeps_the_newest_in_one_copy() -> None:
