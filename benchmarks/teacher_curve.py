@@ -53,9 +53,10 @@ def _categories(data: Path, by_source: bool = False) -> dict[str, str]:
 
 
 def _clip_id(name: str) -> str:
-    """``synthetic_<source>/<clip>_seqNNN[#k]`` (a reference clip) -> ``<source>/<clip>``."""
+    """``synthetic_<source>/<clip>[@x<factor>]_seqNNN[#k]`` (a reference clip; ``@x`` a clip
+    played faster by ``speed_factors``, its category unchanged) -> ``<source>/<clip>``."""
     name = re.sub(r"#\d+$", "", name).removeprefix("synthetic_")
-    return re.sub(r"_seq\d+$", "", name)
+    return re.sub(r"(@x[0-9.]+)?_seq\d+$", "", name)
 
 
 def _loglinear_to(log_x, y, target: float) -> tuple[float, float | None]:

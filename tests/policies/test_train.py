@@ -453,3 +453,7 @@ def test_teacher_curve_groups_categories_by_source(tmp_path):
     assert tc._categories(tmp_path, by_source=True) == {
         "bandai_namco/dataset-1_walk_x_001": "walk bandai_namco/dataset-1",
         "cmu/14_01": "walk cmu", "cmu/14_02": "unknown cmu"}  # fmt: skip
+    # a training walk played faster (speed_factors) is its clip's
+    for name in ("synthetic_bandai_namco/dataset-1_walk_x_001@x1.5_seq000",
+                 "synthetic_bandai_namco/dataset-1_walk_x_001_seq000#1"):  # fmt: skip
+        assert tc._clip_id(name) == "bandai_namco/dataset-1_walk_x_001"
