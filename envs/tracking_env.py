@@ -338,11 +338,12 @@ class GripTrackingEnv(gym.Env):
             obs["environment"][:] = terrain(root[:2], h[0, :2, :2], self._grid, self._hm) - root[2]
         if self._truth is not None:
             tr = self._truth
-            root = er[0, _ROOT].copy()  # (the student's followed root, offset included)
-            er[0] = tr.obs_rows[t]
-            if cfg.teacher_root == "estimate":
+            if cfg.teacher_root == "estimate":  # keep the student's root (offset included)
+                root = er[0, _ROOT].copy()
+                er[0] = tr.obs_rows[t]
                 er[0, _ROOT] = root
             else:
+                er[0] = tr.obs_rows[t]
                 er[0, _ROOT] += self._root_offset_truth
             O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er,
                                obs["teacher_kinematic"][None], self._self_scratch)  # fmt: skip

@@ -291,6 +291,55 @@ def test_fall_below_reference_matches_cpu_env(below_m, falls):
         assert step == FALL_DECISIONS - 1
 
 
+GAP_LIMIT_M = 0.1
+
+
+def test_pelvis_gap_termination_matches_cpu_env():
+    """``termination_root_gap_m``: a body given zero actions sinks where it stands while its
+    reference moves on; the Warp env ends the same episodes at the same decision as the CPU
+    env, until the first one ends (at least one does; the gaps, read back from the CPU env's
+    ``root_pos`` kernel, stay 0.5 mm away from the limit, beyond float32 rounding)."""
+    import torch
+    import warp as wp
+
+    from envs.batched import BatchedTrackingEnv
+    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
+    from envs.warp.env import WarpTrackingEnv
+    from grip.core.reference import ReferenceSet
+    from grip.task.config import TrackingEnvConfig
+
+    wp.config.quiet = True
+    ref = ReferenceSet.load(SAMPLE_REFERENCE)
+    cfg = TrackingEnvConfig(termination_dist_m=0.0, termination_root_gap_m=GAP_LIMIT_M)
+    n = len(FALL_STARTS)
+    envs = [GripTrackingEnv(cfg, ref) for _ in FALL_STARTS]
+    for e in envs:
+        e.reset(seed=0)
+    cpu = BatchedTrackingEnv(envs, threads=1)
+    gpu = WarpTrackingEnv(cfg, ref, n, device="cpu")
+    for i, (c, s) in enumerate(FALL_STARTS):
+        cpu.reset(i, options={"clip": c, "start": s})
+    gpu.reset(torch.ones(n, dtype=torch.bool), torch.tensor([c for c, _ in FALL_STARTS]),
+              torch.tensor([s for _, s in FALL_STARTS]))  # fmt: skip
+    k = cfg.reward.k_root_pos
+    ended = False
+    try:
+        for step in range(FALL_DECISIONS):
+            act = np.zeros((n, 69), np.float32)
+            _, _, te_c, _, info_c = cpu.step(act)
+            _, _, te_g, _, _ = gpu.step(torch.as_tensor(act))
+            gap = np.sqrt(-np.log([i["reward/root_pos"] for i in info_c]) / k)
+            assert np.abs(gap - GAP_LIMIT_M).min() > 5e-4, "too close to the limit"
+            np.testing.assert_array_equal(te_c, gap > GAP_LIMIT_M)
+            np.testing.assert_array_equal(te_g.numpy(), te_c, err_msg=f"terminated, step {step}")
+            if te_c.any():
+                ended = True
+                break  # (a finished episode is not stepped on)
+    finally:
+        cpu.close()
+    assert ended
+
+
 def test_clip_weights_choose_the_clips_drawn():
     """``set_clip_weights`` (hard-clip mining): a reset draws clips by length times the
     weights, so a clip of weight 0 is never drawn; bad weights are refused as on the CPU."""
