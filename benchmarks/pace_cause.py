@@ -8,6 +8,9 @@ estimate and, separately, the ground truth, and measures per segment (frames bef
   positive) and *across* it;
 * the ground covered by the humanoid over the ground covered by what it follows
   (``speed_ratio``; 1 s samples of the horizontal path);
+* how far the followed pelvis itself runs from the truth's over the whole segment
+  (``ref_to_truth_*``; zero when following the truth): the floor of any gap to the truth of a
+  controller that keeps to the estimate, and the estimate's own pace (``ref_over_truth_speed``);
 * the share of leg actions near the action bound (|a| > 0.9): a PD target that cannot go
   further would cap the gait;
 * what the task's reward pays for pace: the ``imit_vel`` and ``root_vel`` kernels (the only
@@ -89,10 +92,12 @@ def play(setup, segments, reference: str) -> list[dict]:
         recon, _ = pipe.play(ep.est, ep.start, ep.body, ep.objects, stop_at_fall=True)
         n = recon.n_frames
         fps = float(est.fps)
-        gt = ground_truth(rec).head(n)
+        gt_all = ground_truth(rec)
+        gt = gt_all.head(n)
         sim_xy = recon.root_pos[:, :2]
         offset = ep.start.qpos[:3] - est.est_root_pos[0]
-        ref_xy = (est.est_root_pos[:n] + offset)[:, :2]
+        ref_all = (est.est_root_pos + offset)[:, :2]
+        ref_xy = ref_all[:n]
         fell = bool(len(recon.falls))
         acts = np.concatenate(rec_runner.actions) if rec_runner.actions else np.zeros((0, 69))
         legs = np.abs(acts[:, list(LEG_HINGES)])
@@ -109,6 +114,16 @@ def play(setup, segments, reference: str) -> list[dict]:
                 continue
             row[f"gap_{name}_m"], row[f"along_{name}_m"], row[f"across_{name}_m"] = _gap_parts(
                 sim_xy, ref_xy, t, fps)
+        # the followed pelvis against the truth's over the whole segment, whatever the humanoid
+        # did: the floor of a gap to the truth for any controller that keeps to the estimate
+        m = min(len(ref_all), len(gt_all.root_pos))
+        truth_xy = gt_all.root_pos[:m, :2] - gt_all.root_pos[0, :2] + ref_all[0]
+        for name, sec in (("1s", 1.0), ("5s", 5.0 - 1.0 / fps), ("end", None)):
+            t = m - 1 if sec is None else round(sec * fps)
+            row[f"ref_to_truth_{name}_m"] = (float(np.linalg.norm(ref_all[t] - truth_xy[t]))
+                                             if t < m else None)  # fmt: skip
+        row["ref_over_truth_speed"] = (_path_speed(ref_all[:m], fps)
+                                       / max(_path_speed(truth_xy, fps), 1e-9))  # fmt: skip
         rows.append(row)
         print(f"{seg.id:50s} {reference:8s} fell={fell!s:5s} speed ratio "
               f"{row['speed_ratio']:.3f} gap 5 s {row['gap_5s_m']} along {row['along_5s_m']}",
@@ -187,6 +202,9 @@ def main(argv: list[str] | None = None) -> None:
             "median_without_fall": {k: _median(kept, k) for k in (
                 "gap_1s_m", "gap_5s_m", "gap_end_m", "along_5s_m", "across_5s_m", "speed_ratio",
                 "ref_speed_mps", "sim_speed_mps", "leg_saturated", "leg_abs_action")},
+            "followed_to_truth_all_segments": {k: _median(rows, k) for k in (
+                "ref_to_truth_1s_m", "ref_to_truth_5s_m", "ref_to_truth_end_m",
+                "ref_over_truth_speed")},
             "max_gap_5s_without_fall_m": max((r["gap_5s_m"] for r in kept
                                               if r["gap_5s_m"] is not None), default=None),
         }  # fmt: skip
@@ -195,6 +213,7 @@ def main(argv: list[str] | None = None) -> None:
         out["by_reference"][ref]["reward_at_median_deficit"] = reward_cost(deficit)
     Path(args.json).write_text(json.dumps(out, indent=1))
     for ref, r in out["by_reference"].items():
+        print(ref, "followed pelvis to the truth's:", json.dumps(r["followed_to_truth_all_segments"]))
         print(ref, json.dumps(r["median_without_fall"]), "max gap 5 s",
               r["max_gap_5s_without_fall_m"], json.dumps(r["reward_at_median_deficit"]))
 
