@@ -213,7 +213,8 @@ def main(argv: list[str] | None = None) -> None:
         out["by_reference"][ref]["reward_at_median_deficit"] = reward_cost(deficit)
     Path(args.json).write_text(json.dumps(out, indent=1))
     for ref, r in out["by_reference"].items():
-        print(ref, "followed pelvis to the truth's:", json.dumps(r["followed_to_truth_all_segments"]))
+        print(ref, "followed pelvis to the truth's:",
+              json.dumps(r["followed_to_truth_all_segments"]))
         print(ref, json.dumps(r["median_without_fall"]), "max gap 5 s",
               r["max_gap_5s_without_fall_m"], json.dumps(r["reward_at_median_deficit"]))
 
