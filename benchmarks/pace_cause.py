@@ -174,6 +174,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--references", default="estimate,truth")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
+    for name in ("policy", "kin"):
+        if not Path(getattr(args, name)).is_file():
+            ap.error(f"--{name} {getattr(args, name)}: no such file")
 
     import torch
 
