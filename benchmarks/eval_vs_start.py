@@ -70,7 +70,8 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=16, help="--batch of the current command")
     ap.add_argument("--workers", type=int, default=2, help="--workers of the current command")
     ap.add_argument("--rounds", type=int, default=2, help="turns of the two commands")
-    ap.add_argument("--before", default=_START, help="commit of the reference (default: %(default)s)")
+    ap.add_argument("--before", default=_START,
+                    help="commit of the reference (default: %(default)s)")
     ap.add_argument("--tree", type=Path, default=None,
                     help="an existing checkout of --before (default: a temporary worktree)")
     ap.add_argument("--json", type=Path, default=None)
@@ -111,7 +112,8 @@ def main() -> None:
         "data": str(args.data), "split": args.split, "segments": args.segments,
         "segment_frames": args.segment_frames, "batch": args.batch, "workers": args.workers,
         "rounds": args.rounds, "before": args.before, "cores": os.cpu_count(),
-        "same_assets": same_assets, "wall_s": wall, "speedup": speedup, "metrics": got, "current_minus_before": diff,
+        "same_assets": same_assets, "wall_s": wall, "speedup": speedup, "metrics": got,
+        "current_minus_before": diff,
     }  # fmt: skip
     print(f"current ({args.batch=}, {args.workers=}) is {speedup:.2f}x faster than "
           f"{args.before}, process starts included")
