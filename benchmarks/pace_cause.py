@@ -75,6 +75,23 @@ def _gap_parts(sim_xy: np.ndarray, ref_xy: np.ndarray, t: int, fps: float) -> tu
     return float(np.linalg.norm(d)), along, across
 
 
+def followed_to_truth(ref_xy: np.ndarray, truth_pos: np.ndarray, fps: float) -> dict:
+    """How far the followed pelvis ``ref_xy (T, 2)`` runs from the truth's ``truth_pos (T', 3)``
+    (moved to start where it starts) at 1 s, 5 s and the end of their common frames, m, and the
+    ground it covers over the truth's (``ref_over_truth_speed``): the floor of any gap to the
+    truth for a controller that keeps to what it follows, whatever the humanoid did."""
+    m = min(len(ref_xy), len(truth_pos))
+    truth_xy = truth_pos[:m, :2] - truth_pos[0, :2] + ref_xy[0]
+    out: dict = {}
+    for name, sec in (("1s", 1.0), ("5s", 5.0 - 1.0 / fps), ("end", None)):
+        t = m - 1 if sec is None else round(sec * fps)
+        out[f"ref_to_truth_{name}_m"] = (float(np.linalg.norm(ref_xy[t] - truth_xy[t]))
+                                         if t < m else None)  # fmt: skip
+    out["ref_over_truth_speed"] = (_path_speed(ref_xy[:m], fps)
+                                   / max(_path_speed(truth_xy, fps), 1e-9))  # fmt: skip
+    return out
+
+
 def play(setup, segments, reference: str) -> list[dict]:
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
@@ -114,16 +131,7 @@ def play(setup, segments, reference: str) -> list[dict]:
                 continue
             row[f"gap_{name}_m"], row[f"along_{name}_m"], row[f"across_{name}_m"] = _gap_parts(
                 sim_xy, ref_xy, t, fps)
-        # the followed pelvis against the truth's over the whole segment, whatever the humanoid
-        # did: the floor of a gap to the truth for any controller that keeps to the estimate
-        m = min(len(ref_all), len(gt_all.root_pos))
-        truth_xy = gt_all.root_pos[:m, :2] - gt_all.root_pos[0, :2] + ref_all[0]
-        for name, sec in (("1s", 1.0), ("5s", 5.0 - 1.0 / fps), ("end", None)):
-            t = m - 1 if sec is None else round(sec * fps)
-            row[f"ref_to_truth_{name}_m"] = (float(np.linalg.norm(ref_all[t] - truth_xy[t]))
-                                             if t < m else None)  # fmt: skip
-        row["ref_over_truth_speed"] = (_path_speed(ref_all[:m], fps)
-                                       / max(_path_speed(truth_xy, fps), 1e-9))  # fmt: skip
+        row.update(followed_to_truth(ref_all, gt_all.root_pos, fps))
         rows.append(row)
         print(f"{seg.id:50s} {reference:8s} fell={fell!s:5s} speed ratio "
               f"{row['speed_ratio']:.3f} gap 5 s {row['gap_5s_m']} along {row['along_5s_m']}",

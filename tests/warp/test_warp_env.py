@@ -240,9 +240,7 @@ def test_fall_below_reference_matches_cpu_env(below_m, falls):
     import torch
     import warp as wp
 
-    from envs.batched import BatchedTrackingEnv
-    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
-    from envs.warp.env import WarpTrackingEnv
+    from envs.tracking_env import SAMPLE_REFERENCE
     from grip.core.reference import ReferenceSet
     from grip.task.config import TrackingEnvConfig
 
@@ -256,16 +254,7 @@ def test_fall_below_reference_matches_cpu_env(below_m, falls):
     ref = ReferenceSet(clips, sample.sensor_sites, sample.insoles)
     cfg = TrackingEnvConfig(termination_dist_m=0.0, fall_height_m=1.5,
                             fall_below_reference_m=below_m)  # fmt: skip
-    n = len(FALL_STARTS)
-    envs = [GripTrackingEnv(cfg, ref) for _ in FALL_STARTS]
-    for e in envs:
-        e.reset(seed=0)
-    cpu = BatchedTrackingEnv(envs, threads=1)
-    gpu = WarpTrackingEnv(cfg, ref, n, device="cpu")
-    for i, (c, s) in enumerate(FALL_STARTS):
-        cpu.reset(i, options={"clip": c, "start": s})
-    gpu.reset(torch.ones(n, dtype=torch.bool), torch.tensor([c for c, _ in FALL_STARTS]),
-              torch.tensor([s for _, s in FALL_STARTS]))  # fmt: skip
+    cpu, gpu, n = _cpu_and_warp_at_fall_starts(cfg, ref)
     first_fall = np.full(n, -1)
     try:
         for step in range(FALL_DECISIONS):
@@ -302,25 +291,14 @@ def test_pelvis_gap_termination_matches_cpu_env():
     import torch
     import warp as wp
 
-    from envs.batched import BatchedTrackingEnv
-    from envs.tracking_env import SAMPLE_REFERENCE, GripTrackingEnv
-    from envs.warp.env import WarpTrackingEnv
+    from envs.tracking_env import SAMPLE_REFERENCE
     from grip.core.reference import ReferenceSet
     from grip.task.config import TrackingEnvConfig
 
     wp.config.quiet = True
     ref = ReferenceSet.load(SAMPLE_REFERENCE)
     cfg = TrackingEnvConfig(termination_dist_m=0.0, termination_root_gap_m=GAP_LIMIT_M)
-    n = len(FALL_STARTS)
-    envs = [GripTrackingEnv(cfg, ref) for _ in FALL_STARTS]
-    for e in envs:
-        e.reset(seed=0)
-    cpu = BatchedTrackingEnv(envs, threads=1)
-    gpu = WarpTrackingEnv(cfg, ref, n, device="cpu")
-    for i, (c, s) in enumerate(FALL_STARTS):
-        cpu.reset(i, options={"clip": c, "start": s})
-    gpu.reset(torch.ones(n, dtype=torch.bool), torch.tensor([c for c, _ in FALL_STARTS]),
-              torch.tensor([s for _, s in FALL_STARTS]))  # fmt: skip
+    cpu, gpu, n = _cpu_and_warp_at_fall_starts(cfg, ref)
     k = cfg.reward.k_root_pos
     ended = False
     try:
@@ -409,3 +387,25 @@ def test_start_bins_and_clip_termination_distances():
         env.set_clip_termination_dists([0.1])
     with pytest.raises(ValueError, match="one entry per clip"):
         env.set_start_bin_weights(100, [np.ones(3)])
+
+
+def _cpu_and_warp_at_fall_starts(cfg, ref):
+    """The batched CPU env and the Warp env (on the CPU device) of ``cfg`` and ``ref``, one
+    environment per :data:`FALL_STARTS` entry, each reset to its clip and start frame."""
+    import torch
+
+    from envs.batched import BatchedTrackingEnv
+    from envs.tracking_env import GripTrackingEnv
+    from envs.warp.env import WarpTrackingEnv
+
+    n = len(FALL_STARTS)
+    envs = [GripTrackingEnv(cfg, ref) for _ in FALL_STARTS]
+    for e in envs:
+        e.reset(seed=0)
+    cpu = BatchedTrackingEnv(envs, threads=1)
+    gpu = WarpTrackingEnv(cfg, ref, n, device="cpu")
+    for i, (c, s) in enumerate(FALL_STARTS):
+        cpu.reset(i, options={"clip": c, "start": s})
+    gpu.reset(torch.ones(n, dtype=torch.bool), torch.tensor([c for c, _ in FALL_STARTS]),
+              torch.tensor([s for _, s in FALL_STARTS]))  # fmt: skip
+    return cpu, gpu, n
