@@ -330,7 +330,7 @@ class GripPipeline:
 
     def estimate(self, streams: Sequence[SensorStream]) -> list[Estimate]:
         """KinematicsNet over whole recordings, as one padded batch, from their calibration
-        poses (the LSTMs' first states; zero velocities)."""
+        poses and velocities (the LSTMs' first states: :func:`first_state`)."""
         import torch
 
         from grip.core.body import build_body
@@ -343,7 +343,7 @@ class GripPipeline:
         for i, f in enumerate(feats):
             x[i, : len(f)] = f
             x[i, len(f) :] = f[-1]  # causal model: padding never affects earlier frames
-        firsts = [first_state(s.calibration, s.body) for s in streams]
+        firsts = [first_state(s.calibration, s.body, s.fps) for s in streams]
         first = {k: torch.from_numpy(np.stack([f[k] for f in firsts])) for k in firsts[0]}
         out = self.estimator.run_features(torch.from_numpy(x), first)
         ests = []

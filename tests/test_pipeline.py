@@ -30,11 +30,20 @@ def test_sensor_stream_features_equal_the_recordings() -> None:
 def test_calibration_gives_the_ground_truths_start() -> None:
     rec = make_recording(60, seed=5)
     s = sensor_stream(rec)
-    first = first_state(s.calibration, s.body)
+    first = first_state(s.calibration, s.body, s.fps)
     t = targets(rec.slice_frames(0, 2))
     np.testing.assert_array_equal(first["fp"], t.joint_pos[0].reshape(-1).astype(np.float32))
     np.testing.assert_array_equal(first["fa"], t.rot6d[0].reshape(-1).astype(np.float32))
-    assert not first["lv"].any()
+    # a segment cut in motion starts from its first frame's velocities, as a training window
+    # does (KinematicsNet learnt to start from them); a standing calibration from zero
+    cut = make_recording(200, seed=5).slice_frames(150, 200)  # (still for 100 frames)
+    moving = sensor_stream(cut)
+    want = targets(cut).velocity[0].reshape(-1).astype(np.float32)
+    assert np.abs(want).max() > 0.05
+    got = first_state(moving.calibration, moving.body, moving.fps)["lv"]
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    still = sensor_stream(rec, init="standing")
+    assert not first_state(still.calibration, still.body, still.fps)["lv"].any()
     clip = oracle_reference_clip(rec)
     a, b = start_from_calibration(s.calibration, s.body, s.fps), start_from_clip(clip)
     np.testing.assert_array_equal(a.qpos, b.qpos)
@@ -72,6 +81,6 @@ def test_without_ground_truth_the_start_is_the_standing_pose_at_the_feet_heading
                                atol=1e-9)  # fmt: skip
     np.testing.assert_allclose(start.qpos[7:], 0.0, atol=1e-9)
     assert not start.qvel.any()
-    first = first_state(s.calibration, s.body)
+    first = first_state(s.calibration, s.body, s.fps)
     assert all(np.isfinite(v).all() for v in first.values()) and not first["lv"].any()
     np.testing.assert_array_equal(stream_features(s), input_features(rec))

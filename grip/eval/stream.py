@@ -154,7 +154,7 @@ class GripStream:
             head = sensor_stream(calibration.slice_frames(0, min(2, calibration.n_frames)), cfg)
         cal, self._head = head.calibration, head
         self._features = FeatureStream(cfg, head.fps, cal.imu_ori, head.name)
-        self._kin = estimator.stream_from(first_state(cal, head.body))
+        self._kin = estimator.stream_from(first_state(cal, head.body, head.fps))
         self.clip = LiveEstimate(head.name, head.fps, cal.root_pos[0], cfg.n_features, capacity)
         # (live: the humanoid starts at frame 0, where a stream begins standing still)
         self._start = start_from_calibration(cal, head.body, head.fps, warmup=False)

@@ -356,16 +356,19 @@ def stream_features(stream: SensorStream, cfg: FeatureConfig = FeatureConfig()) 
     return feats.astype(np.float32)
 
 
-def first_state(calibration: Calibration, body: BodyParams) -> dict[str, np.ndarray]:
+def first_state(calibration: Calibration, body: BodyParams,
+                fps: float) -> dict[str, np.ndarray]:  # fmt: skip
     """KinematicsNet's first-frame states of the calibration pose (``{"lp", "fp", "fa", "lv"}``,
-    flat float32; the velocities zero, as at the start of a real recording): what
-    :meth:`grip.kinematics.inference.KinematicsEstimator.predict` starts its LSTMs from."""
+    flat float32): what :meth:`grip.kinematics.inference.KinematicsEstimator.predict` starts its
+    LSTMs from. The velocities are the calibration's frame 0 to frame 1 at ``fps`` (Hz), as
+    :class:`Targets` gives a training window's first frame: the truth's when the recording
+    starts in motion, zero for a standing calibration (its two frames are the same pose)."""
     g_rot, pos = forward_kinematics(calibration.local_rot, calibration.root_pos,
                                     build_body(body).offsets)  # fmt: skip
     rel = pos - pos[:, :1]
-    vel = np.gradient(pos[:, list(sk.VELOCITY_JOINTS)], axis=0)
+    vel = np.gradient(pos[:, list(sk.VELOCITY_JOINTS)], axis=0) * float(fps)
     out = {"lp": rel[0, list(sk.LEAF_JOINTS)], "fp": rel[0], "fa": matrix_to_6d(g_rot)[0],
-           "lv": vel[0] * 0.0}  # fmt: skip
+           "lv": vel[0]}  # fmt: skip
     return {k: v.reshape(-1).astype(np.float32) for k, v in out.items()}
 
 

@@ -206,7 +206,7 @@ class KinematicsEstimator:
         :func:`recording_calibration`: the ground truth of frame 0, or without it or with
         ``init="standing"`` the standing pose at the sensors' heading)."""
         cfg = self.cfg.features
-        firsts = [first_state(recording_calibration(r, cfg, init), recording_body(r))
+        firsts = [first_state(recording_calibration(r, cfg, init), recording_body(r), r.fps)
                   for r in recs]  # fmt: skip
         return {k: torch.from_numpy(np.stack([f[k] for f in firsts])) for k in TARGET_KEYS}
 
@@ -215,8 +215,8 @@ class KinematicsEstimator:
 
         The calibration pose (the first frame's ground truth, or without it or with
         ``init="standing"`` the standing pose: :func:`recording_calibration`) initialises the
-        LSTMs and the integrated root; the initial velocities are taken as zero, as at the
-        start of a real recording.
+        LSTMs and the integrated root; the initial velocities are the calibration's (the truth's
+        first-frame velocities, as a training window starts; zero when standing).
         """
         feats = [input_features(r, self.cfg.features) for r in recs]
         t_max = max(len(f) for f in feats)

@@ -15,8 +15,8 @@ Layouts (also in each file's ``metadata_props``, JSON where structured):
 * ``outputs`` and ``first_state`` share one row layout: the stages side by side, ``lp`` 0:15
   (root-relative leaf joints, m), ``fp`` 15:87 (root-relative joints, m), ``fa`` 87:231 (global
   joint rotations as 6D: the first two columns of each matrix), ``lv`` 231:249 (world velocities
-  of the leaves and the pelvis, m/s). The first state is the calibration pose in that layout with
-  zero velocities (:func:`grip.kinematics.features.first_state`).
+  of the leaves and the pelvis, m/s). The first state is the calibration pose in that layout
+  with its velocities (zero for a standing start; :func:`grip.kinematics.features.first_state`).
 * State row ``k = stage * L + layer`` (stages in the order lp, fp, fa, lv) holds that LSTM
   layer's hidden (``h``) or cell (``c``) state.
 

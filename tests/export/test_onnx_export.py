@@ -274,7 +274,8 @@ def test_shipped_kinematics_on_the_sample_walk(tmp_path) -> None:
     est = KinematicsEstimator.from_checkpoint(SHIPPED_KIN)
     rec = load_recording(SAMPLE_RECORDING)
     feats = input_features(rec, est.cfg.features)[:40]
-    first = first_state(recording_calibration(rec, est.cfg.features), recording_body(rec))
+    first = first_state(recording_calibration(rec, est.cfg.features), recording_body(rec),
+                        rec.fps)
     (step_path, _), (start_path, _) = export_kinematics_onnx(SHIPPED_KIN, tmp_path / "k.onnx")
     got = _run_onnx(_session(step_path), _session(start_path),
                     np.concatenate([first[k] for k in STAGES])[None], feats[None])[0]

@@ -283,7 +283,7 @@ def test_standing_starts_equal_the_standing_calibration_of_a_recording():
     cfg = FeatureConfig()
     for seed in (3, 4):
         rec = make_recording(20, seed=seed)
-        want = first_state(standing_calibration(rec, cfg), recording_body(rec))
+        want = first_state(standing_calibration(rec, cfg), recording_body(rec), rec.fps)
         x = torch.from_numpy(input_features(rec, cfg)[None])
         offs = torch.from_numpy(build_body(recording_body(rec)).offsets[None].astype(np.float32))
         got = standing_first(heading_of_feet(x, cfg.sites), offs)
