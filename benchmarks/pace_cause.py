@@ -17,6 +17,11 @@ estimate and, separately, the ground truth, and measures per segment (frames bef
   terms that see a horizontal velocity deficit with ``align_root_xy``) at the measured deficit,
   and their weighted cost per step.
 
+Two hybrid references take the estimate apart (``--references``): ``estimate-pose`` follows
+the estimate's pose and leaf velocities with the truth's pelvis velocity (so the truth's root
+path), ``estimate-root`` the truth's pose and leaf velocities with the estimate's pelvis
+velocity (its root path). Which part of the estimate slows the humanoid?
+
     python benchmarks/pace_cause.py --data DATA --json F [--policy P] [--kin K] [--segments N]
 
 Defaults: the shipped policy and KinematicsNet, the test split, categories ``walk*,run*``,
@@ -92,6 +97,29 @@ def followed_to_truth(ref_xy: np.ndarray, truth_pos: np.ndarray, fps: float) -> 
     return out
 
 
+REFERENCES = ("estimate", "truth", "estimate-pose", "estimate-root")
+PELVIS_ROW = -1  # the pelvis' row of est_vel (grip.core.skeleton.VELOCITY_JOINTS ends with it)
+
+
+def hybrid_clip(est, truth, keep: str):
+    """A reference clip that keeps one part of the estimate ``est`` and takes the rest from the
+    ground truth's clip ``truth`` (both :class:`grip.core.reference.ReferenceClip` of one
+    recording): ``keep="pose"`` the estimated joint positions, rotations and leaf velocities
+    with the truth's pelvis velocity (the root the clip integrates is the truth's);
+    ``keep="root"`` the truth's pose and leaf velocities with the estimated pelvis velocity."""
+    import dataclasses
+
+    if keep not in ("pose", "root"):
+        raise ValueError(f"keep must be 'pose' or 'root', got {keep!r}")
+    pose, other = (est, truth) if keep == "pose" else (truth, est)
+    vel = pose.est_vel.copy()
+    vel[:, PELVIS_ROW] = other.est_vel[:, PELVIS_ROW]
+    fields = {f.name for f in dataclasses.fields(est) if f.init}
+    kw = {k: getattr(est, k) for k in fields}
+    kw.update(est_pos=pose.est_pos, est_rot6d=pose.est_rot6d, est_vel=vel)
+    return type(est)(**kw)
+
+
 def play(setup, segments, reference: str) -> list[dict]:
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
@@ -102,9 +130,14 @@ def play(setup, segments, reference: str) -> list[dict]:
     read = SegmentReader()
     for seg in segments:
         rec = read(seg)
-        est = _estimates(estimator, [rec], 1, reference, "truth")[0]
+        if reference.startswith("estimate-"):
+            est = hybrid_clip(_estimates(estimator, [rec], 1, "estimate", "truth")[0],
+                              _estimates(estimator, [rec], 1, "truth", "truth")[0],
+                              reference.split("-", 1)[1])  # fmt: skip
+        else:
+            est = _estimates(estimator, [rec], 1, reference, "truth")[0]
         rec_runner = _Recorder(runner)
-        pipe = _pipeline(rec_runner, estimator, reference, "truth")
+        pipe = _pipeline(rec_runner, estimator, reference.split("-")[0], "truth")
         ep = _episode(rec, est, "truth", estimator.cfg.features)
         recon, _ = pipe.play(ep.est, ep.start, ep.body, ep.objects, stop_at_fall=True)
         n = recon.n_frames
@@ -179,12 +212,17 @@ def main(argv: list[str] | None = None) -> None:
                     help="play the split's clips this many times faster (sensors synthesised "
                     "again, as speed_factors of 'grip policy train' makes its training walks): "
                     "has a controller trained on the faster training walks learnt their pace?")
-    ap.add_argument("--references", default="estimate,truth")
+    ap.add_argument("--references", default="estimate,truth",
+                    help=f"comma-separated, of {', '.join(REFERENCES)} (the hybrids: module "
+                    "docstring)")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):
         if not Path(getattr(args, name)).is_file():
             ap.error(f"--{name} {getattr(args, name)}: no such file")
+    bad = [r for r in args.references.split(",") if r not in REFERENCES]
+    if bad:
+        ap.error(f"--references: unknown {bad}; choose from {', '.join(REFERENCES)}")
 
     import torch
 

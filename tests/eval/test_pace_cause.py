@@ -26,3 +26,27 @@ def test_a_followed_pelvis_that_runs_ahead_of_the_truth() -> None:
     assert max(same[k] for k in ("ref_to_truth_1s_m", "ref_to_truth_5s_m")) < 1e-9
     short = pc.followed_to_truth(truth[:300, :2], truth, 100.0)
     assert short["ref_to_truth_5s_m"] is None  # a segment shorter than 5 s has no 5 s value
+
+
+def test_hybrid_references_take_the_estimate_apart() -> None:
+    from grip.kinematics.features import targets
+    from grip.kinematics.reference import oracle_reference_clip, reference_clip
+    from prism_tools.synthetic import make_recording
+
+    pc = _benchmark("pace_cause")
+    rec = make_recording(200, seed=3)
+    truth = oracle_reference_clip(rec)
+    t = targets(rec)
+    slow = t.velocity * 0.5  # an estimate whose every velocity is half the truth's
+    est = reference_clip(rec, t.joint_pos + 0.01, t.global_rot, slow, truth.sensor)
+    pose = pc.hybrid_clip(est, truth, "pose")
+    np.testing.assert_array_equal(pose.est_pos, est.est_pos)
+    np.testing.assert_array_equal(pose.est_vel[:, :-1], est.est_vel[:, :-1])
+    np.testing.assert_allclose(pose.est_root_pos, truth.est_root_pos, atol=1e-9)  # the truth's path
+    root = pc.hybrid_clip(est, truth, "root")
+    np.testing.assert_array_equal(root.est_pos, truth.est_pos)
+    np.testing.assert_array_equal(root.est_vel[:, :-1], truth.est_vel[:, :-1])
+    np.testing.assert_allclose(root.est_root_pos, est.est_root_pos, atol=1e-9)  # the estimate's
+    assert np.linalg.norm(est.est_root_pos[-1] - truth.est_root_pos[-1]) > 0.2
+    with pytest.raises(ValueError, match="keep"):
+        pc.hybrid_clip(est, truth, "legs")
