@@ -11,6 +11,8 @@ estimate and, separately, the ground truth, and measures per segment (frames bef
 * how far the followed pelvis itself runs from the truth's over the whole segment
   (``ref_to_truth_*``; zero when following the truth): the floor of any gap to the truth of a
   controller that keeps to the estimate, and the estimate's own pace (``ref_over_truth_speed``);
+* how far the followed pelvis' heading turns from the truth's (``pelvis_heading_err_deg``,
+  the median over the frames);
 * the share of leg actions near the action bound (|a| > 0.9): a PD target that cannot go
   further would cap the gait;
 * what the task's reward pays for pace: the ``imit_vel`` and ``root_vel`` kernels (the only
@@ -114,10 +116,16 @@ def hybrid_clip(est, truth, keep: str):
     pose, other = (est, truth) if keep == "pose" else (truth, est)
     vel = pose.est_vel.copy()
     vel[:, PELVIS_ROW] = other.est_vel[:, PELVIS_ROW]
-    fields = {f.name for f in dataclasses.fields(est) if f.init}
-    kw = {k: getattr(est, k) for k in fields}
-    kw.update(est_pos=pose.est_pos, est_rot6d=pose.est_rot6d, est_vel=vel)
-    return type(est)(**kw)
+    return dataclasses.replace(est, est_pos=pose.est_pos, est_rot6d=pose.est_rot6d, est_vel=vel)
+
+
+def pelvis_heading_error_deg(clip) -> float:
+    """Median over the frames of the angle between the followed pelvis' heading and the truth's
+    (a :class:`grip.core.reference.ReferenceClip`), deg: 0 when following the truth."""
+    from grip.core.rotations import heading_angle
+
+    d = heading_angle(clip.est_rot[:, 0]) - heading_angle(clip.gt_rot[:, 0])
+    return float(np.degrees(np.median(np.abs(np.angle(np.exp(1j * d))))))
 
 
 def play(setup, segments, reference: str) -> list[dict]:
@@ -165,6 +173,7 @@ def play(setup, segments, reference: str) -> list[dict]:
             row[f"gap_{name}_m"], row[f"along_{name}_m"], row[f"across_{name}_m"] = _gap_parts(
                 sim_xy, ref_xy, t, fps)
         row.update(followed_to_truth(ref_all, gt_all.root_pos, fps))
+        row["pelvis_heading_err_deg"] = pelvis_heading_error_deg(est)
         rows.append(row)
         print(f"{seg.id:50s} {reference:8s} fell={fell!s:5s} speed ratio "
               f"{row['speed_ratio']:.3f} gap 5 s {row['gap_5s_m']} along {row['along_5s_m']}",
@@ -253,7 +262,7 @@ def main(argv: list[str] | None = None) -> None:
                 "ref_speed_mps", "sim_speed_mps", "leg_saturated", "leg_abs_action")},
             "followed_to_truth_all_segments": {k: _median(rows, k) for k in (
                 "ref_to_truth_1s_m", "ref_to_truth_5s_m", "ref_to_truth_end_m",
-                "ref_over_truth_speed")},
+                "ref_over_truth_speed", "pelvis_heading_err_deg")},
             "max_gap_5s_without_fall_m": max((r["gap_5s_m"] for r in kept
                                               if r["gap_5s_m"] is not None), default=None),
         }  # fmt: skip

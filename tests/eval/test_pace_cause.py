@@ -50,3 +50,19 @@ def test_hybrid_references_take_the_estimate_apart() -> None:
     assert np.linalg.norm(est.est_root_pos[-1] - truth.est_root_pos[-1]) > 0.2
     with pytest.raises(ValueError, match="keep"):
         pc.hybrid_clip(est, truth, "legs")
+
+
+def test_pelvis_heading_error_of_an_estimate_turned_about_the_vertical() -> None:
+    from grip.core.rotations import rot_z
+    from grip.kinematics.features import targets
+    from grip.kinematics.reference import oracle_reference_clip, reference_clip
+    from prism_tools.synthetic import make_recording
+
+    pc = _benchmark("pace_cause")
+    rec = make_recording(120, seed=2)
+    truth = oracle_reference_clip(rec)
+    assert pc.pelvis_heading_error_deg(truth) < 1e-9
+    t = targets(rec)
+    turned = rot_z(np.radians(-7.0)) @ t.global_rot  # every segment 7 deg to the right
+    est = reference_clip(rec, t.joint_pos, turned, t.velocity, truth.sensor)
+    assert pc.pelvis_heading_error_deg(est) == pytest.approx(7.0, abs=1e-6)
