@@ -128,16 +128,35 @@ def pelvis_heading_error_deg(clip) -> float:
     return float(np.degrees(np.median(np.abs(np.angle(np.exp(1j * d))))))
 
 
-def play(setup, segments, reference: str) -> list[dict]:
+def fold_chooser(kin_folds: list[str], data: str):
+    """``rec -> estimator``: the fold model (``--kin-fold``) that never saw the recording's
+    person, as a cross-fitted training set estimates it
+    (:func:`grip.kinematics.reference.build_cross_fitted_reference_set`)."""
+    from grip.kinematics.dataset import dataset_groups, group_fold, recording_group
+    from grip.kinematics.inference import KinematicsEstimator
+    from grip.kinematics.reference import fold_partition
+
+    ests = [KinematicsEstimator.from_checkpoint(k) for k in kin_folds]
+    part = fold_partition(ests, kin_folds)
+    if part is None:
+        raise ValueError(f"{', '.join(kin_folds)}: not fold models (train.val_source = 'fold')")
+    by_fold, groups = {e.cfg.train.fold: e for e in ests}, dataset_groups(data)
+    return lambda rec: by_fold[group_fold(recording_group(rec, groups), *part)]
+
+
+def play(setup, segments, reference: str, choose=None) -> list[dict]:
+    """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
+    of each recording (default: the setup's)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
 
-    runner, estimator = setup.build()
+    runner, default = setup.build()
     rows = []
     read = SegmentReader()
     for seg in segments:
         rec = read(seg)
+        estimator = default if choose is None else choose(rec)
         if reference.startswith("estimate-"):
             est = hybrid_clip(_estimates(estimator, [rec], 1, "estimate", "truth")[0],
                               _estimates(estimator, [rec], 1, "truth", "truth")[0],
@@ -224,6 +243,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--references", default="estimate,truth",
                     help=f"comma-separated, of {', '.join(REFERENCES)} (the hybrids: module "
                     "docstring)")
+    ap.add_argument("--kin-fold", action="append", default=[], metavar="CKPT",
+                    help="the fold models of a split by person (repeat, one per fold): each "
+                    "segment is estimated by the one that never saw its person (with --split "
+                    "train: a cross-fitted training set's references, docs/pace.md E3)")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):
@@ -248,11 +271,13 @@ def main(argv: list[str] | None = None) -> None:
     if 0 < args.segments < len(segs):
         segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
     setup = PolicySetup((args.policy,), args.kin)
-    out: dict = {"policy": args.policy, "kin": args.kin, "data": args.data, "split": args.split,
+    choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else None
+    out: dict = {"policy": args.policy, "kin": args.kin_fold or args.kin, "data": args.data,
+                 "split": args.split,
                  "speed_factor": args.speed_factor, "segments": len(segs),
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
-        rows = play(setup, segs, ref)
+        rows = play(setup, segs, ref, choose)
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {
             "rows": rows,

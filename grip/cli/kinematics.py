@@ -266,6 +266,7 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     from grip.cli.errors import CliError
     from grip.kinematics.dataset import (
         dataset_groups,
+        fold_split,
         holdout_split,
         load_split_sequences,
         sequence_sources,
@@ -279,12 +280,15 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
         groups = dataset_groups(data)
         if tc.val_source == "holdout":
             train, val = holdout_split(train, tc.val_fraction, tc.seed, groups)
+        elif tc.val_source == "fold":
+            train, val = fold_split(train, tc.folds, tc.fold, tc.seed, groups)
         else:
             val = load_split_sequences(data, "test", cfg.features)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(f"{data}: {e}" if str(data) not in str(e) else str(e)) from e
     n_frames = sum(len(s.x) for s in train)
-    what = "held-out training" if tc.val_source == "holdout" else "test"
+    what = {"holdout": "held-out training", "fold": f"fold {tc.fold} of {tc.folds}"}.get(
+        tc.val_source, "test")
     print(f"loaded {len(train)} train / {len(val)} validation ({what}) sequences "
           f"({n_frames} train frames) in {time.perf_counter() - t0:.1f} s")  # fmt: skip
     try:

@@ -54,7 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="KinematicsNet checkpoint that makes the references (default: the "
                    "shipped one); repeat it to train on every recording estimated by each, "
                    "e.g. a weaker checkpoint whose errors on the training clips resemble the "
-                   "shipped one's on unseen clips")  # fmt: skip
+                   "shipped one's on unseen clips; the K fold models of a split by person "
+                   "('grip kin train --set train.val_source=fold --set train.fold=k') make a "
+                   "cross-fitted set instead: each recording estimated once, by the model that "
+                   "never saw its person")  # fmt: skip
     p.add_argument("--config", type=Path, default=None,
                    help="TOML overrides (default: configs/policy/default.toml)")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

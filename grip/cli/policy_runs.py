@@ -46,10 +46,13 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     with ``follow="truth"`` the ground truth is the reference, with the feature settings of
     ``kins[0]``; with ``follow="both"`` the estimates and, as ``<clip>#truth``, the ground
     truth; training clips of ``speed_categories`` also played each of ``speed_factors`` times
-    faster) unless it exists. The augmentation settings are written beside it
-    (``reference_train.json``): an existing set made with other settings is refused, not
-    silently reused (a set without that record predates ``speed_factors``: it holds no
-    speed-scaled clips). Shared by ``grip policy train`` and ``grip policy distill``."""
+    faster) unless it exists. When ``kins`` are the K fold models of a split by person
+    (``grip kin train --set train.val_source=fold``), each recording is estimated once, by the
+    model that never saw its person (cross-fitted, recorded as ``cross_fit``). The augmentation
+    settings are written beside it (``reference_train.json``): an existing set made with other
+    settings is refused, not silently reused (a set without that record predates
+    ``speed_factors``: it holds no speed-scaled clips). Shared by ``grip policy train`` and
+    ``grip policy distill``."""
     from tqdm import tqdm
 
     from grip.cli.errors import CliError
@@ -59,6 +62,15 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     made = {"reverse_categories": list(reverse_categories), "mirror": bool(mirror),
             "follow": follow, "speed_factors": [float(f) for f in speed_factors],
             "speed_categories": list(speed_categories) if speed_factors else []}  # fmt: skip
+    from grip.kinematics.inference import KinematicsEstimator
+    from grip.kinematics.reference import fold_partition
+
+    try:
+        ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
+        if follow != "truth" and fold_partition(ests, kins) is not None:
+            made["cross_fit"] = len(kins)  # (each clip estimated once, by its fold's model)
+    except ValueError as e:
+        raise CliError(str(e)) from e
     sidecar = ref_path.with_suffix(".json")
     if ref_path.is_file():
         try:
@@ -70,14 +82,13 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
             was = {**made, "speed_factors": [], "speed_categories": []}
             note = f"; no readable {sidecar.name}: made before speed_factors existed"
         if was != made:
-            changed = sorted(k for k in made if was.get(k) != made[k])
+            changed = sorted(k for k in {*made, *was} if was.get(k) != made.get(k))
             before, now = ({k: d.get(k) for k in changed} for d in (was, made))
             raise CliError(f"{ref_path} was made with other settings ({', '.join(changed)}: "
                            f"{before} -> {now}{note}); delete it to rebuild the reference set, "
                            "or use a new run folder")  # fmt: skip
         allow_reference_size(reference_copies(made, len(kins)))
         return
-    from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
 
     recs = load_recordings(files)
@@ -89,21 +100,31 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.cli.recordings import speed_scaled_training_recordings
 
         recs += speed_scaled_training_recordings(data, files, speed_categories, speed_factors)
-    sets, est = [], None
-    for kin in kins:
-        try:
-            est = KinematicsEstimator.from_checkpoint(kin)
-        except ValueError as e:
-            raise CliError(str(e)) from e
+    sets, est = [], ests[0]
+    if "cross_fit" in made:
+        from grip.kinematics.dataset import dataset_groups
+        from grip.kinematics.reference import build_cross_fitted_reference_set
+
+        with tqdm(total=len(recs), unit="rec",
+                  desc=f"cross-fitted estimates ({len(kins)} fold models)") as bar:
+            try:
+                sets.append(build_cross_fitted_reference_set(
+                    recs, ests, dataset_groups(data), progress=bar.update,
+                    source="cross-fitted", compact=True))  # fmt: skip
+            except ValueError as e:
+                raise CliError(str(e)) from e
+    else:
         truth = follow == "truth"
-        desc = "ground truth as the reference" if truth else f"KinematicsNet estimates ({kin.name})"
-        with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
-            sets.append(build_reference_set(recs, est, progress=bar.update, source=str(kin),
-                                            truth=truth, compact=True))  # fmt: skip
-        if truth:
-            break  # (the truth is the same whichever checkpoint gave the feature settings)
+        for kin, one in zip(kins, ests, strict=True):
+            desc = ("ground truth as the reference" if truth
+                    else f"KinematicsNet estimates ({kin.name})")  # fmt: skip
+            with tqdm(total=len(recs), unit="rec", desc=desc) as bar:
+                sets.append(build_reference_set(recs, one, progress=bar.update, source=str(kin),
+                                                truth=truth, compact=True))  # fmt: skip
+            if truth:
+                break  # (the truth is the same whichever checkpoint gave the feature settings)
     suffixes = None
-    if follow == "both" and est is not None:
+    if follow == "both":
         with tqdm(total=len(recs), unit="rec", desc="ground truth as the reference") as bar:
             sets.append(build_reference_set(recs, est, progress=bar.update, source="truth",
                                             truth=True, compact=True))  # fmt: skip
@@ -127,10 +148,12 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
 def reference_copies(made: dict, n_kins: int) -> int:
     """How many copies of the training recordings a reference set made with the settings
     ``made`` (the record :func:`build_training_reference` writes) and ``n_kins`` KinematicsNet
-    checkpoints holds at most: one per estimator (one for the truth alone; one more for the
+    checkpoints holds at most: one per estimator (one for the truth alone or for cross-fitted
+    fold models; one more for the
     truth beside the estimates), times one more per speed factor and one for the clips played
     backwards, times two with mirror images."""
-    sets = 1 if made["follow"] == "truth" else max(1, n_kins) + (made["follow"] == "both")
+    one = made["follow"] == "truth" or made.get("cross_fit")
+    sets = 1 if one else max(1, n_kins) + (made["follow"] == "both")
     per_set = 1 + len(made["speed_factors"]) + bool(made["reverse_categories"])
     return sets * per_set * (2 if made["mirror"] else 1)
 

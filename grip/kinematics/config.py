@@ -15,7 +15,7 @@ from grip.core.checks import check
 from grip.kinematics.features import FeatureConfig
 from grip.kinematics.model import STAGES, KinematicsNetConfig
 
-VAL_SOURCES: tuple[str, ...] = ("test", "holdout")
+VAL_SOURCES: tuple[str, ...] = ("test", "holdout", "fold")
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,14 @@ class TrainConfig:
             the dataset's test split (the runs of the shipped models), or ``"holdout"``, a
             fraction ``val_fraction`` of the training clips held out of training
             (:func:`grip.kinematics.dataset.holdout_split`; whole people in a folder split by
-            person), so that the test split stays unseen by model selection.
+            person), so that the test split stays unseen by model selection; or ``"fold"``,
+            fold ``fold`` of a ``folds``-fold split of the training people
+            (:func:`grip.kinematics.dataset.fold_split`): a fold model, one of the K whose
+            estimates of each training clip come from the model that never saw its person
+            (``grip policy train --kin FOLD0 --kin FOLD1 ...``, docs/pace.md).
         val_fraction: Share of the training clips held out with ``val_source = "holdout"``.
+        folds: Number of folds of ``val_source = "fold"``.
+        fold: The fold held out with ``val_source = "fold"`` (``0 .. folds - 1``).
         seed: Seed of windows, noise and initialisation.
         standing_init: Share of the training windows whose LSTMs start from the standing rest
             pose at the heading of the foot IMUs (no ground truth, as ``--init standing`` and
@@ -79,6 +85,8 @@ class TrainConfig:
     val_windows: int = 256
     val_source: str = "test"
     val_fraction: float = 0.1
+    folds: int = 2
+    fold: int = 0
     seed: int = 0
     bf16: bool = False
     standing_init: float = 0.25
@@ -95,6 +103,9 @@ class TrainConfig:
              f"{list(VAL_SOURCES)}, got {self.val_source!r}"),
             (0.0 < self.val_fraction < 1.0,
              f"train.val_fraction must be in (0, 1), got {self.val_fraction}"),
+            (self.folds >= 2 and 0 <= self.fold < self.folds,
+             f"train.folds must be >= 2 and train.fold in [0, folds), got {self.folds} and "
+             f"{self.fold}"),
         )  # fmt: skip
 
 

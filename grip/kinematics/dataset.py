@@ -6,6 +6,7 @@ as float32; a typical dataset built from the shared clips (~125k frames) takes ~
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -119,6 +120,65 @@ def dataset_groups(data_dir: str | os.PathLike) -> dict[str, str]:
     if split.get("split_by") != "person":
         return {}
     return {safe_name(c): g for g, clips in split.get("members", {}).items() for c in clips}
+
+
+def group_fold(group: str, folds: int, seed: int) -> int:
+    """The fold (``0 .. folds - 1``) of a group of clips (a person) in a K-fold split by person
+    (``train.val_source = "fold"``): a hash of the group's name and ``seed``, so that a group's
+    fold does not depend on which other groups a dataset holds (a controller's reference set
+    finds the fold model that never saw a clip's person by the same rule,
+    :func:`grip.kinematics.reference.build_cross_fitted_reference_set`)."""
+    digest = hashlib.sha256(f"{seed}:{group}".encode()).digest()
+    return int.from_bytes(digest[:8], "little") % folds
+
+
+_VARIANT = re.compile(r"(?:@x[0-9.]+|-reversed)$")
+
+
+def sequence_group(sequence_name: str, groups: Mapping[str, str]) -> str:
+    """The group (person) of a sequence or recording name: its clip (:func:`clip_of`, less the
+    ``@x<factor>`` and ``-reversed`` of speed-scaled and time-reversed training clips and in
+    the clip id's file-name form), looked up in ``groups`` (:func:`dataset_groups`); a clip
+    that is not there is its own group."""
+    clip = _VARIANT.sub("", clip_of(sequence_name)).replace("/", "__")
+    return groups.get(clip, clip)
+
+
+def recording_group(rec, groups: Mapping[str, str]) -> str:
+    """The group (person) of a recording of a ``grip data build`` folder: that of its source
+    clip (``extras["source_clip"]``, the clip id the build and the augmentations record), or
+    of its name when it has none (:func:`sequence_group`).
+
+    Raises:
+        ValueError: ``groups`` is not empty (a folder split by person) and does not know the
+            recording's clip.
+    """
+    clip = rec.extras.get("source_clip") if isinstance(rec.extras, dict) else None
+    group = sequence_group(clip if isinstance(clip, str) and clip else rec.name, groups)
+    if groups and group not in groups.values():
+        raise ValueError(f"{rec.name}: its clip is in no group of the dataset's split by person, "
+                         "so the model that never saw its person cannot be told")  # fmt: skip
+    return group
+
+
+def fold_split(
+    seqs: list[SequenceArrays], folds: int, fold: int, seed: int,
+    groups: Mapping[str, str] | None = None,
+) -> tuple[list[SequenceArrays], list[SequenceArrays]]:  # fmt: skip
+    """``(train, held_out)`` of fold ``fold`` of a K-fold split by person: the sequences whose
+    group (:func:`sequence_group`) falls in that fold (:func:`group_fold`) are held out.
+
+    Raises:
+        ValueError: one side is empty (too few groups for ``folds``).
+    """
+    groups = groups or {}
+    held = [s for s in seqs if group_fold(sequence_group(s.name, groups), folds, seed) == fold]
+    train = [s for s in seqs if group_fold(sequence_group(s.name, groups), folds, seed) != fold]
+    if not train or not held:
+        n = len({sequence_group(s.name, groups) for s in seqs})
+        raise ValueError(f"fold {fold} of {folds} (seed {seed}) over {n} clip group(s) leaves "
+                         "nothing to train or validate on")  # fmt: skip
+    return train, held
 
 
 def holdout_names(names: Sequence[str], fraction: float, seed: int,

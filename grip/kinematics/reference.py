@@ -107,6 +107,76 @@ def build_reference_set(
     return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)
 
 
+def fold_partition(estimators: Sequence, sources: Sequence[str]) -> tuple[int, int] | None:
+    """``(folds, seed)`` when the KinematicsNet ``estimators`` are the K fold models of one
+    split by person (``train.val_source = "fold"``, the same ``folds`` and ``seed``, each fold
+    once, in any order); ``None`` when none is a fold model.
+
+    Raises:
+        ValueError: naming ``sources`` (the checkpoints), when some are fold models and others
+            not, or the fold models are not one whole partition.
+    """
+    trains = [e.cfg.train for e in estimators]
+    is_fold = [t.val_source == "fold" for t in trains]
+    if not any(is_fold):
+        return None
+    names = ", ".join(str(s) for s in sources)
+    if not all(is_fold):
+        raise ValueError(f"{names}: some are fold models (train.val_source = 'fold') and some "
+                         "not; cross-fitted estimates need exactly the K fold models")  # fmt: skip
+    if any(e.cfg.features != estimators[0].cfg.features for e in estimators):
+        raise ValueError(f"{names}: the fold models read different sensor features")
+    parts = {(t.folds, t.seed) for t in trains}
+    folds, seed = next(iter(parts))
+    if len(parts) > 1 or sorted(t.fold for t in trains) != list(range(folds)):
+        got = [(t.fold, t.folds, t.seed) for t in trains]
+        raise ValueError(f"{names}: not the {folds} fold models of one split (fold, folds, seed "
+                         f"= {got}); each fold 0..K-1 once, the same folds and seed")  # fmt: skip
+    return folds, seed
+
+
+def build_cross_fitted_reference_set(
+    recs: Sequence,
+    estimators: Sequence,
+    groups,
+    progress: Callable[[int], object] | None = None,
+    source: str = "<memory>",
+    compact: bool = False,
+) -> ReferenceSet:
+    """The reference set of ``recs`` in which every recording is estimated by the fold model
+    that never saw its person (cross-fitting): the errors of the training clips' estimates
+    are then those of people the estimator never saw, as at test time.
+
+    Args:
+        estimators: The K fold models (:func:`fold_partition`), any order.
+        groups: Clip -> group of the recordings' dataset
+            (:func:`grip.kinematics.dataset.dataset_groups`).
+
+    Raises:
+        ValueError: the estimators are not one partition, or a recording's person is unknown
+            (:func:`grip.kinematics.dataset.recording_group`).
+    """
+    from grip.kinematics.dataset import group_fold, recording_group
+
+    part = fold_partition(estimators, [str(e) for e in estimators])
+    if part is None:
+        raise ValueError("cross-fitted estimates need fold models (train.val_source = 'fold')")
+    folds, seed = part
+    by_fold = {e.cfg.train.fold: e for e in estimators}
+    fold_of = [group_fold(recording_group(r, groups), folds, seed) for r in recs]
+    clips: list = [None] * len(recs)
+    for k in range(folds):
+        idx = [i for i, f in enumerate(fold_of) if f == k]
+        if not idx:
+            continue
+        ref = build_reference_set([recs[i] for i in idx], by_fold[k], progress=progress,
+                                  compact=compact)  # fmt: skip
+        for i, c in zip(idx, ref.clips, strict=True):
+            clips[i] = c
+    cfg = estimators[0].cfg.features
+    return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)
+
+
 def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>",
                          suffixes: Sequence[str] | None = None) -> ReferenceSet:  # fmt: skip
     """One reference set holding the clips of several, e.g. the same recordings estimated by

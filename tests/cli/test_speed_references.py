@@ -90,6 +90,42 @@ def test_speed_scaled_recordings_join_the_reference_set(built: Path, tmp_path: P
                                  speed_categories=(cat,))  # fmt: skip
 
 
+def test_fold_models_make_one_cross_fitted_copy(built: Path, tmp_path: Path,
+                                               monkeypatch) -> None:  # fmt: skip
+    """``--kin F0 --kin F1`` of fold models: every training recording (speed-scaled ones too)
+    once, estimated by the fold model that never saw its person; the set records it."""
+    from grip.cli.errors import CliError
+    from grip.cli.policy_runs import build_training_reference
+    from grip.cli.recordings import kin_checkpoint, split_paths
+    from grip.kinematics.dataset import dataset_groups, group_fold, sequence_group
+    from grip.kinematics.features import targets
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.io import load_recording
+    from tests.kinematics.test_cross_fit import _FoldModel
+
+    clip, _ = _train_clip(built)
+    files = split_paths(built, "train")
+    models = {"f0.pt": _FoldModel(0), "f1.pt": _FoldModel(1)}
+    real = KinematicsEstimator.from_checkpoint
+    monkeypatch.setattr(KinematicsEstimator, "from_checkpoint",
+                        lambda p, tta="none": models.get(Path(p).name) or real(p))  # fmt: skip
+    ref_path = tmp_path / "cross.npz"
+    kins = [Path("f1.pt"), Path("f0.pt")]
+    build_training_reference(ref_path, built, files, kins, speed_factors=(1.5,),
+                             speed_categories=(clip["category"],))  # fmt: skip
+    assert json.loads(ref_path.with_suffix(".json").read_text())["cross_fit"] == 2
+    ref = ReferenceSet.load(ref_path)
+    assert len(ref) == len(files) + sum(1 for c in ref.clips if "@x" in c.name)
+    groups = dataset_groups(built)
+    for f, c in zip(files, ref.clips, strict=False):  # (the recordings' order is kept)
+        fold = group_fold(sequence_group(f.stem, groups), 2, 0)
+        shift = c.est_pos - targets(load_recording(f)).joint_pos
+        np.testing.assert_allclose(shift, 0.01 * (fold + 1), atol=1e-4)
+    with pytest.raises(CliError, match=r"cross_fit.*delete it"):
+        build_training_reference(ref_path, built, files, [kin_checkpoint(None)],
+                                 speed_factors=(1.5,), speed_categories=(clip["category"],))
+
+
 def test_speed_factors_are_checked_and_old_configs_load() -> None:
     import dataclasses
 

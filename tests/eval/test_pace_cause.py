@@ -66,3 +66,30 @@ def test_pelvis_heading_error_of_an_estimate_turned_about_the_vertical() -> None
     turned = rot_z(np.radians(-7.0)) @ t.global_rot  # every segment 7 deg to the right
     est = reference_clip(rec, t.joint_pos, turned, t.velocity, truth.sensor)
     assert pc.pelvis_heading_error_deg(est) == pytest.approx(7.0, abs=1e-6)
+
+
+def test_fold_models_estimate_the_people_they_never_saw(tmp_path, monkeypatch) -> None:
+    """``--kin-fold``: each recording goes to the fold model that held its person out."""
+    import json
+
+    from grip.kinematics.dataset import group_fold
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.synthetic import make_recording
+    from tests.kinematics.test_cross_fit import _FoldModel
+
+    pc = _benchmark("pace_cause")
+    members = {f"src/p{p}": [f"src/p{p}_clip0"] for p in range(6)}
+    (tmp_path / "split.json").write_text(json.dumps(
+        {"format": "grip-prism-split", "version": 1, "train": [], "test": [],
+         "split_by": "person", "members": members}))  # fmt: skip
+    models = {"f0.pt": _FoldModel(0), "f1.pt": _FoldModel(1)}
+    monkeypatch.setattr(KinematicsEstimator, "from_checkpoint", lambda p, tta="none": models[p])
+    choose = pc.fold_chooser(["f1.pt", "f0.pt"], str(tmp_path))
+    for p in range(6):
+        rec = make_recording(20, seed=p)
+        rec.extras["source_clip"] = f"src/p{p}_clip0"
+        assert choose(rec).fold == group_fold(f"src/p{p}", 2, 0)
+    monkeypatch.setattr(KinematicsEstimator, "from_checkpoint",
+                        lambda p, tta="none": _FoldModel(0, val_source="test"))  # fmt: skip
+    with pytest.raises(ValueError, match="not fold models"):
+        pc.fold_chooser(["a.pt", "b.pt"], str(tmp_path))
