@@ -375,8 +375,10 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, default=None,
                    help="checkpoint (default: the shipped one in grip/assets)")  # fmt: skip
     p.add_argument("--data", required=True, type=Path, help="dataset folder (with split.json)")
-    p.add_argument("--split", default="test", choices=("train", "test", "all"),
-                   help="dataset split (default test)")  # fmt: skip
+    p.add_argument("--split", default="test", choices=("train", "test", "all", "held-out"),
+                   help="dataset split (default test); held-out: the training people a fold "
+                   "model (train.val_source=fold) never saw, the people whose estimates it "
+                   "makes for a cross-fitted reference set")  # fmt: skip
     p.add_argument("--category", action="append", default=[], metavar="GLOB",
                    help="only these motion categories (glob, repeatable)")  # fmt: skip
     p.add_argument("--json", type=Path, default=None, metavar="PATH", help="write the figures")
@@ -427,8 +429,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
     if args.sweep is not None:
-        if args.model is not None:
-            raise CliError("give --model or --sweep, not both")
+        if args.model is not None or args.split == "held-out":
+            raise CliError("--sweep scores a split of the data: not with --model or --split "
+                           "held-out")  # fmt: skip
         return _eval_sweep(args)
     model = kin_checkpoint(args.model, "--model")
     try:
@@ -436,7 +439,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise CliError(str(e)) from e
     errors: list[tuple[str, str]] = []
-    segs = _split_segments(args, errors)
+    segs = _split_segments(args, errors, _eval_files(args, est))
     with command_pool(args, args.workers) as pool, tqdm(total=len(segs), unit="segment",
                                                          desc="evaluating") as bar:  # fmt: skip
         rows = _evaluate(est, model, segs, pool, progress=bar.update, joints=args.joints,
@@ -500,9 +503,30 @@ def _segment_sources(data: Path, segs: list) -> dict[str, str]:
             for s in segs}  # fmt: skip
 
 
-def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> list:
-    """The segments of ``--split`` (tails down to 10 frames kept); unreadable files are
-    reported, skipped and put in ``errors``."""
+def _eval_files(args: argparse.Namespace, est) -> list[Path]:
+    """The recording files ``grip kin eval`` scores: those of ``--split``, or with ``held-out``
+    the training files of the people the fold model ``est`` held out
+    (:func:`grip.kinematics.dataset.fold_split`'s rule)."""
+    from grip.cli.errors import CliError
+    from grip.cli.recordings import split_paths
+    from grip.kinematics.dataset import dataset_groups, group_fold, sequence_group
+
+    if args.split != "held-out":
+        return split_paths(args.data, args.split)
+    t = est.cfg.train
+    if t.val_source != "fold":
+        raise CliError(f"--split held-out needs a fold model (train.val_source = 'fold'); "
+                       f"{args.model or 'the shipped model'} was validated on "
+                       f"'{t.val_source}'")  # fmt: skip
+    groups = dataset_groups(args.data)
+    return [f for f in split_paths(args.data, "train")
+            if group_fold(sequence_group(f.stem, groups), t.folds, t.seed) == t.fold]
+
+
+def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]],
+                    files: list[Path] | None = None) -> list:  # fmt: skip
+    """The segments of ``files`` (default: those of ``--split``; tails down to 10 frames
+    kept); unreadable files are reported, skipped and put in ``errors``."""
     from grip.cli.errors import CliError
     from grip.cli.recordings import skip_file, split_paths
     from grip.eval.kinematics import MIN_SEGMENT_FRAMES
@@ -510,7 +534,8 @@ def _split_segments(args: argparse.Namespace, errors: list[tuple[str, str]]) -> 
 
     unreadable: list[tuple[str, str]] = []
     try:
-        segs = list_segments(split_paths(args.data, args.split), args.segment_frames,
+        files = split_paths(args.data, args.split) if files is None else files
+        segs = list_segments(files, args.segment_frames,
                              args.category, errors=unreadable,
                              min_frames=MIN_SEGMENT_FRAMES)  # fmt: skip
     except BenchError as e:

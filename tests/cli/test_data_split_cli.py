@@ -237,3 +237,33 @@ def test_a_dataset_built_before_split_modes_still_works(
     split = json.loads((out / "split.json").read_text())
     assert split["split_by"] == "person" and "hdm05/bd" in split["members"]
     assert "0 built in this run" in capsys.readouterr().out
+
+
+def test_fold_models_train_on_the_other_people_and_score_their_own(built: Path, tmp_path: Path,
+                                                                   capsys) -> None:  # fmt: skip
+    """``train.val_source=fold``: each fold model validates on the training people of its fold,
+    and ``grip kin eval --split held-out`` scores exactly those people's segments."""
+    from grip.kinematics.dataset import dataset_groups, group_fold, sequence_group
+
+    small = ["--threads", "1", "--set", "hidden=16", "--set", "layers=1", "--set",
+             "init_hidden=8", "--set", "train.window_frames=30", "--set", "train.batch_size=2",
+             "--set", "train.steps_per_epoch=1", "--set", "train.stage_epochs=0",
+             "--set", "train.joint_epochs=1", "--set", "train.val_windows=2",
+             "--set", "train.val_source=fold", "--set", "train.seed=1"]  # fmt: skip
+    groups = dataset_groups(built)
+    split = json.loads((built / "split.json").read_text())
+    stems = sorted(split["train"])
+    for k in (0, 1):
+        run = tmp_path / f"fold{k}"
+        assert main(["kin", "train", "--data", str(built), "--out", str(run), *small,
+                     "--set", f"train.fold={k}"]) == 0  # fmt: skip
+        held = [s for s in stems if group_fold(sequence_group(s, groups), 2, 1) == k]
+        assert f"{len(stems) - len(held)} train / {len(held)} validation (fold {k} of 2)" in \
+            capsys.readouterr().out
+        js = tmp_path / f"held{k}.json"
+        assert main(["kin", "eval", "--model", str(run / "last.pt"), "--data", str(built),
+                     "--split", "held-out", "--segment-frames", "100000",
+                     "--json", str(js)]) == 0  # fmt: skip
+        assert json.loads(js.read_text())["segments"] == len(held)  # one per file
+    assert main(["kin", "eval", "--data", str(built), "--split", "held-out"]) == 2
+    assert "needs a fold model" in capsys.readouterr().err
