@@ -191,6 +191,10 @@ def play(setup, segments, reference: str, choose=None) -> list[dict]:
                 continue
             row[f"gap_{name}_m"], row[f"along_{name}_m"], row[f"across_{name}_m"] = _gap_parts(
                 sim_xy, ref_xy, t, fps)
+        truth_xy = gt.root_pos[:, :2] - gt.root_pos[0, :2] + sim_xy[0]  # (from the same start)
+        t5 = round((5.0 - 1.0 / fps) * fps)
+        row["sim_to_truth_5s_m"], row["sim_behind_truth_5s_m"], _ = (
+            _gap_parts(sim_xy, truth_xy, t5, fps) if t5 < n else (None, None, None))
         row.update(followed_to_truth(ref_all, gt_all.root_pos, fps))
         row["pelvis_heading_err_deg"] = pelvis_heading_error_deg(est)
         rows.append(row)
@@ -284,6 +288,7 @@ def main(argv: list[str] | None = None) -> None:
             "kept": len(kept),
             "median_without_fall": {k: _median(kept, k) for k in (
                 "gap_1s_m", "gap_5s_m", "gap_end_m", "along_5s_m", "across_5s_m", "speed_ratio",
+                "sim_to_truth_5s_m", "sim_behind_truth_5s_m", "gt_speed_mps",
                 "ref_speed_mps", "sim_speed_mps", "leg_saturated", "leg_abs_action")},
             "followed_to_truth_all_segments": {k: _median(rows, k) for k in (
                 "ref_to_truth_1s_m", "ref_to_truth_5s_m", "ref_to_truth_end_m",

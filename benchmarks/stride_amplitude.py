@@ -1,0 +1,91 @@
+"""Does KinematicsNet shorten the strides of the walks it estimates? (issue 46, docs/pace.md)
+
+For each locomotion segment: the stride amplitude of the estimated pose against the truth's,
+where the stride amplitude is the 95th percentile over the segment of the horizontal distance
+between the two ankles in the root-relative pose (feet apart at the longest step). A ratio
+below 1 means the estimate's legs swing less than the walker's, while its root may move at the
+walker's speed: a humanoid imitating those legs steps short.
+
+    python benchmarks/stride_amplitude.py --data DATA --json F [--split train --kin-fold F0
+        --kin-fold F1 --speed-factor 1.4] [--segments 52]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def stride_amplitude(joint_pos: np.ndarray, q: float = 95.0) -> float:
+    """The ``q``-th percentile over frames of the horizontal ankle-to-ankle distance, m, of
+    ``(T, 24, 3)`` root-relative joints (world axes, z up)."""
+    from grip.core.skeleton import ANKLE_JOINTS
+
+    left, right = ANKLE_JOINTS
+    d = joint_pos[:, left, :2] - joint_pos[:, right, :2]
+    return float(np.percentile(np.linalg.norm(d, axis=1), q))
+
+
+def main(argv: list[str] | None = None) -> None:
+    from grip.assets import SHIPPED_KIN
+    from grip.eval.segments import SegmentReader, list_segments, split_files
+    from grip.kinematics.features import targets
+    from grip.kinematics.inference import KinematicsEstimator
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--kin", default=str(SHIPPED_KIN))
+    ap.add_argument("--kin-fold", action="append", default=[], metavar="CKPT",
+                    help="fold models: each segment estimated by the one that never saw its "
+                    "person (pace_cause.py's option)")
+    ap.add_argument("--split", default="test", choices=("train", "test"))
+    ap.add_argument("--categories", default="walk*,run*")
+    ap.add_argument("--segments", type=int, default=0)
+    ap.add_argument("--segment-frames", type=int, default=500)
+    ap.add_argument("--speed-factor", type=float, default=None)
+    ap.add_argument("--json", required=True)
+    args = ap.parse_args(argv)
+
+    import tempfile
+
+    import torch
+    from pace_cause import _speed_scaled, fold_chooser
+
+    torch.set_num_threads(1)
+    files = split_files(args.data, args.split)
+    tmp = None
+    if args.speed_factor is not None:
+        tmp = tempfile.TemporaryDirectory(prefix="stride_speed_")
+        files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
+                              Path(tmp.name))  # fmt: skip
+    segs = list_segments(files, args.segment_frames, args.categories.split(","))
+    if 0 < args.segments < len(segs):
+        segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
+    default = KinematicsEstimator.from_checkpoint(args.kin)
+    choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else (lambda rec: default)
+    read, rows = SegmentReader(), []
+    for seg in segs:
+        rec = read(seg)
+        est = choose(rec).predict([rec])[0]
+        truth = stride_amplitude(targets(rec).joint_pos)
+        rows.append({"segment": seg.id, "category": seg.category,
+                     "stride_truth_m": truth, "stride_est_m": stride_amplitude(est.joint_pos)})
+        rows[-1]["ratio"] = rows[-1]["stride_est_m"] / max(truth, 1e-9)
+    ratios = [r["ratio"] for r in rows]
+    out = {"data": args.data, "split": args.split, "kin": args.kin_fold or args.kin,
+           "speed_factor": args.speed_factor, "segments": len(rows),
+           "median_ratio": float(np.median(ratios)) if rows else None,
+           "median_stride_truth_m": float(np.median([r["stride_truth_m"] for r in rows]))
+           if rows else None, "rows": rows}  # fmt: skip
+    Path(args.json).write_text(json.dumps(out, indent=1))
+    print(json.dumps({k: v for k, v in out.items() if k != "rows"}))
+
+
+if __name__ == "__main__":
+    main()
