@@ -119,6 +119,17 @@ def hybrid_clip(est, truth, keep: str):
     return dataclasses.replace(est, est_pos=pose.est_pos, est_rot6d=pose.est_rot6d, est_vel=vel)
 
 
+def root_speed_scaled(clip, factor: float):
+    """``clip`` with its estimated pelvis velocity (and so the root it integrates) scaled by
+    ``factor``, the pose and leaf velocities unchanged: does the controller read its pace from
+    the followed root's velocity?"""
+    import dataclasses
+
+    vel = clip.est_vel.copy()
+    vel[:, PELVIS_ROW] *= factor
+    return dataclasses.replace(clip, est_vel=vel)
+
+
 def pelvis_heading_error_deg(clip) -> float:
     """Median over the frames of the angle between the followed pelvis' heading and the truth's
     (a :class:`grip.core.reference.ReferenceClip`), deg: 0 when following the truth."""
@@ -144,9 +155,10 @@ def fold_chooser(kin_folds: list[str], data: str):
     return lambda rec: by_fold[group_fold(recording_group(rec, groups), *part)]
 
 
-def play(setup, segments, reference: str, choose=None) -> list[dict]:
+def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0) -> list[dict]:
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
-    of each recording (default: the setup's)."""
+    of each recording (default: the setup's); ``root_scale`` scales the followed pelvis
+    velocity (:func:`root_speed_scaled`)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
@@ -163,6 +175,8 @@ def play(setup, segments, reference: str, choose=None) -> list[dict]:
                               reference.split("-", 1)[1])  # fmt: skip
         else:
             est = _estimates(estimator, [rec], 1, reference, "truth")[0]
+        if root_scale != 1.0:
+            est = root_speed_scaled(est, root_scale)
         rec_runner = _Recorder(runner)
         pipe = _pipeline(rec_runner, estimator, reference.split("-")[0], "truth")
         ep = _episode(rec, est, "truth", estimator.cfg.features)
@@ -251,6 +265,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="the fold models of a split by person (repeat, one per fold): each "
                     "segment is estimated by the one that never saw its person (with --split "
                     "train: a cross-fitted training set's references, docs/pace.md E3)")
+    ap.add_argument("--root-speed-scale", type=float, default=1.0, metavar="F",
+                    help="scale the followed pelvis velocity (and the root it integrates) by F, "
+                    "the pose unchanged: does the controller read its pace from it?")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):
@@ -277,11 +294,11 @@ def main(argv: list[str] | None = None) -> None:
     setup = PolicySetup((args.policy,), args.kin)
     choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else None
     out: dict = {"policy": args.policy, "kin": args.kin_fold or args.kin, "data": args.data,
-                 "split": args.split,
+                 "split": args.split, "root_speed_scale": args.root_speed_scale,
                  "speed_factor": args.speed_factor, "segments": len(segs),
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
-        rows = play(setup, segs, ref, choose)
+        rows = play(setup, segs, ref, choose, args.root_speed_scale)
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {
             "rows": rows,

@@ -93,3 +93,18 @@ def test_fold_models_estimate_the_people_they_never_saw(tmp_path, monkeypatch) -
                         lambda p, tta="none": _FoldModel(0, val_source="test"))  # fmt: skip
     with pytest.raises(ValueError, match="not fold models"):
         pc.fold_chooser(["a.pt", "b.pt"], str(tmp_path))
+
+
+def test_a_root_speed_scaled_clip_travels_further_with_the_same_pose() -> None:
+    from grip.kinematics.reference import oracle_reference_clip
+    from prism_tools.synthetic import make_recording
+
+    pc = _benchmark("pace_cause")
+    clip = oracle_reference_clip(make_recording(200, seed=5))
+    fast = pc.root_speed_scaled(clip, 1.1)
+    np.testing.assert_array_equal(fast.est_pos, clip.est_pos)
+    np.testing.assert_array_equal(fast.est_vel[:, :-1], clip.est_vel[:, :-1])
+    moved = clip.est_root_pos[-1, :2] - clip.est_root_pos[0, :2]
+    moved_fast = fast.est_root_pos[-1, :2] - fast.est_root_pos[0, :2]
+    assert np.linalg.norm(moved) > 0.1
+    np.testing.assert_allclose(moved_fast, 1.1 * moved, rtol=1e-6, atol=1e-9)
