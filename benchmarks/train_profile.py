@@ -242,10 +242,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.rollouts < 1:
         ap.error("--rollouts must be >= 1")
-    res = profile_training(
-        args.overrides, args.rollouts, args.config, args.reference, args.clock == "cpu"
-    )
-    res["clock"] = args.clock
+    res = profile_training(args.overrides, args.rollouts, args.config, args.reference,
+                           args.clock == "cpu", warmup=args.warmup_rollouts)  # fmt: skip
+    res["clock"], res["warmup_rollouts"] = args.clock, args.warmup_rollouts
     print(
         f"{res['vec_env']}:{res['n_envs']}, action repeat {res['action_repeat']}: "
         f"{res['decisions']} decisions in {res['wall_s']:.1f} s, "
