@@ -241,7 +241,6 @@ def _median(rows: list[dict], key: str) -> float:
 def main(argv: list[str] | None = None) -> None:
     from grip.assets import SHIPPED_KIN, SHIPPED_POLICY
     from grip.eval.policy import PolicySetup
-    from grip.eval.segments import list_segments, split_files
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True)
@@ -280,17 +279,7 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     torch.set_num_threads(1)
-    files = split_files(args.data, args.split)
-    tmp = None
-    if args.speed_factor is not None:
-        import tempfile
-
-        tmp = tempfile.TemporaryDirectory(prefix="pace_speed_")
-        files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
-                              Path(tmp.name))  # fmt: skip
-    segs = list_segments(files, args.segment_frames, args.categories.split(","))
-    if 0 < args.segments < len(segs):
-        segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
+    segs, _keep = split_segments(args)  # (_keep: the speed-scaled recordings, read below)
     setup = PolicySetup((args.policy,), args.kin)
     choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else None
     out: dict = {"policy": args.policy, "kin": args.kin_fold or args.kin, "data": args.data,
@@ -322,6 +311,26 @@ def main(argv: list[str] | None = None) -> None:
               json.dumps(r["followed_to_truth_all_segments"]))
         print(ref, json.dumps(r["median_without_fall"]), "max gap 5 s",
               r["max_gap_5s_without_fall_m"], json.dumps(r["reward_at_median_deficit"]))
+
+
+def split_segments(args) -> tuple[list, object]:
+    """``(segments, temporary folder or None)``: the ``--segments`` locomotion segments of
+    ``--split`` (evenly over its list), played ``--speed-factor`` times faster when given (the
+    folder holds those recordings; keep it alive while the segments are read)."""
+    from grip.eval.segments import list_segments, split_files
+
+    files = split_files(args.data, args.split)
+    tmp = None
+    if args.speed_factor is not None:
+        import tempfile
+
+        tmp = tempfile.TemporaryDirectory(prefix="pace_speed_")
+        files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
+                              Path(tmp.name))  # fmt: skip
+    segs = list_segments(files, args.segment_frames, args.categories.split(","))
+    if 0 < args.segments < len(segs):
+        segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
+    return segs, tmp
 
 
 def _speed_scaled(data: str, files: list[Path], categories: list[str], factor: float,

@@ -34,7 +34,7 @@ def stride_amplitude(joint_pos: np.ndarray, q: float = 95.0) -> float:
 
 def main(argv: list[str] | None = None) -> None:
     from grip.assets import SHIPPED_KIN
-    from grip.eval.segments import SegmentReader, list_segments, split_files
+    from grip.eval.segments import SegmentReader
     from grip.kinematics.features import targets
     from grip.kinematics.inference import KinematicsEstimator
 
@@ -52,21 +52,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
 
-    import tempfile
-
     import torch
-    from pace_cause import _speed_scaled, fold_chooser
+    from pace_cause import fold_chooser, split_segments
 
     torch.set_num_threads(1)
-    files = split_files(args.data, args.split)
-    tmp = None
-    if args.speed_factor is not None:
-        tmp = tempfile.TemporaryDirectory(prefix="stride_speed_")
-        files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
-                              Path(tmp.name))  # fmt: skip
-    segs = list_segments(files, args.segment_frames, args.categories.split(","))
-    if 0 < args.segments < len(segs):
-        segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
+    segs, _keep = split_segments(args)  # (_keep: the speed-scaled recordings, read below)
     default = KinematicsEstimator.from_checkpoint(args.kin)
     choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else (lambda rec: default)
     read, rows = SegmentReader(), []
