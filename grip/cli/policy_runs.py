@@ -65,12 +65,14 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     from grip.kinematics.inference import KinematicsEstimator
     from grip.kinematics.reference import fold_partition
 
-    try:
-        ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
-        if follow != "truth" and fold_partition(ests, kins) is not None:
-            made["cross_fit"] = len(kins)  # (each clip estimated once, by its fold's model)
-    except ValueError as e:
-        raise CliError(str(e)) from e
+    ests = None
+    if len(kins) > 1 and follow != "truth":  # (cross-fitting takes at least two fold models)
+        try:
+            ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
+            if fold_partition(ests, kins) is not None:
+                made["cross_fit"] = len(kins)  # (each clip estimated once, by its fold's model)
+        except ValueError as e:
+            raise CliError(str(e)) from e
     sidecar = ref_path.with_suffix(".json")
     if ref_path.is_file():
         try:
@@ -100,6 +102,11 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         from grip.cli.recordings import speed_scaled_training_recordings
 
         recs += speed_scaled_training_recordings(data, files, speed_categories, speed_factors)
+    if ests is None:
+        try:
+            ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
+        except ValueError as e:
+            raise CliError(str(e)) from e
     sets, est = [], ests[0]
     if "cross_fit" in made:
         from grip.kinematics.dataset import dataset_groups
