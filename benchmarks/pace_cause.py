@@ -142,17 +142,13 @@ def pelvis_heading_error_deg(clip) -> float:
 def fold_chooser(kin_folds: list[str], data: str):
     """``rec -> estimator``: the fold model (``--kin-fold``) that never saw the recording's
     person, as a cross-fitted training set estimates it
-    (:func:`grip.kinematics.reference.build_cross_fitted_reference_set`)."""
-    from grip.kinematics.dataset import dataset_groups, group_fold, recording_group
+    (:func:`grip.kinematics.reference.fold_model_chooser`)."""
+    from grip.kinematics.dataset import dataset_groups
     from grip.kinematics.inference import KinematicsEstimator
-    from grip.kinematics.reference import fold_partition
+    from grip.kinematics.reference import fold_model_chooser
 
     ests = [KinematicsEstimator.from_checkpoint(k) for k in kin_folds]
-    part = fold_partition(ests, kin_folds)
-    if part is None:
-        raise ValueError(f"{', '.join(kin_folds)}: not fold models (train.val_source = 'fold')")
-    by_fold, groups = {e.cfg.train.fold: e for e in ests}, dataset_groups(data)
-    return lambda rec: by_fold[group_fold(recording_group(rec, groups), *part)]
+    return fold_model_chooser(ests, dataset_groups(data), kin_folds)
 
 
 def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0) -> list[dict]:

@@ -110,14 +110,14 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
     sets, est = [], ests[0]
     if "cross_fit" in made:
         from grip.kinematics.dataset import dataset_groups
-        from grip.kinematics.reference import build_cross_fitted_reference_set
+        from grip.kinematics.reference import build_cross_fitted_reference_set, fold_model_chooser
 
         with tqdm(total=len(recs), unit="rec",
                   desc=f"cross-fitted estimates ({len(kins)} fold models)") as bar:
             try:
+                choose = fold_model_chooser(ests, dataset_groups(data), kins)
                 sets.append(build_cross_fitted_reference_set(
-                    recs, ests, dataset_groups(data), progress=bar.update,
-                    source="cross-fitted", compact=True))  # fmt: skip
+                    recs, choose, progress=bar.update, source="cross-fitted", compact=True))
             except ValueError as e:
                 raise CliError(str(e)) from e
     else:
@@ -156,9 +156,8 @@ def reference_copies(made: dict, n_kins: int) -> int:
     """How many copies of the training recordings a reference set made with the settings
     ``made`` (the record :func:`build_training_reference` writes) and ``n_kins`` KinematicsNet
     checkpoints holds at most: one per estimator (one for the truth alone or for cross-fitted
-    fold models; one more for the
-    truth beside the estimates), times one more per speed factor and one for the clips played
-    backwards, times two with mirror images."""
+    fold models; one more for the truth beside the estimates), times one more per speed factor
+    and one for the clips played backwards, times two with mirror images."""
     one = made["follow"] == "truth" or made.get("cross_fit")
     sets = 1 if one else max(1, n_kins) + (made["follow"] == "both")
     per_set = 1 + len(made["speed_factors"]) + bool(made["reverse_categories"])

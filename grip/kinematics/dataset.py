@@ -135,12 +135,18 @@ def group_fold(group: str, folds: int, seed: int) -> int:
 _VARIANT = re.compile(r"(?:@x[0-9.]+|-reversed)$")
 
 
+def _clip_key(sequence_name: str) -> str:
+    """The clip of a sequence or recording name in the keys' form of :func:`dataset_groups`:
+    :func:`clip_of`, less the ``@x<factor>`` and ``-reversed`` of speed-scaled and
+    time-reversed training clips, in the clip id's file-name form."""
+    return _VARIANT.sub("", clip_of(sequence_name)).replace("/", "__")
+
+
 def sequence_group(sequence_name: str, groups: Mapping[str, str]) -> str:
-    """The group (person) of a sequence or recording name: its clip (:func:`clip_of`, less the
-    ``@x<factor>`` and ``-reversed`` of speed-scaled and time-reversed training clips and in
-    the clip id's file-name form), looked up in ``groups`` (:func:`dataset_groups`); a clip
-    that is not there is its own group."""
-    clip = _VARIANT.sub("", clip_of(sequence_name)).replace("/", "__")
+    """The group (person) of a sequence or recording name (its clip, :func:`_clip_key`,
+    looked up in ``groups``, :func:`dataset_groups`); a clip that is not there is its own
+    group."""
+    clip = _clip_key(sequence_name)
     return groups.get(clip, clip)
 
 
@@ -154,11 +160,11 @@ def recording_group(rec, groups: Mapping[str, str]) -> str:
             recording's clip.
     """
     clip = rec.extras.get("source_clip") if isinstance(rec.extras, dict) else None
-    group = sequence_group(clip if isinstance(clip, str) and clip else rec.name, groups)
-    if groups and group not in groups.values():
+    name = clip if isinstance(clip, str) and clip else rec.name
+    if groups and _clip_key(name) not in groups:
         raise ValueError(f"{rec.name}: its clip is in no group of the dataset's split by person, "
                          "so the model that never saw its person cannot be told")  # fmt: skip
-    return group
+    return sequence_group(name, groups)
 
 
 def fold_split(
@@ -172,8 +178,9 @@ def fold_split(
         ValueError: one side is empty (too few groups for ``folds``).
     """
     groups = groups or {}
-    held = [s for s in seqs if group_fold(sequence_group(s.name, groups), folds, seed) == fold]
-    train = [s for s in seqs if group_fold(sequence_group(s.name, groups), folds, seed) != fold]
+    in_fold = [group_fold(sequence_group(s.name, groups), folds, seed) == fold for s in seqs]
+    held = [s for s, h in zip(seqs, in_fold, strict=True) if h]
+    train = [s for s, h in zip(seqs, in_fold, strict=True) if not h]
     if not train or not held:
         n = len({sequence_group(s.name, groups) for s in seqs})
         raise ValueError(f"fold {fold} of {folds} (seed {seed}) over {n} clip group(s) leaves "

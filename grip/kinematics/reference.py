@@ -135,10 +135,29 @@ def fold_partition(estimators: Sequence, sources: Sequence[str]) -> tuple[int, i
     return folds, seed
 
 
+def fold_model_chooser(estimators: Sequence, groups, sources: Sequence[str]):
+    """``rec -> estimator``: of the K fold models ``estimators`` (:func:`fold_partition`; any
+    order), the one that never saw the recording's person
+    (:func:`grip.kinematics.dataset.recording_group` in ``groups``, the clip -> group map of
+    the recordings' dataset, :func:`grip.kinematics.dataset.dataset_groups`).
+
+    Raises:
+        ValueError: naming ``sources``, when the estimators are not one whole partition (or no
+            fold models); the chooser raises for a recording whose person is unknown.
+    """
+    from grip.kinematics.dataset import group_fold, recording_group
+
+    part = fold_partition(estimators, sources)
+    if part is None:
+        raise ValueError(f"{', '.join(str(s) for s in sources)}: not fold models "
+                         "(train.val_source = 'fold')")  # fmt: skip
+    by_fold = {e.cfg.train.fold: e for e in estimators}
+    return lambda rec: by_fold[group_fold(recording_group(rec, groups), *part)]
+
+
 def build_cross_fitted_reference_set(
     recs: Sequence,
-    estimators: Sequence,
-    groups,
+    choose: Callable,
     progress: Callable[[int], object] | None = None,
     source: str = "<memory>",
     compact: bool = False,
@@ -148,33 +167,24 @@ def build_cross_fitted_reference_set(
     are then those of people the estimator never saw, as at test time.
 
     Args:
-        estimators: The K fold models (:func:`fold_partition`), any order.
-        groups: Clip -> group of the recordings' dataset
-            (:func:`grip.kinematics.dataset.dataset_groups`).
+        choose: ``rec -> estimator`` (:func:`fold_model_chooser`); the recordings are run in
+            batches per estimator and keep their order.
 
     Raises:
-        ValueError: the estimators are not one partition, or a recording's person is unknown
+        ValueError: a recording's person is unknown
             (:func:`grip.kinematics.dataset.recording_group`).
     """
-    from grip.kinematics.dataset import group_fold, recording_group
-
-    part = fold_partition(estimators, [str(e) for e in estimators])
-    if part is None:
-        raise ValueError("cross-fitted estimates need fold models (train.val_source = 'fold')")
-    folds, seed = part
-    by_fold = {e.cfg.train.fold: e for e in estimators}
-    fold_of = [group_fold(recording_group(r, groups), folds, seed) for r in recs]
+    chosen = [choose(r) for r in recs]
     clips: list = [None] * len(recs)
-    for k in range(folds):
-        idx = [i for i, f in enumerate(fold_of) if f == k]
-        if not idx:
-            continue
-        ref = build_reference_set([recs[i] for i in idx], by_fold[k], progress=progress,
+    for est in {id(e): e for e in chosen}.values():
+        idx = [i for i, e in enumerate(chosen) if e is est]
+        ref = build_reference_set([recs[i] for i in idx], est, progress=progress,
                                   compact=compact)  # fmt: skip
         for i, c in zip(idx, ref.clips, strict=True):
             clips[i] = c
-    cfg = estimators[0].cfg.features
-    return ReferenceSet(clips, tuple(cfg.sites), cfg.insoles, source)
+    cfg = chosen[0].cfg.features if chosen else None
+    sites, insoles = (tuple(cfg.sites), cfg.insoles) if cfg else ((), False)
+    return ReferenceSet(clips, sites, insoles, source)
 
 
 def merge_reference_sets(sets: Sequence[ReferenceSet], source: str = "<memory>",

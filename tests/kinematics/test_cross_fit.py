@@ -18,7 +18,11 @@ from grip.kinematics.dataset import (
     sequence_group,
 )
 from grip.kinematics.features import targets
-from grip.kinematics.reference import build_cross_fitted_reference_set, fold_partition
+from grip.kinematics.reference import (
+    build_cross_fitted_reference_set,
+    fold_model_chooser,
+    fold_partition,
+)
 from prism_tools.synthetic import make_recording
 
 
@@ -87,7 +91,7 @@ def test_each_clip_is_estimated_by_the_model_that_never_saw_its_person(tmp_path)
         rec.extras["source_clip"] = f"src/p{p}_clip0@x1.5" if p % 2 else f"src/p{p}_clip0"
         recs.append(rec)
     models = [_FoldModel(1), _FoldModel(0)]  # (any order)
-    ref = build_cross_fitted_reference_set(recs, models, groups)
+    ref = build_cross_fitted_reference_set(recs, fold_model_chooser(models, groups, ["b", "a"]))
     assert len(ref) == 10
     for p, (rec, clip) in enumerate(zip(recs, ref.clips, strict=True)):
         assert clip.name == rec.name  # the recordings' order is kept
@@ -101,6 +105,8 @@ def test_fold_models_must_be_one_whole_partition() -> None:
     assert fold_partition([_FoldModel(0), _FoldModel(1)], ["a", "b"]) == (2, 0)
     plain = _FoldModel(0, val_source="test")
     assert fold_partition([plain, plain], ["a", "b"]) is None  # (merged, not cross-fitted)
+    with pytest.raises(ValueError, match="a, b: not fold models"):
+        fold_model_chooser([plain, plain], {}, ["a", "b"])
     with pytest.raises(ValueError, match="some are fold models"):
         fold_partition([_FoldModel(0), plain], ["a", "b"])
     with pytest.raises(ValueError, match=r"each fold 0.*once"):
