@@ -107,6 +107,9 @@ class BatchedTrackingEnv:
         self._half = np.zeros((n, nh))
         self._root_offset = np.zeros((n, 3))
         self._root_offset_truth = np.zeros((n, 3))  # (cfg.teacher_obs)
+        self._root_speed = np.ones(n)  # each episode's root-speed factor (cfg.root_speed_range)
+        self._speed_on = cfg.root_speed_range[1] > cfg.root_speed_range[0] or (
+            cfg.root_speed_range[0] != 1.0)
         self._hist = np.zeros((n, self._hist_n, 2))  # ring of pelvis xy, newest at _hist_pos - 1
         self._hist_pos = np.zeros(n, dtype=np.int64)
         self._hist_len = np.zeros(n, dtype=np.int64)
@@ -142,6 +145,7 @@ class BatchedTrackingEnv:
         self._z_range[i] = sim.z_range
         self._root_offset[i] = e._root_offset
         self._root_offset_truth[i] = e._root_offset_truth
+        self._root_speed[i] = e._root_speed
         self._hist_len[i] = len(e._root_hist)
         self._hist[i, : self._hist_len[i]] = np.asarray(e._root_hist)
         self._hist_pos[i] = self._hist_len[i] % self._hist_n
@@ -261,6 +265,10 @@ class BatchedTrackingEnv:
             gt[j] = gp[ti]
             ref_disp[j] = gp[ti, :2] - gp[back[j], :2]
             gap[j] = e._est.obs_rows[ti, _ROOT_XY]
+        if self._speed_on:
+            f = self._root_speed[idx, None]
+            ref_disp *= f
+            gap *= f
         gap += self._root_offset[idx, :2]
         pvw, rot = body_state(rows)
         pos = pvw[:, 0]
@@ -355,6 +363,8 @@ class BatchedTrackingEnv:
             er[i] = f.obs_rows[t[i]]
             if root_frames is not None:
                 er[i, _ROOT] = root_frames[i].obs_rows[t[i], _ROOT]
+        if self._speed_on:
+            O.scale_root_speed(er, self._root_speed)
         er[:, _ROOT] += offset
         n, space = self.num_envs, self.observation_space
         kin = np.empty((n, space["kinematic"].shape[0]), np.float32)

@@ -132,6 +132,8 @@ class GripTrackingEnv(gym.Env):
         self._self_scratch = np.empty((1, O.SELF_DIM), np.float32)
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
+        self._root_speed = 1.0  # the episode's root-speed factor (cfg.root_speed_range)
+        self._speed_row = np.ones(1)  # (the same, as scale_root_speed takes it)
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)  # (reused by every step)
@@ -277,12 +279,13 @@ class GripTrackingEnv(gym.Env):
         self._t = start
         self._steps = 0
         self._sim.reset(clip.gt_qpos[start], clip.gt_qvel[start])
+        lo, hi = cfg.root_speed_range
+        self._root_speed = float(self.np_random.uniform(lo, hi)) if hi > lo else float(lo)
+        self._speed_row[0] = self._root_speed
         # the estimated root is integrated from the clip's first frame; an episode follows it
         # from where the episode starts (the ground truth there), not with the drift before
-        self._root_offset = clip.gt_qpos[start, :3] - clip.est_root_pos[start]
         self._per_clip_arrays(clip, i)
-        if self._truth is not None:
-            self._root_offset_truth = clip.gt_qpos[start, :3] - self._truth.est.est_root_pos[start]
+        self._set_root_offsets(clip.gt_qpos[start, :3], start)
         pvw, rot = self._sim.state()
         window = cfg.reward.root_vel_window_frames + 1
         self._root_hist = deque([pvw[0, 0, :2].copy()], maxlen=window)
@@ -295,6 +298,23 @@ class GripTrackingEnv(gym.Env):
             self._amp.reset(ref[max(0, start - self._amp.window + 1) : start + 1])
             info["amp_obs"] = self._amp.vector()
         return obs, info
+
+    def _set_root_offsets(self, pos: np.ndarray, t: int) -> None:
+        """Follow the integrated roots (the estimate's and, for a teacher, the truth's) from
+        ``pos`` at frame ``t``, at the episode's root speed."""
+        f = self._root_speed
+        self._root_offset = O.root_speed_offset(pos, self._clip.est_root_pos[t], f)
+        if self._truth is not None:
+            self._root_offset_truth = O.root_speed_offset(pos, self._truth.est.est_root_pos[t], f)
+
+    def _followed_rows(self, frames: O.EstimateFrames, t: int, offset: np.ndarray,
+                       out: np.ndarray) -> None:
+        """``out (1, OBS_ROW_DIM)``: frame ``t`` of ``frames`` at the episode's root speed,
+        its root offset by ``offset``."""
+        out[0] = frames.obs_rows[t]
+        if self._root_speed != 1.0:
+            O.scale_root_speed(out, self._speed_row)
+        out[0, _ROOT] += offset
 
     def _amp_frame(self, pvw: np.ndarray, rot: np.ndarray) -> np.ndarray:
         """The AMP frame of the simulated state (:func:`grip.task.amp.amp_frame`)."""
@@ -320,8 +340,7 @@ class GripTrackingEnv(gym.Env):
         t = min(self._t + 1, self._clip.n_frames - 1)
         est, cfg = self._est, self.cfg
         er = self._est_row
-        er[0] = est.obs_rows[t]
-        er[0, _ROOT] += self._root_offset
+        self._followed_rows(est, t, self._root_offset, er)
         pvw, rot = pvw[None], rot[None]
         if h is None:
             h = O.heading_matrices(rot[:, 0])
@@ -340,11 +359,10 @@ class GripTrackingEnv(gym.Env):
             tr = self._truth
             if cfg.teacher_root == "estimate":  # keep the student's root (offset included)
                 root = er[0, _ROOT].copy()
-                er[0] = tr.obs_rows[t]
+                self._followed_rows(tr, t, self._root_offset_truth, er)
                 er[0, _ROOT] = root
             else:
-                er[0] = tr.obs_rows[t]
-                er[0, _ROOT] += self._root_offset_truth
+                self._followed_rows(tr, t, self._root_offset_truth, er)
             O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er,
                                obs["teacher_kinematic"][None], self._self_scratch)  # fmt: skip
             if self._relative:
@@ -387,9 +405,10 @@ class GripTrackingEnv(gym.Env):
         hist.append(row[0, :2].copy())
         # displacements over the window's frames (fewer after a reset or teleport), divided by
         # the full window's length: millimetres over the first frames are not read as velocity
-        ref_disp = gt[t, :2] - gt[t - (len(hist) - 1), :2]
+        ref_disp = (gt[t, :2] - gt[t - (len(hist) - 1), :2]) * self._root_speed
         # the pelvis the policy follows (the integrated root from where the episode started)
-        gap = self._est.obs_rows[t, _ROOT][:2] + self._root_offset[:2] - row[0, :2]
+        gap = (self._est.obs_rows[t, _ROOT][:2] * self._root_speed + self._root_offset[:2]
+               - row[0, :2])  # fmt: skip
         terms, sq = R.tracking_terms_rows(row, gt[t : t + 1], cfg.reward, cfg.align_root_xy,
                                           (hist[-1] - hist[0])[None], ref_disp[None],
                                           self._vel_s, gap[None])  # fmt: skip
@@ -446,9 +465,7 @@ class GripTrackingEnv(gym.Env):
         sim, clip = self._sim, self._clip
         sim.teleport(qpos76, qvel75)
         r = sim.index.root_qpos_adr
-        self._root_offset = sim.qpos[r : r + 3] - clip.est_root_pos[self._t]
-        if self._truth is not None:
-            self._root_offset_truth = sim.qpos[r : r + 3] - self._truth.est.est_root_pos[self._t]
+        self._set_root_offsets(sim.qpos[r : r + 3], self._t)
         pvw, rot = sim.state()
         self._root_hist.clear()
         self._root_hist.append(pvw[0, 0, :2].copy())

@@ -111,6 +111,16 @@ class TrackingEnvConfig:
             only), it ends an episode that falls behind or strays sideways: PHC's world-frame
             termination, which makes keeping the reference's pace worth the whole future
             reward (docs/pace.md § Q2).
+        root_speed_range: ``(lo, hi)``: each episode's followed root is carried over the ground
+            ``f`` times as fast, ``f`` drawn uniformly from the range at every reset, while the
+            pose, the sensors and the truth's pose stay: the integrated root's horizontal
+            displacement from the episode's start and every velocity joint's horizontal
+            velocity change by the pelvis' (:func:`grip.task.observations.scale_root_speed`),
+            and the reward's root-velocity term compares with the truth's root displacement
+            times ``f``. A controller trained on references whose root always agrees with the
+            gait reads its pace from the pose and ignores the root (docs/pace.md § root speed);
+            decorrelating the two makes covering the followed root's ground worth reading it.
+            ``(1, 1)`` (the default): off.
         align_root_xy: Compare joint positions with the ground truth (imitation reward and
             termination) after shifting the simulated body horizontally so that its pelvis is
             over the ground truth's. The policy follows a root integrated from the estimated
@@ -171,6 +181,7 @@ class TrackingEnvConfig:
     fall_height_m: float = 0.0
     fall_below_reference_m: float = 0.0
     termination_root_gap_m: float = 0.0
+    root_speed_range: tuple[float, float] = (1.0, 1.0)
     align_root_xy: bool = True
     random_start: bool = True
     clip_index: int = -1
@@ -204,6 +215,10 @@ class TrackingEnvConfig:
             (self.termination_dist_m >= 0, "termination_dist_m must be >= 0 (0 = off)"),
             (self.fall_below_reference_m >= 0, "fall_below_reference_m must be >= 0 (0 = off)"),
             (self.termination_root_gap_m >= 0, "termination_root_gap_m must be >= 0 (0 = off)"),
+            (len(self.root_speed_range) == 2
+             and 0.5 <= self.root_speed_range[0] <= self.root_speed_range[1] <= 2.0,
+             f"root_speed_range must be (lo, hi) with 0.5 <= lo <= hi <= 2, got "
+             f"{self.root_speed_range}"),
             (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),

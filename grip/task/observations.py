@@ -300,6 +300,37 @@ def observation_rows(
         out_kin, out_self)  # fmt: skip
 
 
+_VEL_ROWS = OBS_ROW["est_vel"]
+_ROOT_XY = slice(OBS_ROW["est_root_pos"].start, OBS_ROW["est_root_pos"].start + 2)
+_N_VEL = len(sk.VELOCITY_JOINTS)
+_PELVIS_VEL = sk.VELOCITY_JOINTS.index(0)
+
+
+def scale_root_speed(est_rows: np.ndarray, scale: np.ndarray) -> None:
+    """Make the rows of :attr:`EstimateFrames.obs_rows` (``est_rows (B, OBS_ROW_DIM)``, before
+    an episode's root offset) describe the same pose carried over the ground ``scale (B,)``
+    times as fast, in place: the integrated root's horizontal coordinates times ``scale`` (the
+    episode's offset, :func:`root_speed_offset`, puts its start where the episode starts) and
+    ``(scale - 1)`` x the pelvis' horizontal velocity added to every velocity joint's, as a
+    body translated faster would have them. Root-relative positions and orientations stay.
+    The training task's root-speed augmentation (``TrackingEnvConfig.root_speed_range``)."""
+    f = np.asarray(scale, dtype=np.float64).reshape(-1, 1)
+    est_rows[:, _ROOT_XY] *= f
+    vel = est_rows[:, _VEL_ROWS].reshape(len(est_rows), _N_VEL, 3)
+    vel[:, :, :2] += (f - 1.0)[:, None] * vel[:, _PELVIS_VEL, None, :2]
+    est_rows[:, _VEL_ROWS] = vel.reshape(len(est_rows), -1)
+
+
+def root_speed_offset(start_pos: np.ndarray, root_at_start: np.ndarray,
+                      scale: float) -> np.ndarray:  # fmt: skip
+    """``(3,)`` the offset added to a root scaled by :func:`scale_root_speed` (its horizontal
+    coordinates times ``scale``) so that it is at ``start_pos`` at the episode's start, where
+    the unscaled integrated root is ``root_at_start``."""
+    out = np.asarray(start_pos, dtype=np.float64) - np.asarray(root_at_start, dtype=np.float64)
+    out[:2] -= (scale - 1.0) * np.asarray(root_at_start, dtype=np.float64)[:2]
+    return out
+
+
 class EstimateFrames:
     """A kinematic estimate laid out for the control step: what the observation and a relative
     action read per frame, gathered once per clip (and per new frame of a growing one) rather

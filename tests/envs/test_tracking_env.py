@@ -338,3 +338,47 @@ def test_switching_subjects_equals_a_model_compiled_for_each(reference) -> None:
         q_own, f_own = play(own, 0)
         np.testing.assert_array_equal(q, q_own)
         np.testing.assert_array_equal(f, f_own)
+
+
+def test_a_faster_root_is_followed_with_the_same_pose(walk_reference) -> None:
+    """``root_speed_range`` (issue 46): with the pelvis driven along the truth, a root carried
+    1.3 times as fast runs ahead of it by 0.3 times the ground walked, the velocity joints'
+    estimated velocities gain 0.3 times the pelvis', the pose observation stays, and the
+    root-velocity term stops paying the truth's pace."""
+    runs = {}
+    for f in (1.0, 1.3):
+        env = _env(walk_reference, pin_root=True, random_start=False, termination_dist_m=0.0,
+                   kinematic_obs="OAV_Jrel_root", root_speed_range=(f, f))  # fmt: skip
+        env.reset(seed=0)
+        steps = [env.step(np.zeros(69)) for _ in range(120)]
+        runs[f] = (steps, env)
+    (slow, env1), (fast, _) = runs[1.0], runs[1.3]
+    t = env1.frame
+    clip = env1.clip
+    walked = clip.est_root_pos[t, :2] - clip.est_root_pos[0, :2]
+    assert np.linalg.norm(walked) > 0.5
+    gap1, gap3 = (float(np.hypot(*s[-1][0]["kinematic"][-2:])) for s in (slow, fast))
+    assert gap3 - gap1 == pytest.approx(min(0.3 * np.linalg.norm(walked), 1.0), abs=0.03)
+    d_v = slice(60, 78)  # (the velocity rows after d_theta, theta_leaf and d_omega)
+    dv = (fast[-1][0]["kinematic"][d_v] - slow[-1][0]["kinematic"][d_v]).reshape(6, 3)
+    pelvis = clip.est_vel[min(t + 1, clip.n_frames - 1), -1, :2]  # (the observed frame)
+    np.testing.assert_allclose(np.linalg.norm(dv, axis=1), 0.3 * np.linalg.norm(pelvis),
+                               atol=1e-4)  # fmt: skip
+    np.testing.assert_array_equal(fast[-1][0]["kinematic"][:60], slow[-1][0]["kinematic"][:60])
+    np.testing.assert_array_equal(fast[-1][0]["kinematic"][78:-2],
+                                  slow[-1][0]["kinematic"][78:-2])  # fmt: skip
+    vel1 = np.mean([s[4]["reward/root_vel"] for s in slow[40:]])
+    vel3 = np.mean([s[4]["reward/root_vel"] for s in fast[40:]])
+    assert vel1 > 0.9 and vel3 < 0.8 * vel1
+
+
+def test_a_random_root_speed_is_drawn_per_episode_and_checked() -> None:
+    env = GripTrackingEnv(TrackingEnvConfig(root_speed_range=(0.85, 1.15), amp_window=0))
+    drawn = set()
+    for s in range(6):
+        env.reset(seed=s)
+        drawn.add(round(env._root_speed, 6))
+    assert len(drawn) == 6 and all(0.85 <= f <= 1.15 for f in drawn)
+    for bad in ((1.2, 1.1), (0.3, 1.0), (1.0, 2.5)):
+        with pytest.raises(ValueError, match="root_speed_range"):
+            TrackingEnvConfig(root_speed_range=bad)
