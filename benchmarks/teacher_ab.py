@@ -1,6 +1,7 @@
 """A/B of the teacher's learning curve per decision: train short runs, then plot them together.
 
-``train``: stage 1 of a recipe (default ``configs/policy/teacher.toml``) for ``--decisions`` on
+``train``: stage 1 of a recipe (default ``configs/policy/teacher.toml``) for ``--decisions``
+(then ``--stage2`` decisions of its stage 2, default none) on
 a reference set, one torch thread and one physics thread, seed 0 unless overridden, in a run
 folder (resumable, as ``grip policy train``). To train with another checkout's code (the code
 before a change), run this file with that checkout first on ``PYTHONPATH``::
@@ -50,10 +51,11 @@ def train(args) -> int:
     sets = ["ppo.threads=1", "ppo.env_threads=1", "seed=0", *args.overrides]
     cfg = load_config(args.config, PolicyRunConfig(), sets)
     cfg = dataclasses.replace(cfg, stage1=dataclasses.replace(cfg.stage1, timesteps=args.decisions),
-                              stage2=dataclasses.replace(cfg.stage2, timesteps=0))  # fmt: skip
+                              stage2=dataclasses.replace(cfg.stage2, timesteps=args.stage2))  # fmt: skip
     t = time.perf_counter()
     PolicyTrainer(cfg, args.out, args.reference, make_tracking_env).train()
-    print(f"{args.out}: {args.decisions} decisions in {time.perf_counter() - t:.0f} s")
+    print(f"{args.out}: {args.decisions + args.stage2} decisions in "
+          f"{time.perf_counter() - t:.0f} s")
     return 0
 
 
@@ -116,7 +118,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     t = sub.add_parser("train", help="a short run of the recipe")
     t.add_argument("--out", type=Path, required=True)
     t.add_argument("--reference", type=Path, required=True)
-    t.add_argument("--decisions", type=int, default=400_000)
+    t.add_argument("--decisions", type=int, default=400_000, help="stage 1's decisions")
+    t.add_argument("--stage2", type=int, default=0, metavar="N",
+                   help="then N decisions of the recipe's stage 2 (default 0: stage 1 only)")
     t.add_argument("--config", type=Path, default=ROOT / "configs" / "policy" / "teacher.toml")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     p = sub.add_parser("plot", help="plot runs together")
