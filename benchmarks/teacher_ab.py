@@ -50,8 +50,9 @@ def train(args) -> int:
 
     sets = ["ppo.threads=1", "ppo.env_threads=1", "seed=0", *args.overrides]
     cfg = load_config(args.config, PolicyRunConfig(), sets)
-    cfg = dataclasses.replace(cfg, stage1=dataclasses.replace(cfg.stage1, timesteps=args.decisions),
-                              stage2=dataclasses.replace(cfg.stage2, timesteps=args.stage2))  # fmt: skip
+    cfg = dataclasses.replace(
+        cfg, stage1=dataclasses.replace(cfg.stage1, timesteps=args.decisions),
+        stage2=dataclasses.replace(cfg.stage2, timesteps=args.stage2))  # fmt: skip
     t = time.perf_counter()
     PolicyTrainer(cfg, args.out, args.reference, make_tracking_env).train()
     print(f"{args.out}: {args.decisions + args.stage2} decisions in "
