@@ -107,6 +107,13 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
             ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
         except ValueError as e:
             raise CliError(str(e)) from e
+        t = ests[0].cfg.train  # (several fold models are cross-fitted above)
+        if follow != "truth" and t.val_source == "fold":
+            raise CliError(f"{kins[0]} is the model of fold {t.fold} of {t.folds} "
+                           "(train.val_source = 'fold'): its estimates of the training clips mix "
+                           "people it saw and people it never saw; pass all the fold models "
+                           "(--kin F0 --kin F1 ...) to cross-fit them, or a model trained on "
+                           "every training person")  # fmt: skip
     sets, est = [], ests[0]
     if "cross_fit" in made:
         from grip.kinematics.dataset import dataset_groups

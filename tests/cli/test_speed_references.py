@@ -124,6 +124,10 @@ def test_fold_models_make_one_cross_fitted_copy(built: Path, tmp_path: Path,
     with pytest.raises(CliError, match=r"cross_fit.*delete it"):
         build_training_reference(ref_path, built, files, [kin_checkpoint(None)],
                                  speed_factors=(1.5,), speed_categories=(clip["category"],))
+    with pytest.raises(CliError, match=r"f1.pt is the model of fold 1 of 2.*--kin F0 --kin F1"):
+        build_training_reference(tmp_path / "one.npz", built, files, [Path("f1.pt")])
+    build_training_reference(tmp_path / "truth.npz", built, files, [Path("f1.pt")],
+                             follow="truth")  # (the truth needs only its feature settings)
 
 
 def test_speed_factors_are_checked_and_old_configs_load() -> None:
