@@ -120,14 +120,16 @@ def hybrid_clip(est, truth, keep: str):
 
 
 def root_speed_scaled(clip, factor: float):
-    """``clip`` with its estimated pelvis velocity (and so the root it integrates) scaled by
-    ``factor``, the pose and leaf velocities unchanged: does the controller read its pace from
-    the followed root's velocity?"""
+    """``clip`` carried over the ground ``factor`` times as fast with the pose unchanged, as the
+    training's root-speed augmentation does it (:func:`grip.task.observations.carried_faster`:
+    the estimated pelvis' horizontal velocity, and so the root it integrates, times ``factor``;
+    every velocity joint's horizontal velocity shifted by the same amount): does the controller
+    read its pace from the followed root?"""
     import dataclasses
 
-    vel = clip.est_vel.copy()
-    vel[:, PELVIS_ROW] *= factor
-    return dataclasses.replace(clip, est_vel=vel)
+    from grip.task.observations import carried_faster
+
+    return dataclasses.replace(clip, est_vel=carried_faster(clip.est_vel, factor))
 
 
 def pelvis_heading_error_deg(clip) -> float:

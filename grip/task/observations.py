@@ -306,19 +306,31 @@ _N_VEL = len(sk.VELOCITY_JOINTS)
 _PELVIS_VEL = sk.VELOCITY_JOINTS.index(0)
 
 
+def carried_faster(est_vel: np.ndarray, scale) -> np.ndarray:
+    """``est_vel (..., 6, 3)`` (the world velocities of :data:`grip.core.skeleton.
+    VELOCITY_JOINTS`) of the same motion carried over the ground ``scale`` times as fast (a
+    number, or one per leading row): ``(scale - 1)`` x the pelvis' horizontal velocity added to
+    every velocity joint's, the pelvis' own horizontal velocity so ``scale`` times itself. A new
+    array. The root-speed augmentation (:func:`scale_root_speed`) and its probe
+    (``benchmarks/pace_cause.py --root-speed-scale``) share it."""
+    v = np.array(est_vel, dtype=np.float64)
+    f = np.asarray(scale, dtype=np.float64).reshape((*np.shape(scale), 1, 1))
+    v[..., :2] += (f - 1.0) * v[..., _PELVIS_VEL, None, :2]
+    return v
+
+
 def scale_root_speed(est_rows: np.ndarray, scale: np.ndarray) -> None:
     """Make the rows of :attr:`EstimateFrames.obs_rows` (``est_rows (B, OBS_ROW_DIM)``, before
     an episode's root offset) describe the same pose carried over the ground ``scale (B,)``
     times as fast, in place: the integrated root's horizontal coordinates times ``scale`` (the
     episode's offset, :func:`root_speed_offset`, puts its start where the episode starts) and
-    ``(scale - 1)`` x the pelvis' horizontal velocity added to every velocity joint's, as a
-    body translated faster would have them. Root-relative positions and orientations stay.
-    The training task's root-speed augmentation (``TrackingEnvConfig.root_speed_range``)."""
-    f = np.asarray(scale, dtype=np.float64).reshape(-1, 1)
-    est_rows[:, _ROOT_XY] *= f
+    the velocity joints' velocities as :func:`carried_faster` gives them. Root-relative
+    positions and orientations stay. The training task's root-speed augmentation
+    (``TrackingEnvConfig.root_speed_range``)."""
+    f = np.asarray(scale, dtype=np.float64).reshape(-1)
+    est_rows[:, _ROOT_XY] *= f[:, None]
     vel = est_rows[:, _VEL_ROWS].reshape(len(est_rows), _N_VEL, 3)
-    vel[:, :, :2] += (f - 1.0)[:, None] * vel[:, _PELVIS_VEL, None, :2]
-    est_rows[:, _VEL_ROWS] = vel.reshape(len(est_rows), -1)
+    est_rows[:, _VEL_ROWS] = carried_faster(vel, f).reshape(len(est_rows), -1)
 
 
 def root_speed_offset(start_pos: np.ndarray, root_at_start: np.ndarray,
