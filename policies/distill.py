@@ -45,6 +45,7 @@ from grip.core.checks import check
 from grip.core.rundir import RunDir
 from grip.task.config import TEACHER_ROOTS
 from policies.config import REMOVED_IN, speed_rules
+from policies.runner import mlp
 
 VEC_ENVS: tuple[str, ...] = ("batched", "dummy")
 """How :class:`Distiller` steps its rollout environments (:attr:`DistillConfig.vec_env`)."""
@@ -84,6 +85,10 @@ class DistillConfig:
         init_member: The teacher's member whose network shape, normaliser, discriminator and
             (unless ``fresh_student``) weights the student takes.
         fresh_student: Start from random weights instead of the member's.
+        student_hidden: Hidden layer widths of a student of another size than the member's
+            (random weights; the member's normaliser, discriminator and value network stay):
+            a one-network student that loses categories may need more capacity (issue 47).
+            Empty (the default): the member's network.
         categories: Motion categories of the training clips (globs).
         max_episode_frames: Truncate episodes after this many decisions (0: the clip's end).
         fall_height_m: An episode ends when the pelvis is below this height, m.
@@ -129,6 +134,7 @@ class DistillConfig:
     max_samples: int = 400_000
     init_member: int = 0
     fresh_student: bool = False
+    student_hidden: tuple[int, ...] = ()
     categories: tuple[str, ...] = ("walk*", "run*", "dash*")
     max_episode_frames: int = 1000
     fall_height_m: float = 0.3
@@ -158,6 +164,8 @@ class DistillConfig:
             (self.max_samples >= self.decisions_per_iteration,
              "max_samples must hold at least one iteration's decisions"),
             (self.init_member >= 0, "init_member must be >= 0"),
+            (all(isinstance(w, int) and w >= 1 for w in self.student_hidden),
+             "student_hidden must be positive layer widths (empty: the member's network)"),
             (self.action_noise >= 0, "action_noise must be >= 0"),
             (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (self.fall_height_m >= 0 and self.max_episode_frames >= 0,
@@ -261,6 +269,11 @@ class Distiller:
         # first member's discriminator) where the member's file stores none
         disc = {k: payloads[0][k] for k in ("disc", "amp_frame_dim") if k in payloads[0]}
         self.base = {**disc, **payloads[cfg.init_member]}
+        if cfg.student_hidden:  # a fresh network of its own size between the member's ends
+            sizes = self.base["actor_sizes"]
+            self.base["actor_sizes"] = [sizes[0], *cfg.student_hidden, sizes[-1]]
+            activation = json.loads(self.base["config"])["ppo"]["activation"]
+            self.base["actor"] = mlp(self.base["actor_sizes"], activation).state_dict()
         self.student = PolicyRunner.from_payload(self.base, self.teacher_names[cfg.init_member])
         if cfg.fresh_student:
             for m in self.student.actor:

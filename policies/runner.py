@@ -45,7 +45,9 @@ ACTIVATION_FNS: dict[str, type[nn.Module]] = {
 """The activations of :data:`policies.config.ACTIVATIONS`."""
 
 
-def _mlp(sizes: list[int], activation: str) -> nn.Sequential:
+def mlp(sizes: list[int], activation: str) -> nn.Sequential:
+    """A plain MLP of layer ``sizes`` (inputs, hidden..., outputs) with ``activation`` between
+    its linear layers (none after the last): the networks of a policy file."""
     layers: list[nn.Module] = []
     for i in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
@@ -62,7 +64,7 @@ def linear_layers(body: nn.Sequential, head: nn.Linear | None = None) -> list[nn
 
 def _mlp_from_state(state: dict, body: str, head: str, activation: str,
                     path: Path) -> tuple[list[int], nn.Sequential]:  # fmt: skip
-    """A plain MLP (:func:`_mlp`) with the weights of an SB3 network body and its output layer,
+    """A plain MLP (:func:`mlp`) with the weights of an SB3 network body and its output layer,
     taken from a policy state dict (keys ``{body}{i}.weight``, ``{head}weight``, ...); returns
     its layer sizes and the MLP.
 
@@ -75,13 +77,13 @@ def _mlp_from_state(state: dict, body: str, head: str, activation: str,
         names = [f"{body}{i}." for i in idx] + [head]
         weights = [state[n + "weight"] for n in names]
         sizes = [int(weights[0].shape[1])] + [int(w.shape[0]) for w in weights]
-        mlp = _mlp(sizes, activation)
-        for dst, n in zip(linear_layers(mlp), names, strict=True):
+        net = mlp(sizes, activation)
+        for dst, n in zip(linear_layers(net), names, strict=True):
             dst.load_state_dict({"weight": state[n + "weight"], "bias": state[n + "bias"]})
     except (KeyError, IndexError, RuntimeError, ValueError) as e:
         raise ValueError(f"{path}: no {body.rstrip('.')} -> {head.rstrip('.')} network in its "
                          f"policy state ({str(e)[:200]})") from e  # fmt: skip
-    return sizes, mlp
+    return sizes, net
 
 
 _DISC_NET = ("trunk", "head")
@@ -121,7 +123,7 @@ def _declared_sizes(ck: dict, part: str, path: Path, activation: str) -> list[in
         raise ValueError(f"{path}: {part}_sizes = {str(raw)[:100]} is not a list of layer "
                          "sizes (positive integers)")  # fmt: skip
     sizes = [int(v) for v in raw]
-    check_declared_network(lambda: _mlp(sizes, activation), ck[part], str(path),
+    check_declared_network(lambda: mlp(sizes, activation), ck[part], str(path),
                            f"{part}_sizes {sizes}", {f"{part}_sizes": len(sizes) - 1})  # fmt: skip
     return sizes
 
@@ -129,9 +131,9 @@ def _declared_sizes(ck: dict, part: str, path: Path, activation: str) -> list[in
 def _load_mlp(sizes, state: dict, activation: str) -> nn.Sequential:
     from grip.nn.weights import unpack_weights  # fp32, fp16 or int8 (pack_weights)
 
-    mlp = _mlp([int(s) for s in sizes], activation)
-    mlp.load_state_dict(unpack_weights(state))
-    return mlp
+    net = mlp([int(s) for s in sizes], activation)
+    net.load_state_dict(unpack_weights(state))
+    return net
 
 
 class PolicyRunner:

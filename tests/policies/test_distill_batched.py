@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from envs.factory import make_tracking_env
 from envs.tracking_env import SAMPLE_REFERENCE
@@ -66,3 +67,23 @@ def test_the_sample_buffer_keeps_the_newest_in_one_copy() -> None:
     assert sorted(buf.samples()[0][:, 0]) == [13, 14, 15, 16, 17]  # a chunk above capacity
     with pytest.raises(ValueError, match="3 inputs against 2"):
         buf.add(np.zeros((3, 1)), np.zeros((2, 1)))
+
+
+def test_a_larger_student_is_its_own_network_and_exports(tmp_path) -> None:
+    """``student_hidden``: the student is a fresh network of those widths between the member's
+    inputs and outputs, it acts, and its policy file loads with its own sizes."""
+    from policies.runner import PolicyRunner
+
+    cfg = DistillConfig(iterations=1, decisions_per_iteration=24, n_envs=2, max_samples=64,
+                        categories=(), reverse_categories=(), mirror_references=False,
+                        max_episode_frames=5, student_hidden=(96, 48))  # fmt: skip
+    dist = Distiller(cfg, [SHIPPED_POLICY], tmp_path / "d", SAMPLE_REFERENCE, make_tracking_env)
+    widths = [m.out_features for m in dist.student.actor if isinstance(m, torch.nn.Linear)]
+    assert widths[:2] == [96, 48]
+    x, y, _ = dist.collect()
+    assert len(x) == 24 and y.shape[1] == widths[-1]
+    dist.export(tmp_path / "s.pt")
+    loaded = PolicyRunner.load(tmp_path / "s.pt")
+    assert [m.out_features for m in loaded.actor if isinstance(m, torch.nn.Linear)] == widths
+    with pytest.raises(ValueError, match="student_hidden"):
+        DistillConfig(student_hidden=(0,))
