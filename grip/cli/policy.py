@@ -350,6 +350,10 @@ def _warp_settings(cfg, device: str):
     from envs.warp import warp_available
     from grip.cli.errors import CliError
 
+    if tuple(cfg.env.root_speed_range) != (1.0, 1.0):
+        raise CliError(f"env.root_speed_range = {list(cfg.env.root_speed_range)} is a setting of "
+                       "the CPU environments only (WarpTrackingEnv follows the root as it is): "
+                       "train with --backend cpu, or leave it at [1, 1]")  # fmt: skip
     if not warp_available():
         raise CliError("--backend warp needs mujoco-warp and warp-lang: pip install -e .[gpu]")
     import warp as wp
