@@ -103,7 +103,8 @@ def plot(args) -> int:
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize="small")
-    fig.suptitle(f"teacher recipe, stage 1 (smoothed over {args.window} rollouts)")
+    stages = sorted({r.get("stage", "stage1") for rows in runs.values() for r in rows})
+    fig.suptitle(f"teacher recipe, {' and '.join(stages)} (smoothed over {args.window} rollouts)")
     fig.tight_layout()
     args.png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.png, dpi=90)
