@@ -108,8 +108,7 @@ class BatchedTrackingEnv:
         self._root_offset = np.zeros((n, 3))
         self._root_offset_truth = np.zeros((n, 3))  # (cfg.teacher_obs)
         self._root_speed = np.ones(n)  # each episode's root-speed factor (cfg.root_speed_range)
-        self._speed_on = cfg.root_speed_range[1] > cfg.root_speed_range[0] or (
-            cfg.root_speed_range[0] != 1.0)
+        self._speed_on = tuple(cfg.root_speed_range) != (1.0, 1.0)
         self._hist = np.zeros((n, self._hist_n, 2))  # ring of pelvis xy, newest at _hist_pos - 1
         self._hist_pos = np.zeros(n, dtype=np.int64)
         self._hist_len = np.zeros(n, dtype=np.int64)
