@@ -155,8 +155,8 @@ def fold_chooser(kin_folds: list[str], data: str):
 
 def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0) -> list[dict]:
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
-    of each recording (default: the setup's); ``root_scale`` scales the followed pelvis
-    velocity (:func:`root_speed_scaled`)."""
+    of each recording (default: the setup's); ``root_scale`` carries the followed estimate that
+    many times as fast (:func:`root_speed_scaled`)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
@@ -263,8 +263,10 @@ def main(argv: list[str] | None = None) -> None:
                     "segment is estimated by the one that never saw its person (with --split "
                     "train: a cross-fitted training set's references, docs/pace.md E3)")
     ap.add_argument("--root-speed-scale", type=float, default=1.0, metavar="F",
-                    help="scale the followed pelvis velocity (and the root it integrates) by F, "
-                    "the pose unchanged: does the controller read its pace from it?")
+                    help="carry the followed estimate F times as fast over the ground, the pose "
+                    "unchanged, as env.root_speed_range does in training (the pelvis' horizontal "
+                    "velocity, and the root it integrates, times F; every velocity joint shifted "
+                    "with it): does the controller read its pace from the root?")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):

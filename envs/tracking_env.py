@@ -133,7 +133,6 @@ class GripTrackingEnv(gym.Env):
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
         self._root_speed = 1.0  # the episode's root-speed factor (cfg.root_speed_range)
-        self._speed_row = np.ones(1)  # (the same, as scale_root_speed takes it)
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)  # (reused by every step)
@@ -281,7 +280,6 @@ class GripTrackingEnv(gym.Env):
         self._sim.reset(clip.gt_qpos[start], clip.gt_qvel[start])
         lo, hi = cfg.root_speed_range
         self._root_speed = float(self.np_random.uniform(lo, hi)) if hi > lo else float(lo)
-        self._speed_row[0] = self._root_speed
         # the estimated root is integrated from the clip's first frame; an episode follows it
         # from where the episode starts (the ground truth there), not with the drift before
         self._per_clip_arrays(clip, i)
@@ -313,7 +311,7 @@ class GripTrackingEnv(gym.Env):
         its root offset by ``offset``."""
         out[0] = frames.obs_rows[t]
         if self._root_speed != 1.0:
-            O.scale_root_speed(out, self._speed_row)
+            O.scale_root_speed(out, self._root_speed)
         out[0, _ROOT] += offset
 
     def _amp_frame(self, pvw: np.ndarray, rot: np.ndarray) -> np.ndarray:

@@ -93,16 +93,7 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
         return
     from grip.kinematics.reference import build_reference_set, merge_reference_sets
 
-    recs = load_recordings(files)
-    if reverse_categories:
-        from grip.cli.recordings import reversed_training_recordings
-
-        recs += reversed_training_recordings(data, files, reverse_categories)
-    if speed_factors:
-        from grip.cli.recordings import speed_scaled_training_recordings
-
-        recs += speed_scaled_training_recordings(data, files, speed_categories, speed_factors)
-    if ests is None:
+    if ests is None:  # (before any recording is read: a refusal costs nothing)
         try:
             ests = [KinematicsEstimator.from_checkpoint(kin) for kin in kins]
         except ValueError as e:
@@ -114,6 +105,15 @@ def build_training_reference(ref_path: Path, data: Path, files: list[Path], kins
                            "people it saw and people it never saw; pass all the fold models "
                            "(--kin F0 --kin F1 ...) to cross-fit them, or a model trained on "
                            "every training person")  # fmt: skip
+    recs = load_recordings(files)
+    if reverse_categories:
+        from grip.cli.recordings import reversed_training_recordings
+
+        recs += reversed_training_recordings(data, files, reverse_categories)
+    if speed_factors:
+        from grip.cli.recordings import speed_scaled_training_recordings
+
+        recs += speed_scaled_training_recordings(data, files, speed_categories, speed_factors)
     sets, est = [], ests[0]
     if "cross_fit" in made:
         from grip.kinematics.dataset import dataset_groups

@@ -319,15 +319,15 @@ def carried_faster(est_vel: np.ndarray, scale) -> np.ndarray:
     return v
 
 
-def scale_root_speed(est_rows: np.ndarray, scale: np.ndarray) -> None:
+def scale_root_speed(est_rows: np.ndarray, scale) -> None:
     """Make the rows of :attr:`EstimateFrames.obs_rows` (``est_rows (B, OBS_ROW_DIM)``, before
-    an episode's root offset) describe the same pose carried over the ground ``scale (B,)``
-    times as fast, in place: the integrated root's horizontal coordinates times ``scale`` (the
-    episode's offset, :func:`root_speed_offset`, puts its start where the episode starts) and
-    the velocity joints' velocities as :func:`carried_faster` gives them. Root-relative
-    positions and orientations stay. The training task's root-speed augmentation
-    (``TrackingEnvConfig.root_speed_range``)."""
-    f = np.asarray(scale, dtype=np.float64).reshape(-1)
+    an episode's root offset) describe the same pose carried over the ground ``scale`` (one
+    number, or one per row) times as fast, in place: the integrated root's horizontal
+    coordinates times ``scale`` (the episode's offset, :func:`root_speed_offset`, puts its start
+    where the episode starts) and the velocity joints' velocities as :func:`carried_faster`
+    gives them. Root-relative positions and orientations stay. The training task's root-speed
+    augmentation (``TrackingEnvConfig.root_speed_range``)."""
+    f = np.broadcast_to(np.asarray(scale, dtype=np.float64).reshape(-1), (len(est_rows),))
     est_rows[:, _ROOT_XY] *= f[:, None]
     vel = est_rows[:, _VEL_ROWS].reshape(len(est_rows), _N_VEL, 3)
     est_rows[:, _VEL_ROWS] = carried_faster(vel, f).reshape(len(est_rows), -1)

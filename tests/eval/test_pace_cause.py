@@ -111,3 +111,19 @@ def test_a_root_speed_scaled_clip_travels_further_with_the_same_pose() -> None:
     moved_fast = fast.est_root_pos[-1, :2] - fast.est_root_pos[0, :2]
     assert np.linalg.norm(moved) > 0.1
     np.testing.assert_allclose(moved_fast, 1.1 * moved, rtol=1e-6, atol=1e-9)
+
+
+def test_paired_speed_ratio_pairs_the_walks_kept_in_both_runs() -> None:
+    pp = _benchmark("pace_paired")
+
+    def run(speeds: dict) -> dict:
+        rows = [{"segment": k, "fell": v is None, "sim_speed_mps": v or 0.0}
+                for k, v in speeds.items()]  # fmt: skip
+        return {"by_reference": {"estimate": {"rows": rows}}}
+
+    a = run({"w1": 1.0, "w2": 2.0, "w3": 1.0, "w4": None})
+    b = run({"w1": 1.1, "w2": 2.4, "w3": None, "w4": 3.0, "w5": 1.0})
+    got = pp.paired_speed_ratio(a, b)
+    assert got["walks"] == 2
+    assert got["median"] == pytest.approx(1.15) and got["mean"] == pytest.approx(1.15)
+    assert pp.paired_speed_ratio(a, run({"w3": None}))["walks"] == 0
