@@ -153,13 +153,16 @@ def fold_chooser(kin_folds: list[str], data: str):
     return fold_model_chooser(ests, dataset_groups(data), kin_folds)
 
 
-def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0) -> list[dict]:
+def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
+         pace=None) -> list[dict]:  # fmt: skip
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
     of each recording (default: the setup's); ``root_scale`` carries the followed estimate that
-    many times as fast (:func:`root_speed_scaled`)."""
+    many times as fast (:func:`root_speed_scaled`); ``pace`` the players' pace keeper
+    (:class:`grip.player.PaceKeeper`; None: off)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
+    from grip.player import PaceKeeper
 
     runner, default = setup.build()
     rows = []
@@ -176,7 +179,8 @@ def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0) 
         if root_scale != 1.0:
             est = root_speed_scaled(est, root_scale)
         rec_runner = _Recorder(runner)
-        pipe = _pipeline(rec_runner, estimator, reference.split("-")[0], "truth")
+        pipe = _pipeline(rec_runner, estimator, reference.split("-")[0], "truth",
+                         pace or PaceKeeper())  # fmt: skip
         ep = _episode(rec, est, "truth", estimator.cfg.features)
         recon, _ = pipe.play(ep.est, ep.start, ep.body, ep.objects, stop_at_fall=True)
         n = recon.n_frames
@@ -239,6 +243,7 @@ def _median(rows: list[dict], key: str) -> float:
 def main(argv: list[str] | None = None) -> None:
     from grip.assets import SHIPPED_KIN, SHIPPED_POLICY
     from grip.eval.policy import PolicySetup
+    from grip.player import PaceKeeper
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True)
@@ -267,6 +272,11 @@ def main(argv: list[str] | None = None) -> None:
                     "unchanged, as env.root_speed_range does in training (the pelvis' horizontal "
                     "velocity, and the root it integrates, times F; every velocity joint shifted "
                     "with it): does the controller read its pace from the root?")
+    ap.add_argument("--pace-gain", type=float, default=PaceKeeper().gain, metavar="K",
+                    help="the players' pace keeper (grip.player.PaceKeeper): the followed pelvis "
+                    "shown leads the estimate's by K x the humanoid's gap to it (0: off)")
+    ap.add_argument("--pace-lead-max", type=float, default=PaceKeeper().lead_max_m, metavar="M",
+                    help="the pace keeper's longest lead, m")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):
@@ -284,10 +294,12 @@ def main(argv: list[str] | None = None) -> None:
     choose = fold_chooser(args.kin_fold, args.data) if args.kin_fold else None
     out: dict = {"policy": args.policy, "kin": args.kin_fold or args.kin, "data": args.data,
                  "split": args.split, "root_speed_scale": args.root_speed_scale,
+                 "pace_gain": args.pace_gain, "pace_lead_max_m": args.pace_lead_max,
                  "speed_factor": args.speed_factor, "segments": len(segs),
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
-        rows = play(setup, segs, ref, choose, args.root_speed_scale)
+        rows = play(setup, segs, ref, choose, args.root_speed_scale,
+                    PaceKeeper(args.pace_gain, args.pace_lead_max))  # fmt: skip
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {
             "rows": rows,

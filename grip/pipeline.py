@@ -36,6 +36,7 @@ from grip.core.rotations import matrix_to_6d
 from grip.kinematics.features import SensorStream, first_state, stream_features
 from grip.player import (
     CONTACT_FORCE_N,
+    PaceKeeper,
     Player,
     RecoveryConfig,
     StartState,
@@ -50,6 +51,7 @@ __all__ = [
     "BatchedPlayer",
     "Episode",
     "GripPipeline",
+    "PaceKeeper",
     "Player",
     "RecoveryConfig",
     "StartState",
@@ -254,10 +256,12 @@ class GripPipeline:
             settings and sensor features must match the estimator's).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         recovery: Fall detection and recovery settings.
+        pace: The pace keeper of every player (:class:`grip.player.PaceKeeper`; off by default).
     """
 
-    def __init__(self, runner, estimator, recovery: RecoveryConfig = RecoveryConfig()) -> None:
-        self.runner, self.estimator, self.recovery = runner, estimator, recovery
+    def __init__(self, runner, estimator, recovery: RecoveryConfig = RecoveryConfig(),
+                 pace: PaceKeeper = PaceKeeper()) -> None:  # fmt: skip
+        self.runner, self.estimator, self.recovery, self.pace = runner, estimator, recovery, pace
         self._compiled: dict = {}  # compiled models by (scene, subject), for every humanoid here
         self.scenes = humanoid_scenes(runner.env_cfg, compiled=self._compiled)
         self._scene_tag = 0
@@ -272,7 +276,8 @@ class GripPipeline:
     def player(self, body: BodyParams, objects: dict | None = None,
                stop_at_fall: bool = False) -> Player:  # fmt: skip
         """A :class:`Player` on the subject's humanoid."""
-        return Player(self.runner, self.humanoid(body, objects), self.recovery, stop_at_fall)
+        return Player(self.runner, self.humanoid(body, objects), self.recovery, stop_at_fall,
+                      self.pace)  # fmt: skip
 
     def _own_player(self, ep: Episode) -> Player:
         """A :class:`Player` of ``ep`` on a humanoid no other row of a :class:`BatchedPlayer`
@@ -288,7 +293,7 @@ class GripPipeline:
             scenes: HumanoidScenes = humanoid_scenes(self.runner.env_cfg,
                                                      compiled=self._compiled)  # fmt: skip
             h = scenes.get(ep.body, ep.objects, self._scene_tag)
-        player = Player(self.runner, h, self.recovery, ep.stop_at_fall)
+        player = Player(self.runner, h, self.recovery, ep.stop_at_fall, self.pace)
         if ep.objects is None:
             self._lent[id(player)] = key
         return player

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -81,6 +82,44 @@ def tiny_policy_run(tmp_path_factory):
     argv = ["policy", "train", "--data", str(data), "--out", str(run), *TINY_POLICY]
     assert main(argv) == 0
     return data, run
+
+
+@pytest.fixture(scope="session")
+def ensemble_policy(tmp_path_factory) -> Path:
+    """A policy file of three members in the layout written before version 2
+    (``LEGACY_ENSEMBLE_FORMAT``, the layout of the ensemble shipped until 2026-12-06): the shipped
+    policy and two copies of it with their actor weights and observation means moved by a few per
+    cent (seeded), so that the three act differently. Read-only."""
+    import torch
+
+    from grip.assets import SHIPPED_POLICY
+    from policies.runner import FORMAT, LEGACY_ENSEMBLE_FORMAT, read_policy_file
+
+    members, _ = read_policy_file(SHIPPED_POLICY)
+    base = dict(members[0])
+    g = torch.Generator().manual_seed(0)
+
+    def moved(d: dict, how) -> dict:
+        return {k: how(v).to(v.dtype) for k, v in d.items()}
+
+    out = []
+    for i in range(ENSEMBLE_MEMBERS):
+        m = {**base, "format": FORMAT, "version": 1}
+        if i:  # (only the first member stores the discriminator)
+            m.pop("disc", None)
+            m["actor"] = moved(base["actor"], lambda v: v * (1.0 + 0.05 * torch.randn(
+                v.shape, generator=g)))  # fmt: skip
+            m["obs_mean"] = moved(base["obs_mean"], lambda v: v + 0.05 * torch.randn(
+                v.shape, generator=g))  # fmt: skip
+        out.append(m)
+    path = tmp_path_factory.mktemp("ensemble") / "ensemble.pt"
+    torch.save({"format": LEGACY_ENSEMBLE_FORMAT, "version": 1, "members": out,
+                "names": json.dumps([f"m{i}" for i in range(ENSEMBLE_MEMBERS)])}, path)
+    return path
+
+
+ENSEMBLE_MEMBERS = 3
+"""Members of :func:`ensemble_policy`."""
 
 
 WALK_TAKES = {"take0": 230, "take1": 120, "take2": 160}

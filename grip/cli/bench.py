@@ -10,6 +10,7 @@ from pathlib import Path
 from grip.cli.recordings import (
     add_init_argument,
     add_limit_arguments,
+    add_pace_arguments,
     add_restart_argument,
     limits_from_args,
 )
@@ -88,6 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "state)", "; a folder resumes only with the --init it was written "
                       "with")  # fmt: skip
     add_restart_argument(p)
+    add_pace_arguments(p)
     from grip.cli.cluster import add_ray_argument
 
     add_ray_argument(p, "units of work (a method on a segment, or on --batch N of them)")
@@ -137,7 +139,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         options = MethodOptions(kin_checkpoint=args.kin, sweep_dir=args.sweep,
                                 policy_checkpoint=args.policy,
                                 transpose_checkpoint=args.transpose, pip_checkpoint=args.pip,
-                                init=args.init, restart=args.restart)  # fmt: skip
+                                init=args.init, restart=args.restart,
+                                pace_gain=args.pace_gain,
+                                pace_lead_max_m=args.pace_lead_max)  # fmt: skip
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         for f, why in unreadable:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -11,6 +12,7 @@ from grip.cli.policy_runs import build_training_reference, training_files
 from grip.cli.recordings import (
     add_init_argument,
     add_limit_arguments,
+    add_pace_arguments,
     add_tta_argument,
     limits_from_args,
 )
@@ -154,6 +156,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_tta_argument(e)
     add_init_argument(e, "KinematicsNet (its LSTMs and integrated root) and the humanoid",
                       "; with --reference truth the humanoid still starts standing")  # fmt: skip
+    add_pace_arguments(e)
     e.add_argument("--json", type=Path, default=None, help="write the overall figures here")
     e.add_argument("--out", type=Path, default=None,
                    help="folder for the per-segment CSV and the Markdown table")  # fmt: skip
@@ -469,7 +472,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from grip.assets import SHIPPED_POLICY
     from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
-    from grip.cli.recordings import exit_status, kin_checkpoint, skip_file
+    from grip.cli.recordings import exit_status, kin_checkpoint, pace_keeper, skip_file
     from grip.eval.policy import (
         PolicySetup,
         evaluate_batches,
@@ -481,6 +484,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     limits_from_args(args)
     ray_args(args)
+    pace = pace_keeper(args)
     pols = args.policy or [SHIPPED_POLICY]
     for p in pols:
         if not Path(p).is_file():
@@ -539,7 +543,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                    action_noise=args.action_noise,
                                    seeds=[args.seed + i for i in range(args.repeats)],
                                    progress=bar.update, built=(runner, est),
-                                   pool=pool)  # fmt: skip
+                                   pool=pool, pace=pace)  # fmt: skip
         except BenchError as e:  # (a worker process died)
             raise CliError(str(e)) from e
     passes = got if args.repeats == 1 else [[dict(r, replay=i) for r in p]
@@ -563,7 +567,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.json is not None:
         from grip.core.atomic import atomic_write_text
 
-        atomic_write_text(args.json, json.dumps({**summary["overall"], "init": args.init},
+        atomic_write_text(args.json, json.dumps({**summary["overall"], "init": args.init,
+                                                 "pace_keeper": dataclasses.asdict(pace)},
                                                 indent=1))  # fmt: skip
         print(f"wrote {args.json}")
     return exit_status(skipped, len(files))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import os
 import sys
@@ -68,10 +69,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "any NaN fails it)")  # fmt: skip
     p.add_argument("--overwrite", action="store_true", help="redo recordings already in OUT")
     from grip.cli.cluster import add_ray_argument
-    from grip.cli.recordings import add_init_argument, add_limit_arguments, add_restart_argument
+    from grip.cli.recordings import (
+        add_init_argument,
+        add_limit_arguments,
+        add_pace_arguments,
+        add_restart_argument,
+    )
 
     add_init_argument(p, "KinematicsNet and the humanoid")
     add_restart_argument(p)
+    add_pace_arguments(p)
     add_ray_argument(p, "shares of the recordings (--batch N each)")
     add_limit_arguments(p)
     p.set_defaults(func=cmd_reconstruct)
@@ -201,7 +208,8 @@ def _work(job: tuple) -> list[dict]:
     """One worker: reconstruct a share of the recordings (``batch`` of them side by side) and
     write their files. A recording that cannot be read or does not carry the sensors the models
     need gives a row with an ``"error"`` (the others go on)."""
-    files, out, policy, kin, recovery, max_frames, formats, fill_gaps, batch, threads, init = job
+    files, out, policy, kin, (recovery, pace), max_frames, formats, fill_gaps, batch, threads, \
+        init = job  # fmt: skip
     import torch
 
     torch.set_num_threads(1)
@@ -210,11 +218,11 @@ def _work(job: tuple) -> list[dict]:
     from grip.core.digests import FileDigests
     from grip.eval.reconstruct import GripReconstructor
 
-    key = (policy, kin, recovery)
+    key = (policy, kin, recovery, pace)
     g = _LOADED.get(key)
     if g is None:  # each worker process loads the models once
         _LOADED.clear()
-        g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery)
+        g = _LOADED[key] = GripReconstructor.from_files(policy, kin, recovery, pace)
     caught = (CliError, KeyError, ValueError, OSError)
     loaded: list = []  # (f, stem, recording or the error reading it)
     digests = FileDigests()
@@ -284,7 +292,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     from grip.cli.cluster import command_pool, ray_args
     from grip.cli.errors import CliError
-    from grip.cli.recordings import kin_checkpoint, limits_from_args
+    from grip.cli.recordings import kin_checkpoint, limits_from_args, pace_keeper
     from grip.core.atomic import atomic_write_text
     from grip.core.digests import file_sha256
     from grip.core.runs import (
@@ -320,6 +328,9 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         settings["init"] = args.init
     if recovery.enabled and args.restart != "simulated":  # (absent before --restart: GRIP's)
         settings["restart"] = args.restart
+    pace = pace_keeper(args)
+    if pace.gain > 0.0:  # (absent when off: the runs before the pace keeper)
+        settings["pace"] = dataclasses.asdict(pace)
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "summary.json"
     old: dict = {}
@@ -388,7 +399,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         size = max(1, min(args.batch, -(-len(todo) // workers)))
         threads = max(1, usable_cores() // workers)
         jobs = [([(given[f], stems[f]) for f in todo[i : i + size]], str(args.out), str(policy),
-                 str(kin), recovery, args.max_frames, formats, args.fill_gaps, args.batch,
+                 str(kin), (recovery, pace), args.max_frames, formats, args.fill_gaps, args.batch,
                  threads, args.init)
                 for i in range(0, len(todo), size)]  # fmt: skip
 

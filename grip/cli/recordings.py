@@ -208,6 +208,37 @@ def add_restart_argument(parser) -> None:
     )  # fmt: skip
 
 
+def add_pace_arguments(parser) -> None:
+    """The pace keeper's options (:class:`grip.player.PaceKeeper`) of the commands that play
+    GRIP; :func:`pace_keeper` reads them."""
+    from grip.player import PaceKeeper
+
+    d = PaceKeeper()
+    parser.add_argument(
+        "--pace-gain", type=float, default=d.gain, metavar="K",
+        help="pace keeper: the pelvis the controller is shown leads the estimate's by K x the "
+        f"humanoid's horizontal gap to it, at most --pace-lead-max (default {d.gain:g}; 0: off; "
+        "only controllers that read the followed pelvis' position see it; docs/pace.md)",
+    )  # fmt: skip
+    parser.add_argument("--pace-lead-max", type=float, default=d.lead_max_m, metavar="M",
+                        help=f"pace keeper: the longest lead, m (default {d.lead_max_m:g})")
+
+
+
+def pace_keeper(args: argparse.Namespace):
+    """The :class:`grip.player.PaceKeeper` of :func:`add_pace_arguments`' options.
+
+    Raises:
+        CliError: A value out of range."""
+    from grip.cli.errors import CliError
+    from grip.player import PaceKeeper
+
+    try:
+        return PaceKeeper(gain=args.pace_gain, lead_max_m=args.pace_lead_max)
+    except ValueError as e:
+        raise CliError(f"pace keeper: {e}") from e
+
+
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],
                                  categories: Sequence[str]) -> list:  # fmt: skip
     """The time-reversed recordings of the clips of ``categories`` among the training sequence

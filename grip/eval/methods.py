@@ -87,6 +87,8 @@ class MethodOptions:
             calibration (``"standing"``, no ground-truth pose read).
         restart: Where GRIP's humanoid restarts after a fall
             (:attr:`grip.player.RecoveryConfig.restart`).
+        pace_gain, pace_lead_max_m: GRIP's pace keeper
+            (:class:`grip.player.PaceKeeper`).
 
     Raises:
         ValueError: ``init`` is not one of :data:`grip.kinematics.features.INITS`.
@@ -100,6 +102,8 @@ class MethodOptions:
     pip_checkpoint: Path | None = None
     init: str = "truth"
     restart: str = "estimate"
+    pace_gain: float = 1.0  # (grip.player.PaceKeeper's defaults: tests/eval/test_pace_keeper.py)
+    pace_lead_max_m: float = 0.5
 
     def __post_init__(self) -> None:
         from grip.kinematics.features import INITS
@@ -110,6 +114,13 @@ class MethodOptions:
 
         if self.restart not in RESTARTS:
             raise ValueError(f"restart must be one of {list(RESTARTS)}, got {self.restart!r}")
+        self.pace()  # (refuses a bad gain or lead)
+
+    def pace(self):
+        """GRIP's :class:`grip.player.PaceKeeper`."""
+        from grip.player import PaceKeeper
+
+        return PaceKeeper(gain=self.pace_gain, lead_max_m=self.pace_lead_max_m)
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""
@@ -279,7 +290,8 @@ def grip_method(options: MethodOptions) -> Grip:
     from grip.player import RecoveryConfig
 
     recovery = RecoveryConfig(restart=options.restart)
-    return Grip(GripReconstructor.from_files(policy, kin, recovery), options.init)
+    return Grip(GripReconstructor.from_files(policy, kin, recovery, options.pace()),
+                options.init)  # fmt: skip
 
 
 # ------------------------------------------------------------------ PIP physics on KinematicsNet

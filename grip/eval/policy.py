@@ -62,6 +62,7 @@ from grip.kinematics.features import INITS, ground_truth
 from grip.pipeline import (
     Episode,
     GripPipeline,
+    PaceKeeper,
     RecoveryConfig,
     start_from_calibration,
     start_from_clip,
@@ -114,7 +115,8 @@ REFERENCES: tuple[str, ...] = ("estimate", "truth")
 def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
                     progress: Callable[[int], object] | None = None,
                     reference: str = "estimate", play_batch: int = 1,
-                    threads: int = 0, init: str = "truth") -> list[dict]:  # fmt: skip
+                    threads: int = 0, init: str = "truth",
+                    pace: PaceKeeper = PaceKeeper()) -> list[dict]:  # fmt: skip
     """One row of metrics per recording (segment), with ``name`` and ``category``.
 
     ``reference``: what the controller follows: ``"estimate"`` (KinematicsNet's, the method) or
@@ -127,9 +129,10 @@ def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
     humanoid still starts standing). ``batch``: recordings per KinematicsNet forward pass;
     ``progress``: called after each episode; ``play_batch``: episodes played side by side
     (:meth:`grip.pipeline.GripPipeline.play_many`; 1: one after another), their humanoids
-    stepped by ``threads`` threads (0: the usable cores). An episode that raises raises here.
+    stepped by ``threads`` threads (0: the usable cores); ``pace``: the players' pace keeper
+    (:class:`grip.player.PaceKeeper`). An episode that raises raises here.
     """
-    pipe = _pipeline(runner, estimator, reference, init)
+    pipe = _pipeline(runner, estimator, reference, init, pace)
     chunks = [([{}] * len(recs), recs, _estimates(estimator, recs, batch, reference, init))]
     return _play_rows(pipe, chunks, len(recs), play_batch, threads, progress, init)
 
@@ -137,11 +140,12 @@ def evaluate_policy(runner: Controller, estimator, recs: list, batch: int = 16,
 def evaluate_segments(runner: Controller, estimator, segments: Sequence[Segment],
                       batch: int = 16, progress: Callable[[int], object] | None = None,
                       reference: str = "estimate", play_batch: int = 1,
-                      threads: int = 0, init: str = "truth") -> list[dict]:  # fmt: skip
+                      threads: int = 0, init: str = "truth",
+                      pace: PaceKeeper = PaceKeeper()) -> list[dict]:  # fmt: skip
     """:func:`evaluate_policy` on :mod:`grip.eval.segments` (read and estimated ``batch`` at a
     time, when the player needs the next): one row per segment, in order, starting with its
     segment keys (:func:`grip.eval.runner.segment_keys`)."""
-    pipe = _pipeline(runner, estimator, reference, init)
+    pipe = _pipeline(runner, estimator, reference, init, pace)
 
     def chunks() -> Iterator[tuple[list[dict], list, list]]:
         read = SegmentReader()
@@ -200,11 +204,13 @@ def unit_seed(seed: int, unit: int) -> int:
 
 def _play_unit(runner: Controller, estimator, segments: Sequence[Segment], play_batch: int,
                reference: str, init: str, action_noise: float, seed: int, threads: int,
-               progress: Callable[[int], object] | None = None) -> list[dict]:  # fmt: skip
+               progress: Callable[[int], object] | None = None,
+               pace: PaceKeeper = PaceKeeper()) -> list[dict]:  # fmt: skip
     """One batch of :func:`evaluate_batches`: its own pipeline, its own noise generator."""
     runner.use_action_noise(action_noise, seed)
     return evaluate_segments(runner, estimator, segments, progress=progress, reference=reference,
-                             play_batch=play_batch, threads=threads, init=init)  # fmt: skip
+                             play_batch=play_batch, threads=threads, init=init,
+                             pace=pace)  # fmt: skip
 
 
 _WORKER_MODELS: dict[PolicySetup, tuple] = {}
@@ -213,7 +219,7 @@ _WORKER_MODELS: dict[PolicySetup, tuple] = {}
 
 def _worker_unit(setup: PolicySetup, segments: Sequence[Segment], play_batch: int,
                  reference: str, init: str, action_noise: float, seed: int,
-                 threads: int) -> list[dict]:  # fmt: skip
+                 threads: int, pace: PaceKeeper) -> list[dict]:  # fmt: skip
     """:func:`_play_unit` in a worker process: the models are built on the first call (torch
     on one thread) and kept."""
     models = _WORKER_MODELS.get(setup)
@@ -224,7 +230,7 @@ def _worker_unit(setup: PolicySetup, segments: Sequence[Segment], play_batch: in
         _WORKER_MODELS.clear()
         models = _WORKER_MODELS[setup] = setup.build()
     return _play_unit(*models, segments, play_batch, reference, init, action_noise, seed,
-                      threads)  # fmt: skip
+                      threads, pace=pace)  # fmt: skip
 
 
 def evaluate_batches(
@@ -232,7 +238,7 @@ def evaluate_batches(
     reference: str = "estimate", init: str = "truth", action_noise: float = 0.0,
     seeds: Sequence[int] = (0,), progress: Callable[[int], object] | None = None,
     threads: int = 0, built: tuple[Controller, KinematicsEstimator] | None = None,
-    pool: CallPool | None = None,
+    pool: CallPool | None = None, pace: PaceKeeper = PaceKeeper(),
 ) -> list[list[dict]]:  # fmt: skip
     """``grip policy eval``: :func:`evaluate_segments` batch by batch, in ``workers`` processes.
 
@@ -255,6 +261,7 @@ def evaluate_batches(
         threads: Threads stepping a batch's humanoids in each process (0: the usable cores
             shared out over the processes).
         built: ``(controller, KinematicsNet)`` of ``setup``, already built here.
+        pace: The players' pace keeper (:class:`grip.player.PaceKeeper`).
         pool: Worker processes to use (kept by the caller across calls; ``workers`` is then
             ignored), or Ray tasks (:class:`grip.cluster.RayPool`, ``--ray``). None: a pool
             of ``workers`` for this call when there is more than one batch to play.
@@ -279,12 +286,12 @@ def evaluate_batches(
             for p, j, part in units:
                 got[p, j] = _play_unit(runner, est, part, play_batch, reference, init,
                                        action_noise, unit_seed(seeds[p], j), threads,
-                                       progress)  # fmt: skip
+                                       progress, pace)  # fmt: skip
     else:
         n = pool.workers if pool is not None else min(workers, len(units))
         per = threads if threads > 0 else max(1, usable_cores() // n)
         calls = [(_worker_unit, (setup, part, play_batch, reference, init, action_noise,
-                                 unit_seed(seeds[p], j), per))
+                                 unit_seed(seeds[p], j), per, pace))
                  for p, j, part in units]  # fmt: skip
 
         def done(k: int, rows) -> None:
@@ -311,12 +318,13 @@ def evaluate_batches(
     return [[r for j in range(len(parts)) for r in got[p, j]] for p in range(len(seeds))]
 
 
-def _pipeline(runner: Controller, estimator, reference: str, init: str) -> GripPipeline:
+def _pipeline(runner: Controller, estimator, reference: str, init: str,
+              pace: PaceKeeper = PaceKeeper()) -> GripPipeline:  # fmt: skip
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {list(REFERENCES)}, got {reference!r}")
     if init not in INITS:
         raise ValueError(f"init must be one of {list(INITS)}, got {init!r}")
-    return GripPipeline(runner, estimator, RecoveryConfig(enabled=False))
+    return GripPipeline(runner, estimator, RecoveryConfig(enabled=False), pace)
 
 
 def _estimates(estimator, recs: list, batch: int, reference: str, init: str) -> list:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from grip.kinematics.features import sensor_stream
-from grip.pipeline import GripPipeline, RecoveryConfig
+from grip.pipeline import GripPipeline, PaceKeeper, RecoveryConfig
 
 
 class GripReconstructor:
@@ -24,22 +24,27 @@ class GripReconstructor:
             an ensemble; its env settings and sensor features must match the estimator's).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         recovery: Fall detection and recovery settings.
+        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: off).
     """
 
-    def __init__(self, runner, estimator, recovery: RecoveryConfig | None = None) -> None:
+    def __init__(self, runner, estimator, recovery: RecoveryConfig | None = None,
+                 pace: PaceKeeper | None = None) -> None:  # fmt: skip
         self.runner = runner
         self.estimator = estimator
         self.recovery = recovery = recovery or RecoveryConfig()
-        self.pipeline = GripPipeline(runner, estimator, recovery)
+        self.pace = pace = pace or PaceKeeper()
+        self.pipeline = GripPipeline(runner, estimator, recovery, pace)
 
     @classmethod
-    def from_files(cls, policy, kin, recovery: RecoveryConfig | None = None):
+    def from_files(cls, policy, kin, recovery: RecoveryConfig | None = None,
+                   pace: PaceKeeper | None = None):  # fmt: skip
         """Load a policy file (``grip policy export`` or ``grip policy combine``) and a
         KinematicsNet checkpoint."""
         from grip.kinematics.inference import KinematicsEstimator
         from policies.controller import load_controller
 
-        return cls(load_controller(policy), KinematicsEstimator.from_checkpoint(kin), recovery)
+        return cls(load_controller(policy), KinematicsEstimator.from_checkpoint(kin), recovery,
+                   pace)  # fmt: skip
 
     def stream(self, calibration):
         """A :class:`grip.eval.stream.GripStream` (one frame in, one frame out) with these
@@ -47,7 +52,7 @@ class GripReconstructor:
         :class:`grip.kinematics.features.SensorStream` of them)."""
         from grip.eval.stream import GripStream
 
-        return GripStream(self.runner, self.estimator, calibration, self.recovery)
+        return GripStream(self.runner, self.estimator, calibration, self.recovery, pace=self.pace)
 
     def reconstruct(
         self, recs: Sequence, progress: Callable[[int], object] | None = None, batch: int = 16,

@@ -75,6 +75,8 @@ def check_method(out_dir: Path, run: _Run, log: Callable[[str], object] = print)
             # (written before MethodOptions.init existed: those runs started from the truth)
             have["options"].setdefault("init", "truth")
             have["options"].setdefault("restart", "simulated")  # (GRIP's, before --restart)
+            have["options"].setdefault("pace_gain", 0.0)  # (no pace keeper before it existed)
+            have["options"].setdefault("pace_lead_max_m", 0.5)
         if have != want:
             raise BenchError(f"{path.parent}: results of {run.label} with other settings "
                              f"({have} vs now {want}); use another output folder")  # fmt: skip

@@ -50,7 +50,13 @@ from grip.core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
 from grip.kinematics.feature_stream import FeatureStream, sensor_frame_arrays
 from grip.kinematics.features import SensorFrame, SensorStream, first_state, sensor_stream
 from grip.kinematics.inference import decode_outputs
-from grip.pipeline import GripPipeline, Player, RecoveryConfig, start_from_calibration
+from grip.pipeline import (
+    GripPipeline,
+    PaceKeeper,
+    Player,
+    RecoveryConfig,
+    start_from_calibration,
+)
 
 LATENCY_FRAMES = 2
 """Frames between a sensor frame going in and its simulated frame coming out."""
@@ -124,6 +130,7 @@ class GripStream:
         capacity: Frames allocated at first (the buffers double when a stream runs longer).
         max_gap_frames: Longest run of missing frames filled by interpolation (longer ones are
             gaps, see the module docstring).
+        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: off).
         limits: Bound the stream's length (``max_frames``, ``max_duration_s``): a frame whose
             index or timestamp lies beyond is refused (default
             :func:`grip.core.limits.active_limits`).
@@ -141,7 +148,8 @@ class GripStream:
 
     def __init__(self, runner, estimator, calibration, recovery: RecoveryConfig | None = None,
                  capacity: int = 1024, max_gap_frames: int = MAX_GAP_FRAMES,
-                 limits: InputLimits | None = None) -> None:  # fmt: skip
+                 limits: InputLimits | None = None,
+                 pace: PaceKeeper | None = None) -> None:  # fmt: skip
         if max_gap_frames < 0:
             raise ValueError(f"max_gap_frames must be >= 0, got {max_gap_frames}")
         self._limits = limits or active_limits()
@@ -158,7 +166,7 @@ class GripStream:
         self.clip = LiveEstimate(head.name, head.fps, cal.root_pos[0], cfg.n_features, capacity)
         # (live: the humanoid starts at frame 0, where a stream begins standing still)
         self._start = start_from_calibration(cal, head.body, head.fps, warmup=False)
-        self._pipeline = GripPipeline(runner, estimator, recovery)
+        self._pipeline = GripPipeline(runner, estimator, recovery, pace or PaceKeeper())
         self._offsets = build_body(head.body).offsets
         self._capacity = capacity
         self.player: Player | None = None

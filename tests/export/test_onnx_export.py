@@ -32,6 +32,7 @@ from grip.kinematics.model import STAGES, KinematicsNet  # noqa: E402
 from grip.kinematics.onnx import N_OUT, export_kinematics_onnx, init_path  # noqa: E402
 from grip.nn.onnx import read_metadata  # noqa: E402
 from grip.nn.weights import CHECKPOINT_VERSION, save_checkpoint  # noqa: E402
+from grip.task.observations import kinematic_dim  # noqa: E402
 from policies.controller import combine, load_controller  # noqa: E402
 from policies.onnx import export_policy_onnx  # noqa: E402
 from prism_tools.io import load_recording  # noqa: E402
@@ -99,9 +100,9 @@ def sample_obs() -> list[dict]:
 
 
 # ------------------------------------------------------------------------------------ policy
-def test_one_policy_matches_the_runner(tmp_path) -> None:
+def test_one_policy_matches_the_runner(tmp_path, ensemble_policy) -> None:
     one = tmp_path / "one.pt"
-    combine([SHIPPED_POLICY], one, member=2, precision="fp32")
+    combine([ensemble_policy], one, member=2, precision="fp32")
     runner = load_controller(one)
     size, n = export_policy_onnx(one, tmp_path / "one.onnx")
     assert n == 1 and size == (tmp_path / "one.onnx").stat().st_size
@@ -114,12 +115,12 @@ def test_one_policy_matches_the_runner(tmp_path) -> None:
 
 
 def test_the_ensemble_averages_its_members_each_with_its_own_normaliser(
-        tmp_path, sample_obs) -> None:  # fmt: skip
-    ens = load_controller(SHIPPED_POLICY)
-    assert len(ens.members) == 5
+        tmp_path, sample_obs, ensemble_policy) -> None:  # fmt: skip
+    ens = load_controller(ensemble_policy)
+    assert len(ens.members) >= 3
     assert np.abs(ens.members[0]._mean - ens.members[1]._mean).max() > 1e-3  # (they differ)
     out = tmp_path / "ens.onnx"
-    assert export_policy_onnx(SHIPPED_POLICY, out)[1] == 5
+    assert export_policy_onnx(ensemble_policy, out)[1] == len(ens.members)
     sess = _session(out)
     x = _random_obs(ens, 32, seed=1)
     got = sess.run(None, {"obs": x.astype(np.float32)})[0]
@@ -139,12 +140,12 @@ def test_the_ensemble_averages_its_members_each_with_its_own_normaliser(
                                atol=ATOL)  # fmt: skip
 
 
-def test_policy_metadata_documents_the_input_and_output(tmp_path) -> None:
-    ens = load_controller(SHIPPED_POLICY)
+def test_policy_metadata_documents_the_input_and_output(tmp_path, ensemble_policy) -> None:
+    ens = load_controller(ensemble_policy)
     out = tmp_path / "p.onnx"
-    export_policy_onnx(SHIPPED_POLICY, out)
+    export_policy_onnx(ensemble_policy, out)
     meta = read_metadata(out)
-    assert meta["format"] == "grip-policy-onnx" and meta["members"] == "5"
+    assert meta["format"] == "grip-policy-onnx" and meta["members"] == str(len(ens.members))
     keys = json.loads(meta["obs_keys"])
     sizes, slices = json.loads(meta["obs_sizes"]), json.loads(meta["obs_slices"])
     assert keys == ens.obs_keys == list(sizes) == list(slices)
@@ -152,20 +153,24 @@ def test_policy_metadata_documents_the_input_and_output(tmp_path) -> None:
     for k in keys:
         assert slices[k] == [stop, stop + sizes[k]]
         stop += sizes[k]
-    assert stop == ens.members[0]._mean.size == 1275
+    width = ens.members[0]._mean.size
+    assert stop == width and sizes["kinematic"] == kinematic_dim(ens.env_cfg.kinematic_obs)
     assert len(json.loads(meta["action_names"])) == 69
     assert json.loads(meta["env_config"]) == json.loads(json.dumps(asdict(ens.env_cfg)))
     sess = _session(out)
-    assert [(i.name, i.shape[1]) for i in sess.get_inputs()] == [("obs", 1275)]
+    assert [(i.name, i.shape[1]) for i in sess.get_inputs()] == [("obs", width)]
     assert [(o.name, o.shape[1]) for o in sess.get_outputs()] == [("action", 69)]
 
 
-def test_grip_policy_export_to_onnx_and_its_refusals(tmp_path, capsys, monkeypatch) -> None:
+def test_grip_policy_export_to_onnx_and_its_refusals(tmp_path, capsys, monkeypatch,
+                                                     ensemble_policy) -> None:  # fmt: skip
     out = tmp_path / "p.onnx"
-    assert main(["policy", "export", str(SHIPPED_POLICY), "--out", str(out)]) == 0
+    assert main(["policy", "export", str(ensemble_policy), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "p.onnx" in printed and "ensemble of 5" in printed and "(1275,)" in printed
-    assert read_metadata(out)["source"] == str(SHIPPED_POLICY)
+    ens = load_controller(ensemble_policy)
+    assert "p.onnx" in printed and f"ensemble of {len(ens.members)}" in printed
+    assert f"({ens.members[0]._mean.size},)" in printed
+    assert read_metadata(out)["source"] == str(ensemble_policy)
     for argv, why in [
         ([str(SHIPPED_POLICY), "--out", str(tmp_path / "x.onnx"), "--precision", "int8"],
          "fp32"),
@@ -180,7 +185,8 @@ def test_grip_policy_export_to_onnx_and_its_refusals(tmp_path, capsys, monkeypat
     assert "pip install onnx" in capsys.readouterr().err
 
 
-def test_a_run_folder_goes_through_its_fp32_policy_file(tmp_path, capsys, monkeypatch) -> None:
+def test_a_run_folder_goes_through_its_fp32_policy_file(tmp_path, capsys, monkeypatch,
+                                                        ensemble_policy) -> None:  # fmt: skip
     """``grip policy export RUN --out F.onnx``: the run's policy file at fp32 (made here from
     the shipped file's member 0 instead of a training run), then its graph."""
     import policies.runner
@@ -193,7 +199,7 @@ def test_a_run_folder_goes_through_its_fp32_policy_file(tmp_path, capsys, monkey
 
     def fake_export(run_dir, out, half=True, info=None, precision=None):
         calls.append((Path(run_dir), precision, info))
-        return combine([SHIPPED_POLICY], out, member=0)[0]
+        return combine([ensemble_policy], out, member=0)[0]
 
     monkeypatch.setattr(policies.runner, "export_policy", fake_export)
     out = tmp_path / "run.onnx"
@@ -201,7 +207,7 @@ def test_a_run_folder_goes_through_its_fp32_policy_file(tmp_path, capsys, monkey
     assert calls == [(run, "fp32", {"timesteps": 64, "wall_s": 1.0})]
     assert "ONNX of one policy" in capsys.readouterr().out
     assert read_metadata(out)["source"] == str(run) and read_metadata(out)["members"] == "1"
-    member0 = load_controller(SHIPPED_POLICY).members[0]
+    member0 = load_controller(ensemble_policy).members[0]
     x = _random_obs(member0, 8, seed=2)
     np.testing.assert_allclose(_session(out).run(None, {"obs": x.astype(np.float32)})[0],
                                member0.act(_split(member0, x)), atol=ATOL)  # fmt: skip

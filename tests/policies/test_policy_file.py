@@ -1,5 +1,6 @@
 """The policy file: one list of members in every file written now, and every layout written
-before still loading (the shipped ensemble, single policies exported before version 2)."""
+before still loading (ensembles in the layout of the one shipped until 2026-12-06, single
+policies exported before version 2)."""
 
 from __future__ import annotations
 
@@ -25,10 +26,10 @@ def _obs(runner: PolicyRunner, shift: float = 0.5) -> dict:
             * rng.standard_normal(runner.obs_mean[k].shape) for k in runner.obs_keys}  # fmt: skip
 
 
-def test_the_shipped_ensemble_loads_as_before() -> None:
-    raw = torch.load(SHIPPED_POLICY, weights_only=True)
+def test_an_ensemble_of_the_old_layout_loads_as_before(ensemble_policy) -> None:
+    raw = torch.load(ensemble_policy, weights_only=True)
     assert raw["format"] == LEGACY_ENSEMBLE_FORMAT  # written before version 2
-    ctrl = load_controller(SHIPPED_POLICY)
+    ctrl = load_controller(ensemble_policy)
     assert isinstance(ctrl, PolicyEnsemble) and isinstance(ctrl, Controller)
     assert len(ctrl.members) == len(raw["members"]) and ctrl.disc is not None
     obs = _obs(ctrl.members[0])
@@ -36,11 +37,12 @@ def test_the_shipped_ensemble_loads_as_before() -> None:
     np.testing.assert_allclose(ctrl.act(obs), mean, atol=1e-5)
 
 
-def test_new_files_hold_a_list_of_members_and_act_as_the_old_ones(tmp_path: Path) -> None:
-    old = load_controller(SHIPPED_POLICY)
+def test_new_files_hold_a_list_of_members_and_act_as_the_old_ones(
+        tmp_path: Path, ensemble_policy) -> None:  # fmt: skip
+    old = load_controller(ensemble_policy)
     obs = _obs(old.members[0])
     # a single policy exported before version 2 (the policy at the top level) still loads
-    payload, _ = member_payloads(SHIPPED_POLICY)[0]
+    payload, _ = member_payloads(ensemble_policy)[0]
     v1 = tmp_path / "v1.pt"
     torch.save({**payload, "format": FORMAT, "version": 1}, v1)
     single = load_controller(v1)
@@ -55,7 +57,7 @@ def test_new_files_hold_a_list_of_members_and_act_as_the_old_ones(tmp_path: Path
     np.testing.assert_allclose(PolicyRunner.load(one).act(obs), single.act(obs), atol=1e-6)
     # the ensemble rewritten as stored acts as the old file does, member for member
     ens = tmp_path / "ens.pt"
-    assert combine([SHIPPED_POLICY], ens, precision="fp32")[1] == len(old.members)
+    assert combine([ensemble_policy], ens, precision="fp32")[1] == len(old.members)
     members, names = read_policy_file(ens)
     assert len(members) == len(names) == len(old.members)
     assert "disc" in members[0] and all("disc" not in m for m in members[1:])
@@ -67,10 +69,10 @@ def test_new_files_hold_a_list_of_members_and_act_as_the_old_ones(tmp_path: Path
     np.testing.assert_allclose(new.fall_probability(amp), old.fall_probability(amp), atol=1e-6)
 
 
-def test_mirror_averaging_is_an_option_of_loading() -> None:
-    ens = load_controller(SHIPPED_POLICY)
+def test_mirror_averaging_is_an_option_of_loading(ensemble_policy) -> None:
+    ens = load_controller(ensemble_policy)
     sites = ("L_Wrist", "R_Wrist", "L_Foot", "R_Foot")
-    mir = load_controller(SHIPPED_POLICY, mirror=(sites, True))
+    mir = load_controller(ensemble_policy, mirror=(sites, True))
     assert isinstance(mir, MirrorAveragedPolicy) and isinstance(mir, Controller)
     assert mir.info["mirror_averaged"] and mir.env_cfg == ens.env_cfg
     obs = _obs(ens.members[0])
@@ -78,7 +80,7 @@ def test_mirror_averaging_is_an_option_of_loading() -> None:
     np.testing.assert_allclose(mir.act(obs), want, atol=1e-6)
 
 
-def test_refusals_name_the_file(tmp_path: Path) -> None:
+def test_refusals_name_the_file(tmp_path: Path, ensemble_policy) -> None:
     junk = tmp_path / "junk.pt"
     torch.save({"format": "something-else"}, junk)
     with pytest.raises(ValueError, match=r"junk\.pt: not a GRIP policy file"):
@@ -87,8 +89,9 @@ def test_refusals_name_the_file(tmp_path: Path) -> None:
     torch.save({"format": FORMAT, "version": 2, "members": [], "names": "[]"}, empty)
     with pytest.raises(ValueError, match=r"empty\.pt: policy file without its list"):
         load_controller(empty)
-    with pytest.raises(ValueError, match="an ensemble of 5 policies"):
-        PolicyRunner.load(SHIPPED_POLICY)
+    n = len(read_policy_file(ensemble_policy)[0])
+    with pytest.raises(ValueError, match=f"an ensemble of {n} policies"):
+        PolicyRunner.load(ensemble_policy)
     with pytest.raises(ValueError, match="no policy file given"):
         load_controller([])
     with pytest.raises(ValueError, match="how='median'"):

@@ -122,10 +122,15 @@ def test_the_table_names_real_settings_and_ignores_new_ones() -> None:
 
 def test_observation_check_needs_the_sensor_part() -> None:
     m = _member()
+    env = PolicyRunner.load(SHIPPED).env_cfg
     widths = {k: int(v.numel()) for k, v in m["obs_mean"].items()}
-    check_observations(m["obs_keys"], widths, sum(widths.values()), TrackingEnvConfig(), "ok")
-    with pytest.raises(ValueError, match=r"x: the actor takes 10 inputs.*1275"):
-        check_observations(m["obs_keys"], widths, 10, TrackingEnvConfig(), "x")
+    total = sum(widths.values())
+    check_observations(m["obs_keys"], widths, total, env, "ok")
+    with pytest.raises(ValueError, match=rf"x: the actor takes 10 inputs.*{total}"):
+        check_observations(m["obs_keys"], widths, 10, env, "x")
+    with pytest.raises(ValueError, match="kinematic_obs"):  # (another variant's width)
+        check_observations(m["obs_keys"], widths, total,
+                           dataclasses.replace(env, kinematic_obs="OA"), "y")  # fmt: skip
 
 
 def test_reconstruct_refuses_a_policy_with_absurd_physics_cleanly(tmp_path, capsys) -> None:

@@ -276,6 +276,7 @@ def test_the_shipped_policy_file_loads():
     from policies.runner import read_policy_file
 
     members, _ = read_policy_file(SHIPPED_POLICY)
-    for m in members:  # stored with ppo.fixed_std = false and ppo.target_kl = 0 (removed since)
+    for m in members:  # (the shipped controller reads the gap to the followed pelvis: the pace
+        # keeper's lead reaches it, docs/pace.md)
         cfg = policy_config_from_dict(json.loads(m["config"]), "member", training=True)
-        assert cfg.env.kinematic_obs == "OAV_Jrel"
+        assert cfg.env.kinematic_obs == "OAV_Jrel_root"
