@@ -256,7 +256,7 @@ class GripPipeline:
             settings and sensor features must match the estimator's).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         recovery: Fall detection and recovery settings.
-        pace: The pace keeper of every player (:class:`grip.player.PaceKeeper`; off by default).
+        pace: The pace keeper of every player (:class:`grip.player.PaceKeeper`).
     """
 
     def __init__(self, runner, estimator, recovery: RecoveryConfig = RecoveryConfig(),

@@ -214,6 +214,8 @@ class Player:
         humanoid: The subject's humanoid in its scene.
         recovery: Fall detection and recovery settings.
         stop_at_fall: End at the first fall that is not recovered (evaluation).
+        pace: The pace keeper (:class:`PaceKeeper`): where the controller is shown the pelvis
+            it follows.
 
     After :meth:`start`, :attr:`obs` is the observation the next action is computed from,
     :attr:`t` the frame the simulation is at, :attr:`last` the last frame in the output,

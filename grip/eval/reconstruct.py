@@ -24,7 +24,7 @@ class GripReconstructor:
             an ensemble; its env settings and sensor features must match the estimator's).
         estimator: A :class:`grip.kinematics.inference.KinematicsEstimator`.
         recovery: Fall detection and recovery settings.
-        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: off).
+        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: its defaults, gain 1).
     """
 
     def __init__(self, runner, estimator, recovery: RecoveryConfig | None = None,

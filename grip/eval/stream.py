@@ -130,7 +130,7 @@ class GripStream:
         capacity: Frames allocated at first (the buffers double when a stream runs longer).
         max_gap_frames: Longest run of missing frames filled by interpolation (longer ones are
             gaps, see the module docstring).
-        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: off).
+        pace: The pace keeper (:class:`grip.player.PaceKeeper`; default: its defaults, gain 1).
         limits: Bound the stream's length (``max_frames``, ``max_duration_s``): a frame whose
             index or timestamp lies beyond is refused (default
             :func:`grip.core.limits.active_limits`).
