@@ -34,9 +34,12 @@ _DISC = ("disc", "amp_frame_dim")
 
 
 def _driving_settings(cfg: TrackingEnvConfig) -> TrackingEnvConfig:
-    """The settings that decide how a policy's actions move the humanoid (reward and reference
-    file blanked: inference builds its own reference and never computes a reward)."""
-    return dataclasses.replace(cfg, reward=TrackingEnvConfig().reward, reference="")
+    """The settings that decide how a policy's actions move the humanoid (reward, reference
+    file and the root-speed augmentation blanked: inference builds its own reference, never
+    computes a reward and follows the root as it is)."""
+    d = TrackingEnvConfig()
+    return dataclasses.replace(cfg, reward=d.reward, reference="",
+                               root_speed_range=d.root_speed_range)  # fmt: skip
 
 
 def check_same_driving(policies: Sequence, names: Sequence[str]) -> None:

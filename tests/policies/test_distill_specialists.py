@@ -78,6 +78,12 @@ def test_specialists_are_checked(tmp_path: Path) -> None:
     write_policy_file([other], ["other"], tmp_path / "other.pt")
     with pytest.raises(ValueError, match="action_repeat"):
         _distiller(tmp_path, [Specialist(("run",), str(tmp_path / "other.pt"))])
+    # ... but one trained with another root-speed augmentation drives the humanoid alike
+    config = json.loads(members[0]["config"])
+    config["env"]["root_speed_range"] = [0.8, 1.2]
+    write_policy_file([{**members[0], "config": json.dumps(config)}], ["aug"],
+                      tmp_path / "aug.pt")  # fmt: skip
+    _distiller(tmp_path, [Specialist(("run",), str(tmp_path / "aug.pt"))], "aug")
     # a resumed run keeps its specialists
     still = _still_policy(tmp_path / "still.pt")
     dist = _distiller(tmp_path, [Specialist(("run",), str(still))], "resumed")
