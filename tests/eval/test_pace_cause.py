@@ -127,3 +127,28 @@ def test_paired_speed_ratio_pairs_the_walks_kept_in_both_runs() -> None:
     assert got["walks"] == 2
     assert got["median"] == pytest.approx(1.15) and got["mean"] == pytest.approx(1.15)
     assert pp.paired_speed_ratio(a, run({"w3": None}))["walks"] == 0
+
+
+def test_first_second_figures_of_an_estimate() -> None:
+    """``benchmarks/estimate_first_second.py``: the truth against itself gives ratios of 1 and
+    no error (NaN where the truth stands still: this walk's first second); a root carried 10 %
+    faster and feet that move 20 % faster show as such."""
+    from types import SimpleNamespace
+
+    from grip.kinematics.reference import oracle_reference_clip
+    from prism_tools.synthetic import make_recording
+
+    fs = _benchmark("estimate_first_second")
+    truth = oracle_reference_clip(make_recording(300, seed=5))
+    same = fs.window_ratios(truth, truth)
+    assert same["joint_err_first_m"] == same["joint_err_rest_m"] == 0.0
+    assert np.isnan(same["root_speed_ratio_first"])  # (it stands in its first second)
+    assert same["root_speed_ratio_rest"] == pytest.approx(1.0)
+    root = truth.est_root_pos.copy()
+    root[:, :2] = root[0, :2] + 1.1 * (root[:, :2] - root[0, :2])
+    pos = truth.est_pos.copy()
+    pos[:, list(fs.FEET)] = 1.2 * pos[:, list(fs.FEET)]
+    other = fs.window_ratios(SimpleNamespace(fps=truth.fps, est_root_pos=root, est_pos=pos), truth)
+    assert other["root_speed_ratio_rest"] == pytest.approx(1.1, rel=1e-6)
+    assert other["feet_speed_ratio_rest"] == pytest.approx(1.2, rel=1e-6)
+    assert other["joint_err_rest_m"] > 0.0
