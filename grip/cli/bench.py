@@ -102,7 +102,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
-    from grip.cli.recordings import exit_status, skip_file, split_paths
+    from grip.cli.recordings import exit_status, pace_keeper, skip_file, split_paths
     from grip.eval.bench import write_outputs
     from grip.eval.methods import MethodOptions, parse_method_names, sensor_set
     from grip.eval.report import method_table
@@ -110,6 +110,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from grip.eval.segments import BenchError, list_segments, select_segments
 
     limits_from_args(args)
+    pace_keeper(args)  # (a bad --pace-gain or --pace-lead-max refused by name)
     ray_args(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")

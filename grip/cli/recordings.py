@@ -236,7 +236,8 @@ def pace_keeper(args: argparse.Namespace):
     try:
         return PaceKeeper(gain=args.pace_gain, lead_max_m=args.pace_lead_max)
     except ValueError as e:
-        raise CliError(f"pace keeper: {e}") from e
+        raise CliError(f"--pace-gain {args.pace_gain:g} --pace-lead-max {args.pace_lead_max:g}: "
+                       f"{e}") from e
 
 
 def reversed_training_recordings(data: Path, files: Sequence[Path | str],

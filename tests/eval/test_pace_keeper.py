@@ -121,3 +121,16 @@ def test_policy_eval_takes_the_pace_keeper(walk_takes, root_policy, tmp_path) ->
     assert got["pace_keeper"]["gain"] == 2.0
     assert main([*base, "--pace-gain", "-1"]) == 2
 
+
+
+def test_bench_and_reconstruct_refuse_a_bad_keeper_by_name(walk_takes, tmp_path, capsys) -> None:
+    from grip.assets import SAMPLE_RECORDING
+    from grip.cli.main import main
+
+    assert main(["bench", "--data", str(walk_takes), "--methods", "grip", "--out",
+                 str(tmp_path / "b"), "--pace-gain", "-1"]) == 2  # fmt: skip
+    assert "--pace-gain -1" in capsys.readouterr().err
+    assert main(["reconstruct", str(SAMPLE_RECORDING), "--out", str(tmp_path / "r"),
+                 "--pace-lead-max", "0"]) == 2  # fmt: skip
+    assert "lead_max_m must be > 0" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists() or not any((tmp_path / "r").iterdir())
