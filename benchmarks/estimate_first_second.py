@@ -31,6 +31,7 @@ def window_ratios(est, truth, first_s: float = 1.0) -> dict[str, float]:
     feet_e = speed(est.est_pos[:, FEET, :2]).mean(-1)
     feet_t = speed(truth.est_pos[:, FEET, :2]).mean(-1)
     root_e, root_t = speed(est.est_root_pos[:, :2]), speed(truth.est_root_pos[:, :2])
+
     def ratio(a: np.ndarray, b: np.ndarray) -> float:  # (NaN where the truth stands still)
         return float(a.mean() / b.mean()) if b.mean() > 1e-6 else float("nan")
 

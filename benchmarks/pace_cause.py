@@ -158,7 +158,7 @@ def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
     of each recording (default: the setup's); ``root_scale`` carries the followed estimate that
     many times as fast (:func:`root_speed_scaled`); ``pace`` the players' pace keeper
-    (:class:`grip.player.PaceKeeper`; None: off)."""
+    (:class:`grip.player.PaceKeeper`; None: its defaults, on; ``PaceKeeper(gain=0)``: off)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth

@@ -84,9 +84,9 @@ class PaceKeeper:
     the controller is shown (``OAV_Jrel_root``'s gap, the root of ``OAV_Jglo``) leads the
     estimate's by ``gain`` times the humanoid's horizontal gap to it, at most ``lead_max_m``, so
     that a humanoid falling behind is asked to hurry and one that keeps pace sees the estimate
-    as it is. The physics, the PD targets and the
-    reconstruction's reference are untouched. Only controllers that read the followed pelvis'
-    position (``env.kinematic_obs`` ``OAV_Jrel_root`` and ``OAV_Jglo``) see it.
+    as it is. The physics, the PD targets and the reconstruction's reference are untouched.
+    Only controllers that read the followed pelvis' position (``env.kinematic_obs``
+    ``OAV_Jrel_root`` and ``OAV_Jglo``) see it.
 
     Attributes:
         gain: k, the lead per metre of gap (0: off). The default, 1, was chosen on the

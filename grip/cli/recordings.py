@@ -224,7 +224,6 @@ def add_pace_arguments(parser) -> None:
                         help=f"pace keeper: the longest lead, m (default {d.lead_max_m:g})")
 
 
-
 def pace_keeper(args: argparse.Namespace):
     """The :class:`grip.player.PaceKeeper` of :func:`add_pace_arguments`' options.
 
