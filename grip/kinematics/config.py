@@ -61,6 +61,10 @@ class TrainConfig:
             (:func:`grip.kinematics.dataset.source_weights`): 0 draws frames uniformly (in the
             whole shared corpus Bandai Namco dataset-2's locomotion is 76 % of them), 0.5 gives
             each source a share in proportion to the square root of its frames, 1 the same share.
+        category_balance: The same for the motion categories
+            (:func:`grip.kinematics.dataset.training_weights`): 0 draws frames uniformly
+            (walking and running are most of them), 0.5 gives each category a share in
+            proportion to the square root of its frames; multiplies with ``source_balance``.
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
             AVX512-BF16 the LSTMs run several times faster
@@ -91,12 +95,15 @@ class TrainConfig:
     bf16: bool = False
     standing_init: float = 0.25
     source_balance: float = 0.0
+    category_balance: float = 0.0
 
     def __post_init__(self) -> None:
         check(
             self,
             (0.0 <= self.source_balance <= 1.0,
              f"train.source_balance must be in [0, 1], got {self.source_balance}"),
+            (0.0 <= self.category_balance <= 1.0,
+             f"train.category_balance must be in [0, 1], got {self.category_balance}"),
             (0.0 <= self.standing_init <= 1.0,
              f"train.standing_init must be in [0, 1], got {self.standing_init}"),
             (self.val_source in VAL_SOURCES, f"train.val_source must be one of "
@@ -146,7 +153,6 @@ REMOVED_IN = "42da3e6"
 
 REMOVED_SETTINGS: tuple[RemovedSetting, ...] = (
     RemovedSetting("train.time_warp", 0.0, "time-warp augmentation", REMOVED_IN),
-    RemovedSetting("train.category_balance", 0.0, "category-balanced sampling", REMOVED_IN),
     RemovedSetting("train.reverse_categories", (), "time-reversed training clips", REMOVED_IN),
     RemovedSetting("train.speed_augment", 0.0, "speed augmentation", "b92f8c9"),
 )

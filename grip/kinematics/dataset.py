@@ -266,6 +266,24 @@ def source_weights(seqs: Sequence[SequenceArrays], sources: Mapping[str, str],
     return w / w.sum()
 
 
+def training_weights(seqs: Sequence[SequenceArrays], sources: Mapping[str, str],
+                     source_balance: float, category_balance: float) -> np.ndarray:
+    """Sampling weight of each training sequence with both balances: its length times its
+    source's total frames to the power ``-source_balance`` times its category's total frames
+    to the power ``-category_balance`` (:func:`source_weights` for each, the categories read
+    from ``SequenceArrays.category``). Both 0: frames drawn uniformly.
+
+    Returns:
+        ``(len(seqs),)`` weights summing to 1.
+    """
+    w = source_weights(seqs, sources, source_balance)
+    if category_balance > 0:
+        by_cat = source_weights(seqs, {s.name: s.category for s in seqs}, category_balance)
+        lengths = np.array([len(s.x) for s in seqs], dtype=np.float64)
+        w = w * by_cat / lengths
+    return w / w.sum()
+
+
 def sequence_sources(seqs: Sequence[SequenceArrays], groups: Mapping[str, str]) -> dict[str, str]:
     """Sequence name -> source (:func:`prism_tools.chunking.clip_source` of its clip, with
     ``groups`` from :func:`dataset_groups`)."""

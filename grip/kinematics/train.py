@@ -34,7 +34,7 @@ from grip.kinematics.dataset import (
     Normalizer,
     SequenceArrays,
     sample_windows,
-    source_weights,
+    training_weights,
 )
 from grip.kinematics.model import KinematicsNet
 from grip.nn.symmetry import mirror_batch, mirror_site_order, rotate_batch, yaw_matrices
@@ -158,7 +158,8 @@ class Trainer:
         else:
             self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.norm = Normalizer.fit(train_seqs)
-        self.weights = source_weights(train_seqs, sources or {}, cfg.train.source_balance)
+        self.weights = training_weights(train_seqs, sources or {}, cfg.train.source_balance,
+                                        cfg.train.category_balance)  # fmt: skip
         self.rng = np.random.default_rng(cfg.train.seed)
         self.epoch = 0
         self.best_val = float("inf")

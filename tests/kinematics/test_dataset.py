@@ -91,7 +91,7 @@ def test_holdout_split_keeps_each_group_on_one_side(tmp_path):
 def test_source_weights_share_sources_by_balance_and_draws_follow_them():
     from types import SimpleNamespace
 
-    from grip.kinematics.dataset import sequence_sources, source_weights
+    from grip.kinematics.dataset import sequence_sources, source_weights, training_weights
 
     # Source "big" has 900 frames in three sequences, "small" 100 in one.
     seqs = [SimpleNamespace(name=f"big__c{i}_v0_seq000", x=np.zeros((300, 1))) for i in range(3)]
@@ -109,6 +109,16 @@ def test_source_weights_share_sources_by_balance_and_draws_follow_them():
     assert named == {"big__c0_v0_seq000": "hdm05"}
     with pytest.raises(ValueError, match="balance"):
         source_weights(seqs, sources, 1.5)
+    # Categories multiply in: "rare" has 100 of the 1,000 frames, all in the "big" source.
+    for q, cat in zip(seqs, ("walk", "walk", "rare", "walk"), strict=True):
+        q.category = cat
+    np.testing.assert_allclose(training_weights(seqs, sources, 0.0, 0.0), w0)
+    np.testing.assert_allclose(training_weights(seqs, sources, 1.0, 0.0), w1)
+    wc = training_weights(seqs, sources, 0.0, 1.0)  # walk 700 frames, rare 300: equal shares
+    np.testing.assert_allclose([wc[0] + wc[1] + wc[3], wc[2]], [0.5, 0.5])
+    both = training_weights(seqs, sources, 1.0, 1.0)  # len * src^-1 * cat^-1, normalised
+    raw = np.array([300 / 900 / 700, 300 / 900 / 700, 300 / 900 / 300, 100 / 100 / 700])
+    np.testing.assert_allclose(both, raw / raw.sum())
     # The sampler draws with those weights.
     real = [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (80, 80)]
     x, _ = sample_windows(real, 200, 20, np.random.default_rng(0), np.array([0.0, 1.0]))

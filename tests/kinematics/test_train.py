@@ -253,7 +253,7 @@ def test_stored_configs_with_removed_settings():
     )
 
     d = asdict(KinematicsRunConfig())
-    off = {**d, "train": {**d["train"], "time_warp": 0.0, "category_balance": 0.0,
+    off = {**d, "train": {**d["train"], "time_warp": 0.0,
                           "reverse_categories": []}}  # fmt: skip
     assert run_config_from_dict(off) == KinematicsRunConfig()
     on = {**d, "train": {**d["train"], "time_warp": 0.2}}
