@@ -78,7 +78,8 @@ def _paths(files: PathLike | Sequence[PathLike]) -> list[Path]:
 
 def load_controller(files: PathLike | Sequence[PathLike],
                     mirror: tuple[Sequence[str], bool] | None = None) -> Controller:  # fmt: skip
-    """The controller of one or several policy files: the policy of a one-member file, else the
+    """The controller of one or several policy files: the policy of a one-member file, the
+    gate over its members of a gated file (:class:`policies.gate.GatedController`), else the
     mean action of every member of every file (:class:`policies.ensemble.PolicyEnsemble`).
 
     Args:
@@ -95,9 +96,13 @@ def load_controller(files: PathLike | Sequence[PathLike],
             humanoid alike.
     """
     from policies.ensemble import PolicyEnsemble
-    from policies.runner import PolicyRunner, read_policy_file
+    from policies.runner import PolicyRunner, read_policy_file, read_policy_gate
 
     paths = _paths(files)
+    gated = [p for p in paths if read_policy_gate(p) is not None]
+    if gated and len(paths) > 1:
+        raise ValueError(f"{gated[0]}: a gated policy file drives alone (no ensemble with "
+                         "other files)")  # fmt: skip
     runners: list[PolicyRunner] = []
     names: list[str] = []
     for p in paths:
@@ -111,7 +116,15 @@ def load_controller(files: PathLike | Sequence[PathLike],
                     for m, lab in zip(members, labels, strict=True)]  # fmt: skip
         names += labels if len(paths) == 1 else [f"{p} [{i}]" for i in range(len(members))]
     ctrl: Controller
-    if len(runners) == 1:
+    if gated:
+        from policies.gate import GatedController, gate_from_payload
+
+        gate = gate_from_payload(read_policy_gate(paths[0]), str(paths[0]))
+        try:
+            ctrl = GatedController(runners, names, gate)
+        except ValueError as e:
+            raise ValueError(f"{paths[0]}: {e}") from e
+    elif len(runners) == 1:
         ctrl = runners[0]
     else:
         try:

@@ -387,14 +387,24 @@ def read_policy_file(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
     return members, names
 
 
-def write_policy_file(members: list[dict], names: list[str], out: str | os.PathLike) -> int:
+def read_policy_gate(path: str | os.PathLike) -> dict | None:
+    """The gate stored beside a policy file's members (:mod:`policies.gate`), or None."""
+    ck = load_weights(Path(path), "policy file")
+    return ck.get("gate") if isinstance(ck, dict) else None
+
+
+def write_policy_file(members: list[dict], names: list[str], out: str | os.PathLike,
+                      gate: dict | None = None) -> int:  # fmt: skip
     """Write ``members`` (policy payloads, as :func:`read_policy_file` returns them) and their
-    ``names`` as one policy file, atomically; returns its size in bytes."""
+    ``names`` as one policy file, atomically, with ``gate`` (:func:`policies.gate.gate_payload`)
+    beside them if given; returns its size in bytes."""
     if not members or len(names) != len(members):
         raise ValueError(f"{out}: a policy file needs one name per member, at least one member")
     kept = [{k: v for k, v in m.items() if k not in ("format", "version")} for m in members]
     payload = {"format": FORMAT, "version": VERSION, "members": kept,
                "names": json.dumps(list(names))}  # fmt: skip
+    if gate is not None:
+        payload["gate"] = gate
     buf = io.BytesIO()
     torch.save(payload, buf)
     atomic_write(out, lambda f: f.write(buf.getvalue()))

@@ -294,13 +294,15 @@ def _train_one(data: Path, out: Path, cfg, init: Path | None = None) -> int:
     try:
         sources = sequence_sources(train, groups)
         trainer = Trainer(cfg, train, val, out, sources=sources)
-        for what, key in (("source", lambda q: sources[q.name]), ("category", lambda q: q.category)):
+        for what, of in (("source", {q.name: sources[q.name] for q in train}),
+                         ("category", {q.name: q.category for q in train})):  # fmt: skip
             share: dict[str, float] = {}
             for seq, w in zip(train, trainer.weights, strict=True):
-                share[key(seq)] = share.get(key(seq), 0.0) + float(w)
+                share[of[seq.name]] = share.get(of[seq.name], 0.0) + float(w)
             if len(share) > 1:
-                print(f"training windows by {what}: " + ", ".join(
-                    f"{k} {100 * v:.1f} %" for k, v in sorted(share.items(), key=lambda kv: -kv[1])))
+                ranked = sorted(share.items(), key=lambda kv: -kv[1])
+                print(f"training windows by {what}: "
+                      + ", ".join(f"{k} {100 * v:.1f} %" for k, v in ranked))  # fmt: skip
         info = {"data": str(data.resolve()), "train_frames": n_frames}
         if init is not None:
             trainer.init_from(init)

@@ -245,9 +245,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          "them")  # fmt: skip
     c.set_defaults(func=cmd_combine)
 
-    from grip.cli import distill
+    from grip.cli import distill, gate
 
     distill.add_parser(psub)
+    gate.add_parser(psub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
