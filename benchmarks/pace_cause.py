@@ -153,12 +153,35 @@ def fold_chooser(kin_folds: list[str], data: str):
     return fold_model_chooser(ests, dataset_groups(data), kin_folds)
 
 
+def warm_clip(estimator, read, seg, seconds: float):
+    """``(clip, w)``: the estimate of segment ``seg`` made by KinematicsNet started from the
+    ground truth ``w = min(seconds x fps, seg.start)`` frames before the segment (the frames
+    before it in its file, as a recording's estimator has run before any moment of it) and cut
+    to the segment: its LSTMs settled at the segment's first frame, its root integrated from the
+    truth's there as a cold start's is. ``w = 0``: the cold start itself."""
+    import dataclasses
+
+    from grip.eval.policy import _estimates
+
+    rec = read(seg)
+    w = min(round(seconds * float(rec.fps)), int(seg.start))
+    if w == 0:
+        return _estimates(estimator, [rec], 1, "estimate", "truth")[0], 0
+    ext = read._rec.slice_frames(seg.start - w, seg.stop)  # (the file SegmentReader holds)
+    clip = _estimates(estimator, [ext], 1, "estimate", "truth")[0]
+    cut = {k: getattr(clip, k)[w:] for k in ("gt_qpos", "est_pos", "est_rot6d", "est_vel",
+                                             "sensor")}  # fmt: skip
+    return dataclasses.replace(clip, name=rec.name, **cut), w
+
+
 def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
-         pace=None) -> list[dict]:  # fmt: skip
+         pace=None, warm_s: float = 0.0) -> list[dict]:  # fmt: skip
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
     of each recording (default: the setup's); ``root_scale`` carries the followed estimate that
     many times as fast (:func:`root_speed_scaled`); ``pace`` the players' pace keeper
-    (:class:`grip.player.PaceKeeper`; None: its defaults, on; ``PaceKeeper(gain=0)``: off)."""
+    (:class:`grip.player.PaceKeeper`; None: its defaults, on; ``PaceKeeper(gain=0)``: off);
+    ``warm_s`` > 0 warms the estimator up on the seconds before each segment
+    (:func:`warm_clip`; ``reference="estimate"`` only)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
@@ -169,11 +192,14 @@ def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
     read = SegmentReader()
     for seg in segments:
         rec = read(seg)
+        warmed = 0
         estimator = default if choose is None else choose(rec)
         if reference.startswith("estimate-"):
             est = hybrid_clip(_estimates(estimator, [rec], 1, "estimate", "truth")[0],
                               _estimates(estimator, [rec], 1, "truth", "truth")[0],
                               reference.split("-", 1)[1])  # fmt: skip
+        elif reference == "estimate" and warm_s > 0:
+            est, warmed = warm_clip(estimator, read, seg, warm_s)
         else:
             est = _estimates(estimator, [rec], 1, reference, "truth")[0]
         if root_scale != 1.0:
@@ -198,7 +224,8 @@ def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
                "ref_speed_mps": _path_speed(ref_xy, fps), "sim_speed_mps": _path_speed(sim_xy, fps),
                "gt_speed_mps": _path_speed(gt.root_pos[:, :2], fps),
                "leg_saturated": float((legs > 0.9).mean()) if legs.size else float("nan"),
-               "leg_abs_action": float(legs.mean()) if legs.size else float("nan")}  # fmt: skip
+               "leg_abs_action": float(legs.mean()) if legs.size else float("nan"),
+               "warm_frames": warmed}  # fmt: skip
         row["speed_ratio"] = row["sim_speed_mps"] / max(row["ref_speed_mps"], 1e-9)
         for name, sec in (("1s", 1.0), ("5s", 5.0 - 1.0 / fps), ("end", None)):
             t = n - 1 if sec is None else round(sec * fps)
@@ -277,6 +304,14 @@ def main(argv: list[str] | None = None) -> None:
                     "shown leads the estimate's by K x the humanoid's gap to it (0: off)")
     ap.add_argument("--pace-lead-max", type=float, default=PaceKeeper().lead_max_m, metavar="M",
                     help="the pace keeper's longest lead, m")
+    ap.add_argument("--shift", type=float, default=0.0, metavar="S",
+                    help="play every segment S seconds later in its file (those whose file is "
+                    "too short are dropped): walks under way instead of from their start")
+    ap.add_argument("--warm-up", type=float, default=0.0, metavar="S",
+                    help="start KinematicsNet from the truth S seconds before each segment, on "
+                    "the frames before it in its file (as many as there are), instead of at its "
+                    "first frame: does the estimator's cold start cost the pace? (reference "
+                    "'estimate' only; each row's warm_frames says how many it got)")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
     for name in ("policy", "kin"):
@@ -296,10 +331,11 @@ def main(argv: list[str] | None = None) -> None:
                  "split": args.split, "root_speed_scale": args.root_speed_scale,
                  "pace_gain": args.pace_gain, "pace_lead_max_m": args.pace_lead_max,
                  "speed_factor": args.speed_factor, "segments": len(segs),
+                 "warm_up_s": args.warm_up, "shift_s": args.shift,
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
         rows = play(setup, segs, ref, choose, args.root_speed_scale,
-                    PaceKeeper(args.pace_gain, args.pace_lead_max))  # fmt: skip
+                    PaceKeeper(args.pace_gain, args.pace_lead_max), args.warm_up)  # fmt: skip
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {
             "rows": rows,
@@ -340,9 +376,29 @@ def split_segments(args) -> tuple[list, object]:
         files = _speed_scaled(args.data, files, args.categories.split(","), args.speed_factor,
                               Path(tmp.name))  # fmt: skip
     segs = list_segments(files, args.segment_frames, args.categories.split(","))
+    if args.shift > 0:
+        segs = shifted_segments(segs, args.shift)
     if 0 < args.segments < len(segs):
         segs = [segs[i] for i in np.linspace(0, len(segs) - 1, args.segments).round().astype(int)]
     return segs, tmp
+
+
+def shifted_segments(segs: list, seconds: float) -> list:
+    """Each segment ``seconds`` later in its file, as long as before (``_shift`` appended to its
+    id); a segment whose file ends before that is dropped. Starts later than a clip's first
+    second leave out the start of the walk (a walker who sets off from standing)."""
+    import dataclasses
+
+    from grip.eval.segments import SegmentReader
+
+    read, out = SegmentReader(), []
+    for seg in segs:
+        rec = read(seg)
+        shift = round(seconds * float(rec.fps))
+        if seg.stop + shift <= read._rec.n_frames:
+            out.append(dataclasses.replace(seg, id=f"{seg.id}_shift", start=seg.start + shift,
+                                           stop=seg.stop + shift))  # fmt: skip
+    return out
 
 
 def _speed_scaled(data: str, files: list[Path], categories: list[str], factor: float,

@@ -152,3 +152,35 @@ def test_first_second_figures_of_an_estimate() -> None:
     assert other["root_speed_ratio_rest"] == pytest.approx(1.1, rel=1e-6)
     assert other["feet_speed_ratio_rest"] == pytest.approx(1.2, rel=1e-6)
     assert other["joint_err_rest_m"] > 0.0
+
+
+def test_warm_clip_settles_the_estimator_before_the_segment(tmp_path) -> None:
+    """``--warm-up``: the estimate of a segment starts the KinematicsNet on the frames before
+    it (as many as its file has), then is cut to the segment, its truth and root start those
+    of the segment; a segment at its file's start has no frames before it (a cold start)."""
+    from grip.assets import SHIPPED_KIN
+    from grip.eval.policy import _estimates
+    from grip.eval.segments import Segment, SegmentReader
+    from grip.kinematics.features import ground_truth
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.io import save_recording
+    from prism_tools.synthetic import make_recording
+
+    pc = _benchmark("pace_cause")
+    path = tmp_path / "walk.npz"
+    save_recording(make_recording(260, seed=4), path)
+    est = KinematicsEstimator.from_checkpoint(SHIPPED_KIN)
+    read = SegmentReader()
+    seg = Segment("walk_f000060", path, 60, 260, "walk")
+    warm, w = pc.warm_clip(est, read, seg, 0.5)
+    assert w == 50  # 0.5 s at 100 Hz, all of it before the segment
+    cold = _estimates(est, [read(seg)], 1, "estimate", "truth")[0]
+    np.testing.assert_allclose(warm.gt_qpos, cold.gt_qpos)
+    np.testing.assert_allclose(warm.est_root_pos[0], ground_truth(read(seg)).root_pos[0],
+                               atol=1e-9)  # fmt: skip
+    assert warm.n_frames == 200 and not np.allclose(warm.est_pos[:5], cold.est_pos[:5])
+    assert pc.warm_clip(est, read, seg, 2.0)[1] == 60  # (only 60 frames before it)
+    assert pc.warm_clip(est, read, Segment("walk_f000000", path, 0, 200, "walk"), 1.0)[1] == 0
+    # --shift: later in the file, or dropped where the file ends before
+    shifted = pc.shifted_segments([Segment("walk_f000000", path, 0, 200, "walk"), seg], 0.5)
+    assert [(s.id, s.start, s.stop) for s in shifted] == [("walk_f000000_shift", 50, 250)]
