@@ -65,6 +65,10 @@ class TrainConfig:
             (:func:`grip.kinematics.dataset.training_weights`): 0 draws frames uniformly
             (walking and running are most of them), 0.5 gives each category a share in
             proportion to the square root of its frames; multiplies with ``source_balance``.
+        first_frame_share: Share of the training windows that start at their sequence's
+            first frame (a clip's first sequence: the mover setting off, as the walks of the
+            test split by person start) instead of anywhere in it
+            (:func:`grip.kinematics.dataset.sample_windows`).
         bf16: Run the network's forward (and so its backward) pass under bfloat16 autocast
             (weights, losses and the optimiser stay float32). On a CPU with AMX or
             AVX512-BF16 the LSTMs run several times faster
@@ -96,6 +100,7 @@ class TrainConfig:
     standing_init: float = 0.25
     source_balance: float = 0.0
     category_balance: float = 0.0
+    first_frame_share: float = 0.0
 
     def __post_init__(self) -> None:
         check(
@@ -104,6 +109,8 @@ class TrainConfig:
              f"train.source_balance must be in [0, 1], got {self.source_balance}"),
             (0.0 <= self.category_balance <= 1.0,
              f"train.category_balance must be in [0, 1], got {self.category_balance}"),
+            (0.0 <= self.first_frame_share <= 1.0,
+             f"train.first_frame_share must be in [0, 1], got {self.first_frame_share}"),
             (0.0 <= self.standing_init <= 1.0,
              f"train.standing_init must be in [0, 1], got {self.standing_init}"),
             (self.val_source in VAL_SOURCES, f"train.val_source must be one of "

@@ -294,11 +294,13 @@ def sequence_sources(seqs: Sequence[SequenceArrays], groups: Mapping[str, str]) 
 
 def sample_windows(
     seqs: list[SequenceArrays], n: int, length: int, rng: np.random.Generator,
-    weights: np.ndarray | None = None,
+    weights: np.ndarray | None = None, first_share: float = 0.0,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``n`` random windows of ``length`` frames (shorter sequences are padded by repeating
     their last frame; a window never crosses sequences), drawn with probabilities ``weights``
-    (``(len(seqs),)`` summing to 1; default: in proportion to sequence length).
+    (``(len(seqs),)`` summing to 1; default: in proportion to sequence length). A share
+    ``first_share`` of the windows starts at its sequence's first frame (a clip's first
+    sequence: the mover setting off), the others anywhere.
 
     Returns:
         ``x (n, length, F)`` and ``{key: (n, length, dim)}`` for every target key of the
@@ -315,6 +317,8 @@ def sample_windows(
         s = seqs[i]
         t = len(s.x)
         start = int(rng.integers(0, max(t - length, 0) + 1))
+        if first_share > 0 and rng.random() < first_share:
+            start = 0
         idx = np.minimum(np.arange(start, start + length), t - 1)
         xs.append(s.x[idx])
         for k in keys:

@@ -305,7 +305,7 @@ class Trainer:
         for group in self.opt.param_groups:
             group["lr"] = lr
         x, y = sample_windows(self.train_seqs, tc.batch_size, tc.window_frames, self.rng,
-                              self.weights)  # fmt: skip
+                              self.weights, tc.first_frame_share)  # fmt: skip
         tick(time.perf_counter())
         xt, yt = self._tensors(x, y, augment=True)
         tick(time.perf_counter())

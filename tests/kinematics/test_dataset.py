@@ -119,6 +119,16 @@ def test_source_weights_share_sources_by_balance_and_draws_follow_them():
     both = training_weights(seqs, sources, 1.0, 1.0)  # len * src^-1 * cat^-1, normalised
     raw = np.array([300 / 900 / 700, 300 / 900 / 700, 300 / 900 / 300, 100 / 100 / 700])
     np.testing.assert_allclose(both, raw / raw.sum())
+    # A share of the windows starts at its sequence's first frame; 0 draws as before.
+    real3 = [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (90, 120)]
+    a, _ = sample_windows(real3, 50, 30, np.random.default_rng(5))
+    b, _ = sample_windows(real3, 50, 30, np.random.default_rng(5), first_share=0.0)
+    np.testing.assert_array_equal(a, b)
+    firsts, _ = sample_windows(real3, 50, 30, np.random.default_rng(5), first_share=1.0)
+    assert all(any(np.array_equal(w, q.x[:30]) for q in real3) for w in firsts)
+    half, _ = sample_windows(real3, 400, 30, np.random.default_rng(6), first_share=0.5)
+    share = np.mean([any(np.array_equal(w, q.x[:30]) for q in real3) for w in half])
+    assert 0.4 < share < 0.65  # (a random start is the first frame now and then too)
     # The sampler draws with those weights.
     real = [sequence_arrays(make_recording(n, seed=n), FeatureConfig()) for n in (80, 80)]
     x, _ = sample_windows(real, 200, 20, np.random.default_rng(0), np.array([0.0, 1.0]))
