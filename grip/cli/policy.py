@@ -228,11 +228,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "             sits between the swings; the last member's normaliser, discriminator\n"
             "             and settings are kept (policies/average.py)\n"
             "  --member K only member K (0 = the first, in the order given): its actor as\n"
-            "             stored, its normaliser, its file's discriminator, no value network"
+            "             stored, its normaliser, its file's discriminator, no value network\n"
+            "  --gate C   a gate over the files (policies/gate.py): every frame one of them\n"
+            "             drives, the one a small classifier of the frame's sensor features\n"
+            "             (the KinematicsNet's inputs: IMUs and insoles) picks: the second file\n"
+            "             for the categories of the first --gate, the third for the second's,\n"
+            "             ...; the first file for every other motion. The classifier learns\n"
+            "             from the train split of --data (its recordings and their categories;\n"
+            "             no simulation, about a minute) and the routes it takes are printed per\n"
+            "             category for the train and the test split"
         ),
         epilog="example: grip policy combine runs/a/policy.pt runs/b/policy.pt --out runs/ab.pt\n"
         "         grip policy combine runs/a.pt runs/b.pt --average --out runs/avg.pt\n"
-        "         grip policy combine grip/assets/policy_default.pt --member 0 --out e.pt",
+        "         grip policy combine grip/assets/policy_default.pt --member 0 --out e.pt\n"
+        "         grip policy combine walk.pt sit.pt --gate sit-stand,stairs --data data/mine "
+        "--out gated.pt",
     )
     c.add_argument("policies", nargs="+", type=Path, help="policy files")
     how = c.add_mutually_exclusive_group()
@@ -240,15 +250,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="the weight average of all members instead of their ensemble")
     how.add_argument("--member", type=int, default=None, metavar="K",
                      help="write only member K of all those of the files")  # fmt: skip
+    how.add_argument("--gate", action="append", default=None, metavar="CATEGORY[,CATEGORY...]",
+                     help="the category globs of the next file's motions (repeat it once per "
+                     "file after the first): a gate over the files")  # fmt: skip
+    from grip.cli import gate
+
+    gate.add_arguments(c)
     add_output_arguments(c, None, "actor and discriminator weights: an ensemble stores int8 "
                          "with a scale per row by default, the others as the files store "
                          "them")  # fmt: skip
     c.set_defaults(func=cmd_combine)
 
-    from grip.cli import distill, gate
+    from grip.cli import distill
 
     distill.add_parser(psub)
-    gate.add_parser(psub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -454,6 +469,15 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_combine(args: argparse.Namespace) -> int:
     from grip.cli.common import write_artifact
     from policies.controller import combine
+
+    if args.gate:
+        from grip.cli.gate import cmd_gate
+
+        return cmd_gate(args)
+    if args.data is not None or args.kin is not None or args.gate_steps != 3000:
+        from grip.cli.errors import CliError
+
+        raise CliError("--data, --kin and --gate-steps belong to --gate")
 
     def write() -> tuple[int, str]:
         size, n = combine(args.policies, args.out, "average" if args.average else "ensemble",

@@ -1,4 +1,4 @@
-"""A gate over frozen controllers (policies/gate.py, ``grip policy gate``)."""
+"""A gate over frozen controllers (policies/gate.py, ``grip policy combine --gate``)."""
 
 from __future__ import annotations
 
@@ -144,30 +144,22 @@ def test_grip_policy_gate_command(tmp_path, capsys):
     save_split({"format": "grip-prism-split", "version": 1, "train": ["w0", "w1", "s0"],
                 "test": ["t0"], "split_by": "clip"}, data / "split.json")  # fmt: skip
     out = tmp_path / "gated.pt"
-    argv = [
-        "policy",
-        "gate",
-        "--default",
-        str(a),
-        "--specialist",
-        f"sit-stand={b}",
-        "--data",
-        str(data),
-        "--out",
-        str(out),
-        "--steps",
-        "20",
-        "--hidden",
-        "8",
-    ]
+    argv = ["policy", "combine", str(a), str(b), "--gate", "sit-stand", "--data", str(data),
+            "--out", str(out), "--gate-steps", "20"]  # fmt: skip
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "routes on the train split" in text and "routes on the test split" in text
-    assert "| sit-stand | 150 | sit-stand |" in text
+    assert "| sit-stand | 150 | sit-stand |" in text and "2 controllers and their gate" in text
     assert isinstance(load_controller(out), GatedController)
-    assert main([*argv[:4], "--specialist", "sit-stand", *argv[6:]]) != 0  # no policy named
-    assert "CATEGORY" in capsys.readouterr().err
+    assert main(["policy", "combine", str(a), str(b), "--gate", "sit-stand", "--out",
+                 str(out)]) != 0  # fmt: skip
+    assert "--gate needs --data" in capsys.readouterr().err
+    assert main(["policy", "combine", str(a), str(b), "--data", str(data), "--out",
+                 str(out)]) != 0  # fmt: skip
+    assert "belong to --gate" in capsys.readouterr().err
+    assert main([*argv[:6], "--gate", "jump", *argv[6:]]) != 0  # one --gate too many
+    assert "need 1 --gate" in capsys.readouterr().err
     # A family without training frames is refused, naming the folder.
-    assert main([*argv[:4], "--specialist", f"dance={b}", *argv[6:]]) != 0
+    assert main([*argv[:5], "dance", *argv[6:]]) != 0
     assert "no training frames" in capsys.readouterr().err
     assert json.loads((data / "split.json").read_text())["train"]  # (the data are untouched)
