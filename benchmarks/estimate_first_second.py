@@ -2,7 +2,9 @@
 the rest (issue 46: the humanoid loses its pace to the estimate in the first second,
 docs/pace.md): per walk, the root-relative joint error, the feet's root-relative horizontal
 speed over the truth's and the integrated root's speed over the truth's, over frames 0-1 s and
-1 s-end; medians printed and written with the rows to --json.
+1 s-end, and the walker's own speed over 0-0.3 s, 0.3-1 s and after (``setting_off``: the first
+0.3 s below 70 % of the speed after 1 s); medians (and the share setting off) printed and
+written with the rows to --json.
 
     python benchmarks/estimate_first_second.py --data DATA [--kin CKPT] --json F
 """
@@ -35,7 +37,12 @@ def window_ratios(est, truth, first_s: float = 1.0) -> dict[str, float]:
     def ratio(a: np.ndarray, b: np.ndarray) -> float:  # (NaN where the truth stands still)
         return float(a.mean() / b.mean()) if b.mean() > 1e-6 else float("nan")
 
-    out = {}
+    k3 = round(0.3 * fps)
+    out = {"truth_speed_0_0.3s_mps": float(root_t[:k3].mean()),
+           "truth_speed_0.3_1s_mps": float(root_t[k3:k].mean()),
+           "truth_speed_after_1s_mps": float(root_t[k:].mean())}  # fmt: skip
+    out["setting_off"] = float(out["truth_speed_0_0.3s_mps"]
+                               < 0.7 * out["truth_speed_after_1s_mps"])  # fmt: skip
     for name, sl in (("first", slice(0, k)), ("rest", slice(k, None))):
         out[f"joint_err_{name}_m"] = float(err[sl].mean())
         out[f"feet_speed_ratio_{name}"] = ratio(feet_e[sl], feet_t[sl])
@@ -69,7 +76,9 @@ def main(argv: list[str] | None = None) -> None:
         rec = read(seg)
         e, t = (_estimates(est, [rec], 1, ref, "truth")[0] for ref in ("estimate", "truth"))
         rows.append({"segment": seg.id, **window_ratios(e, t)})
-    med = {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0] if k != "segment"}
+    med = {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0]
+           if k not in ("segment", "setting_off")}  # fmt: skip
+    med["share_setting_off"] = float(np.mean([r["setting_off"] for r in rows]))
     print(json.dumps(med, indent=1))
     Path(args.json).write_text(json.dumps({"kin": args.kin, "walks": len(rows), "median": med,
                                            "rows": rows}, indent=1))  # fmt: skip

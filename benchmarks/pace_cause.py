@@ -167,7 +167,7 @@ def warm_clip(estimator, read, seg, seconds: float):
     w = min(round(seconds * float(rec.fps)), int(seg.start))
     if w == 0:
         return _estimates(estimator, [rec], 1, "estimate", "truth")[0], 0
-    ext = read._rec.slice_frames(seg.start - w, seg.stop)  # (the file SegmentReader holds)
+    ext = read.whole(seg).slice_frames(seg.start - w, seg.stop)
     clip = _estimates(estimator, [ext], 1, "estimate", "truth")[0]
     cut = {k: getattr(clip, k)[w:] for k in ("gt_qpos", "est_pos", "est_rot6d", "est_vel",
                                              "sensor")}  # fmt: skip
@@ -393,9 +393,9 @@ def shifted_segments(segs: list, seconds: float) -> list:
 
     read, out = SegmentReader(), []
     for seg in segs:
-        rec = read(seg)
+        rec = read.whole(seg)
         shift = round(seconds * float(rec.fps))
-        if seg.stop + shift <= read._rec.n_frames:
+        if seg.stop + shift <= rec.n_frames:
             out.append(dataclasses.replace(seg, id=f"{seg.id}_shift", start=seg.start + shift,
                                            stop=seg.stop + shift))  # fmt: skip
     return out

@@ -96,17 +96,17 @@ def load_controller(files: PathLike | Sequence[PathLike],
             humanoid alike.
     """
     from policies.ensemble import PolicyEnsemble
-    from policies.runner import PolicyRunner, read_policy_file, read_policy_gate
+    from policies.runner import PolicyRunner, read_policy_parts
 
     paths = _paths(files)
-    gated = [p for p in paths if read_policy_gate(p) is not None]
-    if gated and len(paths) > 1:
-        raise ValueError(f"{gated[0]}: a gated policy file drives alone (no ensemble with "
-                         "other files)")  # fmt: skip
     runners: list[PolicyRunner] = []
     names: list[str] = []
+    gate = None
     for p in paths:
-        members, stored = read_policy_file(p)
+        members, stored, gate = read_policy_parts(p)
+        if gate is not None and len(paths) > 1:
+            raise ValueError(f"{p}: a gated policy file drives alone (no ensemble with "
+                             "other files)")  # fmt: skip
         labels = [f"{p} (member {i}: {n})" for i, n in enumerate(stored)]
         if len(members) == 1:
             runners.append(PolicyRunner.from_payload(members[0], p))
@@ -116,14 +116,13 @@ def load_controller(files: PathLike | Sequence[PathLike],
                     for m, lab in zip(members, labels, strict=True)]  # fmt: skip
         names += labels if len(paths) == 1 else [f"{p} [{i}]" for i in range(len(members))]
     ctrl: Controller
-    if gated:
+    if gate is not None:
         from policies.gate import GatedController, gate_from_payload
 
-        gate = gate_from_payload(read_policy_gate(paths[0]), str(paths[0]))
         try:
-            ctrl = GatedController(runners, names, gate)
+            ctrl = GatedController(runners, names, gate_from_payload(gate, str(paths[0])))
         except ValueError as e:
-            raise ValueError(f"{paths[0]}: {e}") from e
+            raise ValueError(e if str(e).startswith(str(paths[0])) else f"{paths[0]}: {e}") from e
     elif len(runners) == 1:
         ctrl = runners[0]
     else:

@@ -32,6 +32,15 @@ GATE_KEY = "gate"
 GATE_FORMAT = "grip-gate"
 
 
+def route_of(families: Sequence[Sequence[str]], category: str) -> int:
+    """The route of ``category``: 1 + the index of the first family with a matching glob, 0 (the
+    default controller) when none matches."""
+    for i, globs in enumerate(families):
+        if any(fnmatch.fnmatch(category, g) for g in globs):
+            return i + 1
+    return 0
+
+
 def gate_network(in_dim: int, hidden: Sequence[int], routes: int) -> nn.Sequential:
     """The classifier: an MLP with ELU from the normalised features to one logit per route."""
     sizes = [in_dim, *[int(h) for h in hidden], routes]
@@ -65,11 +74,8 @@ class Gate:
         return int(self.mean.shape[0])
 
     def route_of(self, category: str) -> int:
-        """The route a clip of ``category`` is trained to take (0: the default)."""
-        for i, globs in enumerate(self.families):
-            if any(fnmatch.fnmatch(category, g) for g in globs):
-                return i + 1
-        return 0
+        """The route a clip of ``category`` is trained to take (:func:`route_of`)."""
+        return route_of(self.families, category)
 
     @torch.no_grad()
     def probabilities(self, sensor: np.ndarray) -> np.ndarray:
@@ -103,9 +109,8 @@ def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
     if len({f.shape[-1] for f in features}) != 1:
         raise ValueError("the recordings' sensor features differ in width")
     fams = [tuple(f) for f in families]
-    probe = Gate(nn.Sequential(), np.zeros(1), np.ones(1), fams, tuple(hidden))
     xs = [np.asarray(f, np.float64)[::stride] for f in features]
-    ys = [np.full(len(x), probe.route_of(c), np.int64) for x, c in zip(xs, categories, strict=True)]
+    ys = [np.full(len(x), route_of(fams, c), np.int64) for x, c in zip(xs, categories, strict=True)]
     x, y = np.concatenate(xs), np.concatenate(ys)
     routes = len(fams) + 1
     counts = np.bincount(y, minlength=routes)
@@ -240,11 +245,11 @@ def write_gated_policy(files: Sequence, gate: Gate, out, precision: str | None =
     ``gate``, each one policy) and ``gate`` as one gated policy file; returns its size in bytes.
 
     Raises:
-        ValueError: naming the file, when one is not a single policy, or they do not fit
-            together (:func:`policies.ensemble.ensemble_members`, :class:`GatedController`).
+        ValueError: naming the file, when one is not a single policy, or they do not drive the
+            humanoid alike (:func:`policies.ensemble.ensemble_members`).
     """
     from policies.ensemble import ensemble_members, member_payloads
-    from policies.runner import PolicyRunner, repack, write_policy_file
+    from policies.runner import repack, write_policy_file
 
     if len(files) != len(gate.families) + 1:
         raise ValueError(f"a gate of {len(gate.families) + 1} routes needs as many policies, "
@@ -257,9 +262,7 @@ def write_gated_policy(files: Sequence, gate: Gate, out, precision: str | None =
                              "policies (grip policy combine --member K takes one out)")  # fmt: skip
         payloads.append(got[0][0])
         names.append(str(f))
-    GatedController([PolicyRunner.from_payload(p, n) for p, n in zip(payloads, names, strict=True)],
-                    names, gate)  # refuses members that drive otherwise  # fmt: skip
-    kept = ensemble_members(payloads, names)
+    kept = ensemble_members(payloads, names)  # (refuses members that drive otherwise)
     if precision is not None:
         kept = [repack(m, precision) for m in kept]
     return write_policy_file(kept, names, out, gate=gate_payload(gate))

@@ -367,11 +367,18 @@ def read_policy_file(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
         ValueError: naming the file, when it is no policy file or its list of members is
             missing or unreadable.
     """
+    members, names, _ = read_policy_parts(path)
+    return members, names
+
+
+def read_policy_parts(path: str | os.PathLike) -> tuple[list[dict], list[str], dict | None]:
+    """:func:`read_policy_file`'s members and names, and the gate stored beside them
+    (:mod:`policies.gate`; None: the file has none), from one read of the file."""
     path = Path(path)
     ck = load_weights(path, "policy file")
     fmt = ck.get("format") if isinstance(ck, dict) else None
     if fmt == FORMAT and "members" not in ck:
-        return [ck], [str(path)]
+        return [ck], [str(path)], None
     if fmt not in (FORMAT, LEGACY_ENSEMBLE_FORMAT):
         raise ValueError(f"{path}: not a GRIP policy file (format {FORMAT!r} expected)")
     members = ck.get("members")
@@ -384,13 +391,7 @@ def read_policy_file(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
         raise ValueError(f"{path}: policy file with unreadable member names ({e})") from e
     if len(names) != len(members):
         names = [f"member {i}" for i in range(len(members))]
-    return members, names
-
-
-def read_policy_gate(path: str | os.PathLike) -> dict | None:
-    """The gate stored beside a policy file's members (:mod:`policies.gate`), or None."""
-    ck = load_weights(Path(path), "policy file")
-    return ck.get("gate") if isinstance(ck, dict) else None
+    return members, names, ck.get("gate")
 
 
 def write_policy_file(members: list[dict], names: list[str], out: str | os.PathLike,

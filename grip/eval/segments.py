@@ -158,8 +158,12 @@ class SegmentReader:
 
     def __call__(self, seg: Segment):
         """The recording of ``seg``: its file's frames ``[start, stop)``."""
+        return self.whole(seg).slice_frames(seg.start, seg.stop)
+
+    def whole(self, seg: Segment):
+        """The whole recording of ``seg``'s file (the frames around the segment too)."""
         from prism_tools.io import load_recording
 
         if self._path != seg.path:
             self._rec, self._path = load_recording(seg.path), seg.path
-        return self._rec.slice_frames(seg.start, seg.stop)
+        return self._rec

@@ -152,6 +152,15 @@ def test_first_second_figures_of_an_estimate() -> None:
     assert other["root_speed_ratio_rest"] == pytest.approx(1.1, rel=1e-6)
     assert other["feet_speed_ratio_rest"] == pytest.approx(1.2, rel=1e-6)
     assert other["joint_err_rest_m"] > 0.0
+    # The walker's own speed: this one sets off from standing; one at 1.2 m/s throughout does not.
+    assert same["setting_off"] == 1.0 and same["truth_speed_0_0.3s_mps"] < 0.05
+    steady_root = np.zeros((300, 3))
+    steady_root[:, 0] = 1.2 * np.arange(300) / truth.fps
+    steady = SimpleNamespace(fps=truth.fps, est_root_pos=steady_root, est_pos=truth.est_pos)
+    w = fs.window_ratios(steady, steady)
+    assert w["setting_off"] == 0.0
+    for k in ("truth_speed_0_0.3s_mps", "truth_speed_0.3_1s_mps", "truth_speed_after_1s_mps"):
+        assert w[k] == pytest.approx(1.2, rel=1e-6)
 
 
 def test_warm_clip_settles_the_estimator_before_the_segment(tmp_path) -> None:

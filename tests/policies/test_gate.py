@@ -103,7 +103,7 @@ def test_gated_file_refuses_what_does_not_fit(tmp_path, ensemble_policy):
         gate_payload,
         write_gated_policy,
     )
-    from policies.runner import read_policy_gate
+    from policies.runner import read_policy_parts
 
     a, b = _two_policies(tmp_path)
     width = 70
@@ -121,9 +121,9 @@ def test_gated_file_refuses_what_does_not_fit(tmp_path, ensemble_policy):
     # One member taken out of a gated file is an ordinary policy file.
     out = tmp_path / "g.pt"
     write_gated_policy([a, b], gate, out)
-    assert read_policy_gate(out) is not None
+    assert read_policy_parts(out)[2] is not None
     combine(out, tmp_path / "m1.pt", member=1)
-    assert read_policy_gate(tmp_path / "m1.pt") is None
+    assert read_policy_parts(tmp_path / "m1.pt")[2] is None
 
 
 def test_grip_policy_gate_command(tmp_path, capsys):
