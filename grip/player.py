@@ -13,7 +13,9 @@ frames, the joints at the FA estimate of frame t (velocities: the estimated pelv
 joints at rest), the body lowered or lifted onto the ground, and the simulation resumes. Output
 frames t - N .. t are replaced by the buffered kinematic estimate on the same integrated root;
 their forces and torques are NaN and their contacts False. Each event is reported as
-``[t - N, t]`` in :attr:`grip.core.reconstruction.Reconstruction.falls`.
+``[t - N, t]`` in :attr:`grip.core.reconstruction.Reconstruction.falls`. A humanoid that stays up
+but loses the pelvis it follows by more than ``lost_gap_m`` (off by default) is recovered the
+same way (:class:`RecoveryConfig`).
 
 Blow-ups: the frame of a blown-up state never enters the output; it is recovered like a fall
 (history buffer included) and the recording goes on to its last frame. With recovery off a
@@ -61,6 +63,11 @@ class RecoveryConfig:
             the start, the pelvis the controller follows), so a fall does not inherit the
             distance lost before it: on the 90 test segments of the split by person GRIP's
             MPJPE fell from 1,020 to 775 mm with the shipped policy (docs/pace.md, "Recovery").
+        lost_gap_m: A humanoid whose pelvis is horizontally farther than this from the pelvis
+            it follows is lost and recovered like a fall (an event in ``falls``, counted in the
+            reconstruction's ``notes["lost"]``); 0: off, only falls are recovered. A controller
+            trained with episodes that end at a pelvis gap (``stage2.termination_root_gap_m``:
+            0.5 m for the shipped one) has never acted beyond it (docs/pace.md, "Lost").
     """
 
     enabled: bool = True
@@ -68,10 +75,12 @@ class RecoveryConfig:
     fall_height_m: float = 0.30
     fall_probability: float = 0.7
     restart: str = "estimate"
+    lost_gap_m: float = 0.0
 
     def __post_init__(self) -> None:
         check(self, (self.history_frames >= 1, "history_frames must be >= 1"),
-              (self.restart in RESTARTS, f"restart must be one of {RESTARTS}"))  # fmt: skip
+              (self.restart in RESTARTS, f"restart must be one of {RESTARTS}"),
+              (self.lost_gap_m >= 0.0, "lost_gap_m must be >= 0 (0 = off)"))  # fmt: skip
 
 
 RESTARTS: tuple[str, ...] = ("simulated", "estimate")
@@ -242,6 +251,7 @@ class Player:
         self.done = False
         self.falls: list[tuple[int, int]] = []
         self.blowup_frames: list[int] = []
+        self.lost_frames: list[int] = []
 
     # ------------------------------------------------------------------ episode
     def start(self, est, start: StartState, name: str, fps: float,
@@ -262,7 +272,7 @@ class Player:
         self._down = False  # (recovery off) the humanoid is down: one fall until it is up
         self.t = self.last = self.warmup = 0
         self.done = False
-        self.falls, self.blowup_frames = [], []
+        self.falls, self.blowup_frames, self.lost_frames = [], [], []
         self._action: np.ndarray | None = None
         self._held = 0  # frames the current action has been played (env_cfg.action_repeat)
         self._obs = self._observe(*h.state())
@@ -363,8 +373,12 @@ class Player:
         low = height < rec.fall_height_m
         fell = low and (self.runner.disc is None or self.runner.fall_probability(
             None if self._amp is None else self._amp.vector())[0] < rec.fall_probability)
+        lost = not fell and rec.enabled and rec.lost_gap_m > 0.0 and self.gap(t, pvw) > \
+            rec.lost_gap_m  # fmt: skip
         end = False
-        if fell and rec.enabled:
+        if lost:
+            self.lost_frames.append(t)
+        if (fell or lost) and rec.enabled:
             s = max(self._floor, t - rec.history_frames, 0)
             self._recover(s, t)
             self.falls.append((s, t))
@@ -379,6 +393,13 @@ class Player:
         end = end or t >= self.est.n_frames - 1 or height < 0.0
         self.done = end
         return end
+
+    def gap(self, t: int, pvw: np.ndarray) -> float:
+        """Horizontal distance, m, of the simulated pelvis (``pvw[0, 0]``) at frame ``t`` from
+        the pelvis the controller follows there (the estimate's, re-anchored by recoveries;
+        without the pace keeper's lead)."""
+        d = pvw[0, 0, :2] - (self.est.est_root_pos[t, :2] + self._root_offset[:2])
+        return float(np.hypot(d[0], d[1]))
 
     def resume(self, t: int) -> None:
         """Put the humanoid at the kinematic estimate of frame ``t`` (its root: where the last
@@ -465,5 +486,6 @@ class Player:
             falls=np.minimum(np.array(self.falls, dtype=np.int64).reshape(-1, 2), last),
             ms_per_frame=ms_per_frame,
             notes={"blowups": self.blowups, "blowup_frames": list(self.blowup_frames),
-                   "recovery": self.recovery.enabled, "warmup_frames": int(self.warmup)},
+                   "lost": len(self.lost_frames), "recovery": self.recovery.enabled,
+                   "warmup_frames": int(self.warmup)},
         )  # fmt: skip

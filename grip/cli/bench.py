@@ -102,7 +102,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     from grip.cli.cluster import ray_args, ray_pool
     from grip.cli.errors import CliError
-    from grip.cli.recordings import exit_status, pace_keeper, skip_file, split_paths
+    from grip.cli.recordings import exit_status, lost_gap, pace_keeper, skip_file, split_paths
     from grip.eval.bench import write_outputs
     from grip.eval.methods import MethodOptions, parse_method_names, sensor_set
     from grip.eval.report import method_table
@@ -111,6 +111,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     limits_from_args(args)
     pace_keeper(args)  # (a bad --pace-gain or --pace-lead-max refused by name)
+    lost_gap(args)
     ray_args(args)
     if args.workers < 1:
         raise CliError(f"--workers must be >= 1, got {args.workers}")
@@ -141,6 +142,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                                 policy_checkpoint=args.policy,
                                 transpose_checkpoint=args.transpose, pip_checkpoint=args.pip,
                                 init=args.init, restart=args.restart,
+                                lost_gap_m=args.lost_gap,
                                 pace_gain=args.pace_gain,
                                 pace_lead_max_m=args.pace_lead_max)  # fmt: skip
         runs, built = prepare_runs(names, options, sensors)

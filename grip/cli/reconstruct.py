@@ -292,7 +292,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     from grip.cli.cluster import command_pool, ray_args
     from grip.cli.errors import CliError
-    from grip.cli.recordings import kin_checkpoint, limits_from_args, pace_keeper
+    from grip.cli.recordings import kin_checkpoint, limits_from_args, lost_gap, pace_keeper
     from grip.core.atomic import atomic_write_text
     from grip.core.digests import file_sha256
     from grip.core.runs import (
@@ -320,7 +320,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise CliError("--fill-gaps must be >= 0")
     policy, kin = policy_checkpoint(args.policy), kin_checkpoint(args.kin)
     recovery = RecoveryConfig(enabled=not args.no_recovery, history_frames=args.history,
-                              restart=args.restart)  # fmt: skip
+                              restart=args.restart, lost_gap_m=lost_gap(args))  # fmt: skip
     settings = {"max_frames": args.max_frames, "recovery": recovery.enabled,
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
                 "policy_sha256": file_sha256(policy), "kin_sha256": file_sha256(kin)}  # fmt: skip
@@ -328,6 +328,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         settings["init"] = args.init
     if recovery.enabled and args.restart != "simulated":  # (absent before --restart: GRIP's)
         settings["restart"] = args.restart
+    if recovery.enabled and args.lost_gap > 0:  # (absent when off: the runs before it)
+        settings["lost_gap_m"] = args.lost_gap
     pace = pace_keeper(args)
     if pace.gain > 0.0:  # (absent when off: the runs before the pace keeper)
         settings["pace"] = dataclasses.asdict(pace)

@@ -206,6 +206,25 @@ def add_restart_argument(parser) -> None:
         "world error on the split by person (default "
         f"{RecoveryConfig().restart!r}; docs/pace.md)",
     )  # fmt: skip
+    parser.add_argument(
+        "--lost-gap", type=float, default=RecoveryConfig().lost_gap_m, metavar="M",
+        help="recover the humanoid like a fall when its pelvis is farther than M metres "
+        "(horizontally) from the pelvis it follows, though it stands (counted as a fall; "
+        f"0: off, only falls; default {RecoveryConfig().lost_gap_m:g}; docs/pace.md, 'Lost')",
+    )  # fmt: skip
+
+
+def lost_gap(args: argparse.Namespace) -> float:
+    """``--lost-gap`` (:func:`add_restart_argument`), m.
+
+    Raises:
+        CliError: A negative gap.
+    """
+    from grip.cli.errors import CliError
+
+    if not args.lost_gap >= 0.0:
+        raise CliError(f"--lost-gap must be >= 0 (0: off), got {args.lost_gap:g}")
+    return float(args.lost_gap)
 
 
 def add_pace_arguments(parser) -> None:

@@ -40,7 +40,9 @@ root_gt_end_m     m      the same at the last frame
 
 ``results.json`` also counts ``blowups``: simulation blow-ups over the segments (a method's
 ``Reconstruction.notes["blowups"]``; GRIP recovers each like a fall, so its frames are never
-in the metrics; 0 for methods without a simulation); each segment's row carries its own. Its
+in the metrics; 0 for methods without a simulation); each segment's row carries its own; and
+``lost``: GRIP's recoveries of a humanoid that stood but had lost the pelvis it follows
+(``--lost-gap``; each also a fall in the success rate). Its
 ``init`` says where the method started (``"truth"`` or ``"standing"``), and its
 ``pace_by_category`` the pace keys per motion category (``{category: {key: mean, "segments":
 n}}``).
@@ -146,10 +148,10 @@ def write_outputs(
     seg_rows = [{**{k: r[k] for k in ("method", "segment", "category", "start", "stop",
                                       "status")},
                  "frames": r.get("frames"), "falls": r.get("falls"),
-                 "blowups": r.get("blowups"), "error": r.get("error"),
+                 "blowups": r.get("blowups"), "lost": r.get("lost"), "error": r.get("error"),
                  **jsonable(r["metrics"])} for r in rows]  # fmt: skip
     seg_keys = ["method", "segment", "category", "start", "stop", "status", "frames", "falls",
-                "blowups", *METRIC_KEYS, "error"]  # fmt: skip
+                "blowups", "lost", *METRIC_KEYS, "error"]  # fmt: skip
     atomic_write_text(out_dir / "segments.csv", csv_text(seg_rows, seg_keys))
     n_frames = sorted({s.n_frames for s in segments})
     parts = [f"# {title}" if title else "# Benchmark",
@@ -170,6 +172,11 @@ def write_outputs(
     if blown:
         parts[5:5] = ["Simulation blow-ups (each recovered like a fall, its frames replaced): "
                       + ", ".join(f"{k} {v}" for k, v in blown.items()), ""]  # fmt: skip
+    lost = {label: s["lost"] for label, s in summary.items() if s.get("lost")}
+    if lost:
+        parts[5:5] = ["Lost (recovered standing, farther than --lost-gap from the pelvis "
+                      "followed; each a fall in Succ.): "
+                      + ", ".join(f"{k} {v}" for k, v in lost.items()), ""]  # fmt: skip
     if any(r.options.sensors for r in runs):
         parts += ["", "## Sensor configurations (GRIP Table 3 layout)", "",
                   _sweep_table(summary, [r for r in runs if r.options.sensors])]  # fmt: skip

@@ -87,6 +87,8 @@ class MethodOptions:
             calibration (``"standing"``, no ground-truth pose read).
         restart: Where GRIP's humanoid restarts after a fall
             (:attr:`grip.player.RecoveryConfig.restart`).
+        lost_gap_m: The pelvis gap at which GRIP's humanoid is lost and recovered like a fall
+            (:attr:`grip.player.RecoveryConfig.lost_gap_m`; 0: off).
         pace_gain, pace_lead_max_m: GRIP's pace keeper
             (:class:`grip.player.PaceKeeper`).
 
@@ -102,6 +104,7 @@ class MethodOptions:
     pip_checkpoint: Path | None = None
     init: str = "truth"
     restart: str = "estimate"
+    lost_gap_m: float = 0.0
     pace_gain: float = 1.0  # (grip.player.PaceKeeper's defaults: tests/eval/test_pace_keeper.py)
     pace_lead_max_m: float = 0.5
 
@@ -114,7 +117,14 @@ class MethodOptions:
 
         if self.restart not in RESTARTS:
             raise ValueError(f"restart must be one of {list(RESTARTS)}, got {self.restart!r}")
+        self.recovery()  # (refuses a bad lost gap)
         self.pace()  # (refuses a bad gain or lead)
+
+    def recovery(self):
+        """GRIP's :class:`grip.player.RecoveryConfig`."""
+        from grip.player import RecoveryConfig
+
+        return RecoveryConfig(restart=self.restart, lost_gap_m=self.lost_gap_m)
 
     def pace(self):
         """GRIP's :class:`grip.player.PaceKeeper`."""
@@ -287,10 +297,7 @@ def grip_method(options: MethodOptions) -> Grip:
     for what, p in (("policy", policy), ("KinematicsNet", kin)):
         if not p.is_file():
             raise ValueError(f"{p}: no such {what} checkpoint")
-    from grip.player import RecoveryConfig
-
-    recovery = RecoveryConfig(restart=options.restart)
-    return Grip(GripReconstructor.from_files(policy, kin, recovery, options.pace()),
+    return Grip(GripReconstructor.from_files(policy, kin, options.recovery(), options.pace()),
                 options.init)  # fmt: skip
 
 

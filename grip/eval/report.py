@@ -35,7 +35,7 @@ __all__ = [
     "weighted_means",
 ]
 
-RESULT_KEYS: tuple[str, ...] = (*METRIC_KEYS, "segments", "blowups")
+RESULT_KEYS: tuple[str, ...] = (*METRIC_KEYS, "segments", "blowups", "lost")
 """Keys of each method's entry in ``results.json`` (plus ``failed``: segments that raised)."""
 _TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("MPJPE_mm", "MPJPE (mm)", "{:.2f}"), ("PEL_MPJPE_mm", "PEL-MPJPE (mm)", "{:.2f}"),
@@ -144,6 +144,7 @@ def aggregate(rows: Sequence[dict], labels: Sequence[str]) -> dict[str, dict]:
         res: dict = {k: float(s.get(k, float("nan"))) for k in METRIC_KEYS}
         res["segments"] = len(ok)
         res["blowups"] = int(sum(r.get("blowups", 0) for r in ok))
+        res["lost"] = int(sum(r.get("lost") or 0 for r in ok))
         res["failed"] = len(mine) - len(ok)
         pj = M.summarize([r["per_joint"] for r in ok if r["per_joint"]]) if ok else {}
         res["per_joint"] = {k: np.asarray(v) for k, v in pj.items()}

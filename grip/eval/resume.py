@@ -75,6 +75,7 @@ def check_method(out_dir: Path, run: _Run, log: Callable[[str], object] = print)
             # (written before MethodOptions.init existed: those runs started from the truth)
             have["options"].setdefault("init", "truth")
             have["options"].setdefault("restart", "simulated")  # (GRIP's, before --restart)
+            have["options"].setdefault("lost_gap_m", 0.0)  # (only falls, before --lost-gap)
             have["options"].setdefault("pace_gain", 0.0)  # (no pace keeper before it existed)
             have["options"].setdefault("pace_lead_max_m", 0.5)
         if have != want:

@@ -225,7 +225,7 @@ def score_segment(method: Method, rec, label: str, seg: Segment,
     metrics["ms_per_frame"] = 1000.0 * wall_s / rec.n_frames
     row = {**base_row(label, seg), "status": "ok", "frames": recon.n_frames,
            "can_fall": bool(method.can_fall), "falls": int(recon.falls.shape[0]),
-           "blowups": int(recon.notes.get("blowups", 0)),
+           "blowups": int(recon.notes.get("blowups", 0)), "lost": int(recon.notes.get("lost", 0)),
            "metrics": metrics, "per_joint": per_joint,
            "method_ms_per_frame": float(recon.ms_per_frame), "notes": recon.notes}  # fmt: skip
     return row, recon

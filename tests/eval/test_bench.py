@@ -73,7 +73,8 @@ class Oracle:
     supports_sensors = False
 
     def __init__(self, shift=(0.0, 0.0, 0.0), fail_on=(), calls=None, can_fall=True,
-                 fall=False, grf_offset_n=0.0, blowups=0, lead_mps=None) -> None:  # fmt: skip
+                 fall=False, grf_offset_n=0.0, blowups=0, lead_mps=None,
+                 lost=0) -> None:  # fmt: skip
         self.shift = np.asarray(shift, dtype=float)
         self.fail_on = set(fail_on)
         self.calls = calls if calls is not None else []
@@ -81,6 +82,7 @@ class Oracle:
         self.fall = fall
         self.grf_offset_n = grf_offset_n
         self.blowups = blowups  # reported in the notes, as GRIP's simulation does
+        self.lost = lost
         # a pelvis it follows that walks away along x at this speed (None: it follows none)
         self.lead_mps = lead_mps
 
@@ -98,7 +100,8 @@ class Oracle:
             ref[:, 0] += self.lead_mps * np.arange(rec.n_frames) / rec.fps
         return Reconstruction(name=rec.name, method=self.name, fps=rec.fps,
                               joint_pos=gt.joint_pos + self.shift, global_rot=gt.global_rot,
-                              grf=grf, notes={"blowups": self.blowups}, ref_root_pos=ref,
+                              grf=grf, notes={"blowups": self.blowups, "lost": self.lost},
+                              ref_root_pos=ref,
                               **({"falls": falls} if self.fall else {}))  # fmt: skip
 
 
@@ -522,7 +525,7 @@ def test_shipped_baselines_start_at_the_true_first_frame(name) -> None:
 
 
 def test_blow_ups_are_counted_per_segment_and_in_the_results(segments, tmp_path) -> None:
-    oracle = Oracle(blowups=2)
+    oracle = Oracle(blowups=2, lost=3)
     runs = [_run("oracle", lambda o: oracle)]
     out = tmp_path / "bench"
     rows = R.run_bench(runs, segments, out, built={"oracle": oracle}, log=lambda s: None)
@@ -530,8 +533,11 @@ def test_blow_ups_are_counted_per_segment_and_in_the_results(segments, tmp_path)
     B.write_outputs(out, rows, runs, segments, "test", plots=False)
     results = json.loads((out / "results.json").read_text())
     assert results["oracle"]["blowups"] == 2 * len(segments)
-    assert "Simulation blow-ups" in (out / "table.md").read_text()
-    assert "blowups" in (out / "segments.csv").read_text().splitlines()[0]
+    assert results["oracle"]["lost"] == 3 * len(segments)
+    table = (out / "table.md").read_text()
+    assert "Simulation blow-ups" in table and f"oracle {3 * len(segments)}" in table
+    head = (out / "segments.csv").read_text().splitlines()[0].split(",")
+    assert "blowups" in head and "lost" in head
 
 
 class BatchOracle(Oracle):

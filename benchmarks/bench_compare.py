@@ -1,0 +1,111 @@
+"""Two ``grip bench`` folders of the same segments side by side, per motion category.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_compare.py BEFORE AFTER [--method grip] [--json PATH]
+
+For each category (and all segments): the method's MPJPE in BEFORE and AFTER, the
+kinematics-only MPJPE (BEFORE's ``kinematics`` rows, else AFTER's; n/a without either), the
+events (falls, with ``--lost-gap`` the lost recoveries among them), the segments without any
+event (the bench's success) and those without a fall proper (events that are not lost
+recoveries). Segments are matched by name; a segment missing or failed in either folder is left
+out and counted. Only the two ``segments.csv`` files are read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+
+def _rows(folder: Path, method: str) -> dict[str, dict]:
+    path = folder / "segments.csv"
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except OSError as e:
+        raise SystemExit(f"{path}: cannot read ({e}); give 'grip bench' output folders") from e
+    return {r["segment"]: r for r in rows if r.get("method") == method and r.get("status") == "ok"}
+
+
+def _num(row: dict | None, key: str) -> float:
+    try:
+        return float(row[key]) if row is not None and row.get(key) not in (None, "") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def _mean(xs: list[float]) -> float:
+    xs = [x for x in xs if not math.isnan(x)]
+    return sum(xs) / len(xs) if xs else math.nan
+
+
+def compare(before: Path, after: Path, method: str = "grip") -> dict:
+    """``{"categories": {category | "all": {...}}, "unmatched": n}`` (keys as the table's)."""
+    a, b = _rows(before, method), _rows(after, method)
+    kin = _rows(before, "kinematics") or _rows(after, "kinematics")
+    both = [s for s in a if s in b]
+    by_cat: dict[str, list[str]] = defaultdict(list)
+    for s in both:
+        by_cat[a[s]["category"]].append(s)
+        by_cat["all"].append(s)
+    out = {}
+    for cat, segs in sorted(by_cat.items(), key=lambda kv: (kv[0] == "all", kv[0])):
+        ev = lambda rows, s: int(_num(rows[s], "falls") or 0)  # noqa: E731
+        lost = lambda rows, s: int(_num(rows[s], "lost")) if not math.isnan(  # noqa: E731
+            _num(rows[s], "lost")) else 0  # fmt: skip
+        out[cat] = {
+            "segments": len(segs),
+            "mpjpe_before": _mean([_num(a[s], "MPJPE_mm") for s in segs]),
+            "mpjpe_after": _mean([_num(b[s], "MPJPE_mm") for s in segs]),
+            "mpjpe_kinematics": _mean([_num(kin.get(s), "MPJPE_mm") for s in segs]),
+            "events_before": sum(ev(a, s) for s in segs),
+            "events_after": sum(ev(b, s) for s in segs),
+            "lost_after": sum(lost(b, s) for s in segs),
+            "no_event_before": sum(ev(a, s) == 0 for s in segs),
+            "no_event_after": sum(ev(b, s) == 0 for s in segs),
+            "no_fall_before": sum(ev(a, s) - lost(a, s) == 0 for s in segs),
+            "no_fall_after": sum(ev(b, s) - lost(b, s) == 0 for s in segs),
+        }
+    return {"categories": out, "unmatched": len(set(a) ^ set(b))}
+
+
+def table(res: dict) -> str:
+    head = ("| category | segments | MPJPE before | MPJPE after | kinematics only | events "
+            "(lost) | no event | no fall |")  # fmt: skip
+    lines = [head, "|---|---:|---:|---:|---:|---|---|---|"]
+    f = lambda x: "n/a" if math.isnan(x) else f"{x:.0f}"  # noqa: E731
+    for cat, r in res["categories"].items():
+        lines.append(f"| {cat} | {r['segments']} | {f(r['mpjpe_before'])} | {f(r['mpjpe_after'])} "
+                     f"| {f(r['mpjpe_kinematics'])} | {r['events_before']} -> {r['events_after']}"
+                     f" ({r['lost_after']}) | {r['no_event_before']} -> {r['no_event_after']} | "
+                     f"{r['no_fall_before']} -> {r['no_fall_after']} |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("before", type=Path)
+    ap.add_argument("after", type=Path)
+    ap.add_argument("--method", default="grip", help="the bench label to compare (default grip)")
+    ap.add_argument("--json", type=Path, help="also write the numbers here")
+    args = ap.parse_args(argv)
+    res = compare(args.before, args.after, args.method)
+    if not res["categories"]:
+        print(f"no segment of method {args.method!r} in both folders", file=sys.stderr)
+        return 1
+    print(table(res))
+    if res["unmatched"]:
+        print(f"({res['unmatched']} segment(s) in only one folder left out)")
+    if args.json:
+        args.json.write_text(json.dumps(res, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""``benchmarks/bench_compare.py``: two bench folders per category, on hand-written
+``segments.csv`` files."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+HEAD = "method,segment,category,status,falls,lost,MPJPE_mm\n"
+
+
+@pytest.fixture(scope="module")
+def bc():
+    spec = importlib.util.spec_from_file_location("benchmarks_bench_compare",
+                                                  REPO / "benchmarks" / "bench_compare.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _write(folder: Path, rows: list[str]) -> Path:
+    folder.mkdir()
+    (folder / "segments.csv").write_text(HEAD + "".join(r + "\n" for r in rows))
+    return folder
+
+
+def test_categories_events_and_the_unmatched(bc, tmp_path, capsys) -> None:
+    before = _write(tmp_path / "a", [
+        "grip,s1,walk,ok,0,,400", "grip,s2,walk,ok,1,,600", "grip,s3,sit-stand,ok,2,,500",
+        "grip,s4,walk,ok,0,,1", "kinematics,s1,walk,ok,0,,300", "kinematics,s2,walk,ok,0,,350",
+        "kinematics,s3,sit-stand,ok,0,,450"])  # fmt: skip
+    after = _write(tmp_path / "b", [
+        "grip,s1,walk,ok,1,1,320", "grip,s2,walk,ok,1,0,500", "grip,s3,sit-stand,ok,3,2,420",
+        "grip,s5,walk,ok,0,0,1"])  # fmt: skip
+    res = bc.compare(before, after)
+    walk, sit, all_ = (res["categories"][k] for k in ("walk", "sit-stand", "all"))
+    assert res["unmatched"] == 2 and list(res["categories"])[-1] == "all"
+    assert walk["segments"] == 2 and walk["mpjpe_before"] == 500 and walk["mpjpe_after"] == 410
+    assert walk["mpjpe_kinematics"] == 325
+    assert (walk["no_event_before"], walk["no_event_after"]) == (1, 0)
+    assert (walk["no_fall_before"], walk["no_fall_after"]) == (1, 1)  # s1's event: lost
+    assert (sit["events_before"], sit["events_after"], sit["lost_after"]) == (2, 3, 2)
+    assert all_["segments"] == 3 and all_["lost_after"] == 3
+    out = tmp_path / "c.json"
+    assert bc.main([str(before), str(after), "--json", str(out)]) == 0
+    line = "| walk | 2 | 500 | 410 | 325 | 1 -> 2 (1) | 1 -> 0 | 1 -> 1 |"
+    assert line in capsys.readouterr().out
+    assert json.loads(out.read_text())["categories"]["all"]["segments"] == 3
+    assert bc.main([str(before), str(after), "--method", "pip"]) == 1
+    with pytest.raises(SystemExit, match="cannot read"):
+        bc.main([str(before), str(tmp_path / "missing")])
