@@ -253,7 +253,8 @@ def _work(job: tuple) -> list[dict]:
                      "formats": formats,
                      "frames": recon.n_frames,
                      "falls": recon.falls.tolist(), "ms_per_frame": recon.ms_per_frame,
-                     "blowups": recon.notes.get("blowups", 0), "written": [str(dst), *written],
+                     "blowups": recon.notes.get("blowups", 0), "lost": recon.notes.get("lost", 0),
+                     "written": [str(dst), *written],
                      "failed": failed,
                      "filled_gaps": rec.extras.get("filled_gaps", [])})  # fmt: skip
     return rows
@@ -383,7 +384,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                 "history_frames": recovery.history_frames, "fill_gaps": args.fill_gaps,
                 "max_frames": args.max_frames, "settings": settings,
                 "falls": sum(len(r["falls"]) for r in rows),
-                "blowups": sum(int(r.get("blowups", 0)) for r in rows)}  # fmt: skip
+                "blowups": sum(int(r.get("blowups", 0)) for r in rows),
+                "lost": sum(int(r.get("lost", 0)) for r in rows)}  # fmt: skip
         failed = dict(sorted(errors.items(),
                              key=lambda kv: rank.get(str(Path(kv[0]).resolve()), -1)))  # fmt: skip
         atomic_write_text(summary_path, json.dumps({**meta, "recordings": rows,
@@ -433,10 +435,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     rows = [done[str(f)] for f in inputs if str(f) in done]
     falls = sum(len(r["falls"]) for r in rows)
     blowups = sum(int(r.get("blowups", 0)) for r in rows)
+    lost = sum(int(r.get("lost", 0)) for r in rows)
     frames = sum(r["frames"] for r in rows)
     print(f"wrote {len(rows)} reconstruction(s) to {args.out}: {frames} frames, {falls} fall "
-          f"event(s){' recovered' if recovery.enabled else ''}, {blowups} blow-up(s) recovered; "
-          f"summary {summary_path}")  # fmt: skip
+          f"event(s){' recovered' if recovery.enabled else ''}"
+          f"{f' ({lost} of them lost, not fallen)' if lost else ''}, {blowups} blow-up(s) "
+          f"recovered; summary {summary_path}")  # fmt: skip
     failed = [(r["name"], fmt, msg) for r in rows for fmt, msg in r.get("failed", {}).items()]
     for name, fmt, msg in failed:
         print(f"grip: error: {fmt} of {name}: {msg}", file=sys.stderr)
