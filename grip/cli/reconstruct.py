@@ -329,7 +329,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         settings["init"] = args.init
     if recovery.enabled and args.restart != "simulated":  # (absent before --restart: GRIP's)
         settings["restart"] = args.restart
-    if recovery.enabled and args.lost_gap > 0:  # (absent when off: the runs before it)
+    if recovery.enabled and args.lost_gap > 0:  # (absent when off, as in the runs before it)
         settings["lost_gap_m"] = args.lost_gap
     pace = pace_keeper(args)
     if pace.gain > 0.0:  # (absent when off: the runs before the pace keeper)

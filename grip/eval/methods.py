@@ -104,7 +104,7 @@ class MethodOptions:
     pip_checkpoint: Path | None = None
     init: str = "truth"
     restart: str = "estimate"
-    lost_gap_m: float = 0.0
+    lost_gap_m: float = 0.5  # (RecoveryConfig's: tests/eval/test_recovery_restart.py)
     pace_gain: float = 1.0  # (grip.player.PaceKeeper's defaults: tests/eval/test_pace_keeper.py)
     pace_lead_max_m: float = 0.5
 

@@ -104,6 +104,12 @@ def test_a_humanoid_left_behind_is_lost_and_recovered_at_the_estimate(clip) -> N
     assert gap.max() < 0.3 + 0.05  # never farther than the threshold (one frame's walk)
 
 
+def test_the_bench_and_the_player_default_alike() -> None:
+    from grip.eval.methods import MethodOptions
+
+    assert MethodOptions().recovery() == RecoveryConfig()
+
+
 def test_a_negative_lost_gap_is_refused() -> None:
     with pytest.raises(ValueError, match="lost_gap_m"):
         RecoveryConfig(lost_gap_m=-0.1)
