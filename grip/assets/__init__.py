@@ -19,8 +19,9 @@ SHIPPED_POLICY = ASSETS / "policy_default.pt"
 SHIPPED_BASELINES = {"transpose": ASSETS / "transpose4.pt", "pip": ASSETS / "pip4.pt"}
 """The baselines' networks, by method name."""
 SAMPLE_RECORDING = ASSETS / "sample_recording.npz"
-"""The demo's recording: a 5 s walk of the shipped models' per-clip test split with 4 IMUs and
-both insoles."""
+"""The demo's recording: a 5 s walk with 4 IMUs and both insoles (Bandai Namco dataset-1's "proud"
+walk: in the test split of the per-clip corpus, a training person of the split by person on which
+both shipped models were trained)."""
 SAMPLE_PROPS_RECORDING = ASSETS / "sample_props_recording.npz"
 """The demo's recording with props: 6 s of CMU subject 14 (a person in no training split of the
 ``--test-group cmu/14`` corpus) climbing three steps, with the steps the data build inferred from

@@ -88,7 +88,7 @@ def _trajectory(ax, recon: Reconstruction, gt: GroundTruth | None) -> None:
     if recon.falls.shape[0]:
         det = recon.falls[:, 1]
         ax.plot(root[det, 0], root[det, 1], "x", color=_FALL_COLOR, ms=10, mew=2,
-                label="fall detected")  # fmt: skip
+                label="recovery (fall or lost)")  # fmt: skip
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("world x (m)")
     ax.set_ylabel("world y (m)")
@@ -103,7 +103,7 @@ def _height(ax, recon: Reconstruction, gt: GroundTruth | None, t: np.ndarray) ->
     _shade_falls(ax, recon)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("pelvis height (m)")
-    ax.set_title("pelvis height (falls shaded)")
+    ax.set_title("pelvis height (recoveries shaded)")
     ax.legend(loc="best", fontsize=8)
 
 
@@ -184,7 +184,10 @@ def summary_figure(recon: Reconstruction, gt: GroundTruth | None = None) -> Figu
     _contacts(axes[2, 0], recon, gt, t)
     _errors(axes[2, 1], recon, gt)
     head = (f"{recon.name} ({recon.method}): {recon.n_frames} frames, {stats['duration_s']:.2f} s "
-            f"at {recon.fps:g} Hz, {int(stats['falls'])} fall(s)")  # fmt: skip
+            f"at {recon.fps:g} Hz, {int(stats['falls'])} recovery event(s)")  # fmt: skip
+    lost = int(recon.notes.get("lost", 0))
+    if lost:
+        head += f" ({lost} lost, not fallen)"
     if recon.ms_per_frame:
         head += f", {recon.ms_per_frame:.2f} ms/frame"
     labels = {"MPJPE_mm": "MPJPE {:.1f} mm", "PEL_MPJPE_mm": "PEL-MPJPE {:.1f} mm",
