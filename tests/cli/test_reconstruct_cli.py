@@ -114,7 +114,7 @@ def test_resume_with_other_settings_is_refused(takes, tmp_path, capsys):
     before = (out / "take001.npz").stat().st_mtime_ns
     for extra in (["--max-frames", "12"], ["--history", "20"], ["--no-recovery"],
                   ["--fill-gaps", "3"], ["--init", "standing"],
-                  ["--lost-gap", "0.5"]):  # fmt: skip
+                  ["--lost-gap", "0"], ["--lost-gap", "0.3"]):  # fmt: skip
         assert main([*base, *extra]) == 2
         err = capsys.readouterr().err
         assert "different settings" in err and "--overwrite" in err
