@@ -3,23 +3,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.cli.test_data_cli import _benchmark
+
 HEAD = "method,segment,category,status,falls,lost,MPJPE_mm\n"
 
 
 @pytest.fixture(scope="module")
 def bc():
-    spec = importlib.util.spec_from_file_location("benchmarks_bench_compare",
-                                                  REPO / "benchmarks" / "bench_compare.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return _benchmark("bench_compare")
 
 
 def _write(folder: Path, rows: list[str]) -> Path:
