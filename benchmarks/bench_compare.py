@@ -40,6 +40,13 @@ def _num(row: dict | None, key: str) -> float:
         return math.nan
 
 
+def _count(row: dict, key: str) -> int:
+    """An event count of a row; 0 where the column is empty or absent (``lost`` before it
+    existed)."""
+    v = _num(row, key)
+    return 0 if math.isnan(v) else int(v)
+
+
 def _mean(xs: list[float]) -> float:
     xs = [x for x in xs if not math.isnan(x)]
     return sum(xs) / len(xs) if xs else math.nan
@@ -56,9 +63,8 @@ def compare(before: Path, after: Path, method: str = "grip") -> dict:
         by_cat["all"].append(s)
     out = {}
     for cat, segs in sorted(by_cat.items(), key=lambda kv: (kv[0] == "all", kv[0])):
-        ev = lambda rows, s: int(_num(rows[s], "falls") or 0)  # noqa: E731
-        lost = lambda rows, s: int(_num(rows[s], "lost")) if not math.isnan(  # noqa: E731
-            _num(rows[s], "lost")) else 0  # fmt: skip
+        ev = lambda rows, s: _count(rows[s], "falls")  # noqa: E731
+        lost = lambda rows, s: _count(rows[s], "lost")  # noqa: E731
         out[cat] = {
             "segments": len(segs),
             "mpjpe_before": _mean([_num(a[s], "MPJPE_mm") for s in segs]),

@@ -510,8 +510,8 @@ def viewer_html(data: Mapping[str, Any], assets: WebAssets) -> str:
         speeds,
         '</select></label><input id="frame" type="range" min="0" value="0" step="1" ',
         'aria-label="frame"><span id="clock"></span></div>\n',
-        '<canvas id="timeline" title="falls: shaded = frames replaced from the history '
-        'buffer (recovered), red = fall detected"></canvas>\n',
+        '<canvas id="timeline" title="recoveries: shaded = frames replaced from the history '
+        'buffer, red = a fall or a lost humanoid (--lost-gap) detected"></canvas>\n',
         '<canvas id="pace" title="horizontal pelvis distance: solid = to the pelvis the body '
         'followed (its estimate), dashed = to the ground truth"></canvas>\n',
         '<div id="plots"><canvas id="grf-left"></canvas><canvas id="grf-right"></canvas></div>\n',
