@@ -66,7 +66,8 @@ GROWN_OBS_VAR = 0.09
 """Normaliser variance of the appended inputs: the followed pelvis' offset, (0.3 m)^2."""
 
 RESUMABLE: tuple[str, ...] = (
-    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.device",
+    "stage2.", "stage1.termination_", "checkpoint_every", "ppo.threads", "ppo.env_threads",
+    "ppo.device",
     "ppo.n_envs", "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs",
     "ppo.gae_lambda", "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm",
     "ppo.critic_warmup_steps", "amp.real_sampling", "env.reward.weights.amp",
@@ -74,6 +75,7 @@ RESUMABLE: tuple[str, ...] = (
 )  # fmt: skip
 """Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's and the
 rollout's layout (a resumed run takes them from the config, not from its checkpoint), the
+threads of the update and of the physics (a run moved to a machine with more cores), the
 termination curriculum, stage 2, and how the style reward is made (the real windows' sampler,
 AMP on or off: a fork of a run's checkpoint may A/B them), and the root-speed augmentation."""
 

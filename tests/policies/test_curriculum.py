@@ -335,7 +335,7 @@ def test_category_termination_in_training_sets_each_clips_distance_and_resumes(t
 
 def test_a_fork_may_change_the_style_reward_and_the_curricula_on_resume():
     """A/B forks of a checkpoint: the real windows' sampler, AMP on or off, the termination
-    settings of stage 1 and every stage-2 setting may change; stage 1's start bins may not
+    settings of stage 1, every stage-2 setting and the threads may change; stage 1's start bins may not
     (a stage-1 setting like its mining mix), and a run recorded before these settings existed
     resumes with them at their defaults."""
     from grip.core.runs import changed_settings
@@ -349,7 +349,8 @@ def test_a_fork_may_change_the_style_reward_and_the_curricula_on_resume():
         base, amp=dataclasses.replace(base.amp, real_sampling="episodes"),
         env=dataclasses.replace(base.env, reward=dataclasses.replace(base.env.reward, weights=w)),
         stage1=dataclasses.replace(base.stage1, termination_category_min_m=0.2),
-        stage2=dataclasses.replace(base.stage2, mining_bins_mix=0.5))  # fmt: skip
+        stage2=dataclasses.replace(base.stage2, mining_bins_mix=0.5),
+        ppo=dataclasses.replace(base.ppo, threads=2, env_threads=2))  # fmt: skip
     assert changed_settings(old, run_config_dict(fork), defaults, RESUMABLE) == []
     bins1 = dataclasses.replace(base, stage1=dataclasses.replace(base.stage1,
                                                                  mining_bins_mix=0.5))  # fmt: skip
