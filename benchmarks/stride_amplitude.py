@@ -7,7 +7,7 @@ below 1 means the estimate's legs swing less than the walker's, while its root m
 walker's speed: a humanoid imitating those legs steps short.
 
     python benchmarks/stride_amplitude.py --data DATA --json F [--split train --kin-fold F0
-        --kin-fold F1 --speed-factor 1.4] [--segments 52]
+        --kin-fold F1 --speed-factor 1.4] [--segments 52] [--shift S]
 """
 
 from __future__ import annotations
@@ -49,6 +49,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--segments", type=int, default=0)
     ap.add_argument("--segment-frames", type=int, default=500)
     ap.add_argument("--speed-factor", type=float, default=None)
+    ap.add_argument("--shift", type=float, default=0.0, metavar="S",
+                    help="each segment S seconds later in its file (pace_cause.py's option)")
     ap.add_argument("--json", required=True)
     args = ap.parse_args(argv)
 

@@ -193,3 +193,45 @@ def test_warm_clip_settles_the_estimator_before_the_segment(tmp_path) -> None:
     # --shift: later in the file, or dropped where the file ends before
     shifted = pc.shifted_segments([Segment("walk_f000000", path, 0, 200, "walk"), seg], 0.5)
     assert [(s.id, s.start, s.stop) for s in shifted] == [("walk_f000000_shift", 50, 250)]
+
+
+def test_stride_amplitude_of_an_estimate_against_the_truth(tmp_path, monkeypatch) -> None:
+    """``benchmarks/stride_amplitude.py``: an estimate whose ankles swing 0.8 times as far
+    apart as the walker's scores 0.8, the truth itself 1.0 (``--shift`` as pace_cause's)."""
+    import dataclasses
+    import json
+
+    from grip.kinematics.features import targets
+    from grip.kinematics.inference import KinematicsEstimator
+    from prism_tools.chunking import make_split, save_split
+    from prism_tools.io import save_recording
+    from prism_tools.synthetic import make_recording
+
+    sa = _benchmark("stride_amplitude")
+    for i in range(2):
+        rec = make_recording(300, seed=i)
+        rec = dataclasses.replace(rec, extras={**rec.extras, "take_name": f"t{i}",
+                                               "category": "walk"})  # fmt: skip
+        save_recording(rec, tmp_path / "sequences" / f"t{i}.npz")
+    save_split(make_split(["t0", "t1"], test_fraction=0.5), tmp_path / "split.json")
+
+    class Shrunk:
+        def __init__(self, scale: float) -> None:
+            self.scale = scale
+
+        def predict(self, recs):
+            t = targets(recs[0])
+            pos = t.joint_pos.copy()
+            pos[..., :2] *= self.scale  # (root-relative joints: every horizontal offset)
+            return [dataclasses.replace(t, joint_pos=pos)]
+
+    for scale in (1.0, 0.8):
+        monkeypatch.setattr(KinematicsEstimator, "from_checkpoint",
+                            lambda p, tta="none", s=scale: Shrunk(s))  # fmt: skip
+        out = tmp_path / f"s{scale}.json"
+        sa.main(["--data", str(tmp_path), "--json", str(out), "--segment-frames", "100",
+                 "--shift", "0.2"])  # fmt: skip
+        got = json.loads(out.read_text())
+        assert got["segments"] >= 1
+        assert got["median_ratio"] == pytest.approx(scale, rel=1e-6)
+        assert all(r["segment"].endswith("_shift") for r in got["rows"])
