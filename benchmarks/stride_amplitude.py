@@ -4,7 +4,12 @@ For each locomotion segment: the stride amplitude of the estimated pose against 
 where the stride amplitude is the 95th percentile over the segment of the horizontal distance
 between the two ankles in the root-relative pose (feet apart at the longest step). A ratio
 below 1 means the estimate's legs swing less than the walker's, while its root may move at the
-walker's speed: a humanoid imitating those legs steps short.
+walker's speed: a humanoid imitating those legs steps short. Beside it the legs' speed: the mean
+rate at which the ankles part and close along the stride's axis (the principal axis of their
+horizontal offset), m/s. A walker's stance foot moves back under the pelvis at the walking
+speed while the swing foot moves forward about as fast, so this rate is a multiple of the speed
+the pose alone walks at, whatever the root does: the ratio estimate/truth is the pace the legs
+set (``legs_ratio``).
 
     python benchmarks/stride_amplitude.py --data DATA --json F [--split train --kin-fold F0
         --kin-fold F1 --speed-factor 1.4] [--segments 52] [--shift S]
@@ -30,6 +35,20 @@ def stride_amplitude(joint_pos: np.ndarray, q: float = 95.0) -> float:
     left, right = ANKLE_JOINTS
     d = joint_pos[:, left, :2] - joint_pos[:, right, :2]
     return float(np.percentile(np.linalg.norm(d, axis=1), q))
+
+
+def leg_speed(joint_pos: np.ndarray, fps: float) -> float:
+    """The mean rate, m/s, at which the ankles part and close along the principal axis of their
+    horizontal offset, of ``(T, 24, 3)`` joints (world axes, z up); 0 for fewer than 3 frames."""
+    from grip.core.skeleton import ANKLE_JOINTS
+
+    left, right = ANKLE_JOINTS
+    d = joint_pos[:, left, :2] - joint_pos[:, right, :2]
+    if len(d) < 3:
+        return 0.0
+    d = d - d.mean(axis=0)
+    axis = np.linalg.svd(d, full_matrices=False)[2][0]
+    return float(np.abs(np.diff(d @ axis)).mean() * fps)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -69,10 +88,15 @@ def main(argv: list[str] | None = None) -> None:
         rows.append({"segment": seg.id, "category": seg.category,
                      "stride_truth_m": truth, "stride_est_m": stride_amplitude(est.joint_pos)})
         rows[-1]["ratio"] = rows[-1]["stride_est_m"] / max(truth, 1e-9)
+        legs = leg_speed(targets(rec).joint_pos, float(rec.fps))
+        rows[-1].update(legs_truth_mps=legs, legs_est_mps=leg_speed(est.joint_pos, float(rec.fps)))
+        rows[-1]["legs_ratio"] = rows[-1]["legs_est_mps"] / max(legs, 1e-9)
     ratios = [r["ratio"] for r in rows]
     out = {"data": args.data, "split": args.split, "kin": args.kin_fold or args.kin,
            "speed_factor": args.speed_factor, "segments": len(rows),
            "median_ratio": float(np.median(ratios)) if rows else None,
+           "median_legs_ratio": float(np.median([r["legs_ratio"] for r in rows]))
+           if rows else None,
            "median_stride_truth_m": float(np.median([r["stride_truth_m"] for r in rows]))
            if rows else None, "rows": rows}  # fmt: skip
     Path(args.json).write_text(json.dumps(out, indent=1))

@@ -234,4 +234,19 @@ def test_stride_amplitude_of_an_estimate_against_the_truth(tmp_path, monkeypatch
         got = json.loads(out.read_text())
         assert got["segments"] >= 1
         assert got["median_ratio"] == pytest.approx(scale, rel=1e-6)
+        assert got["median_legs_ratio"] == pytest.approx(scale, rel=1e-6)
         assert all(r["segment"].endswith("_shift") for r in got["rows"])
+
+
+def test_leg_speed_is_the_rate_the_ankles_part_and_close() -> None:
+    """Ankles that swing 0.3 m either way of each other along one axis, twice a second: the
+    offset travels 4 x 0.3 m per cycle, 2.4 m per second, whatever the axis' direction; legs
+    held still: 0."""
+    sa = _benchmark("stride_amplitude")
+    t = np.arange(1001) / 100.0
+    pos = np.zeros((len(t), 24, 3))
+    u = np.array([0.6, 0.8])
+    pos[:, 7, :2] = (0.3 * np.sin(2 * np.pi * 2 * t))[:, None] * u
+    pos[:, 8, :2] = 0.1  # (the right ankle still: its offset is the left's alone)
+    assert sa.leg_speed(pos, 100.0) == pytest.approx(4 * 0.3 * 2, rel=0.01)
+    assert sa.leg_speed(np.zeros((50, 24, 3)), 100.0) == 0.0
