@@ -22,9 +22,11 @@ estimate and, separately, the ground truth, and measures per segment (frames bef
 Two hybrid references take the estimate apart (``--references``): ``estimate-pose`` follows
 the estimate's pose and leaf velocities with the truth's pelvis velocity (so the truth's root
 path), ``estimate-root`` the truth's pose and leaf velocities with the estimate's pelvis
-velocity (its root path). Which part of the estimate slows the humanoid?
+velocity (its root path). Which part of the estimate slows the humanoid? ``--lean DEG`` leans
+the followed upper body DEG further forward (the trunk's lean sets the pace: docs/pace.md).
 
     python benchmarks/pace_cause.py --data DATA --json F [--policy P] [--kin K] [--segments N]
+        [--references estimate,estimate-pose] [--lean DEG]
 
 Defaults: the shipped policy and KinematicsNet, the test split, categories ``walk*,run*``,
 500-frame segments, recovery off (as ``grip policy eval``).
@@ -132,6 +134,43 @@ def root_speed_scaled(clip, factor: float):
     return dataclasses.replace(clip, est_vel=carried_faster(clip.est_vel, factor))
 
 
+UPPER_BODY: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23)
+"""The joints above the pelvis (spine, neck, head, collars, arms) that ``--lean`` turns."""
+
+
+def leaned_clip(clip, deg: float):
+    """``clip`` with its estimated upper body leaned ``deg`` further forward (negative: back)
+    about the pelvis, towards the truth's direction of travel (its pelvis' horizontal velocity
+    averaged over 1 s; the clip's mean direction where the walker stands): the joint positions
+    and global rotations of :data:`UPPER_BODY` turned, and the velocities of its velocity joints
+    (wrists, head) turned relative to the pelvis'; the legs, the pelvis and the root it
+    integrates unchanged. Does the estimated trunk's lean set the humanoid's pace?"""
+    import dataclasses
+
+    from scipy.ndimage import uniform_filter1d
+
+    from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
+    from grip.core.skeleton import VELOCITY_JOINTS
+
+    v = uniform_filter1d(clip.gt_vel[:, 0, :2], size=max(1, round(clip.fps)), axis=0)
+    mean = clip.gt_vel[:, 0, :2].mean(axis=0)
+    mean = mean / np.linalg.norm(mean) if np.linalg.norm(mean) > 1e-6 else np.array([1.0, 0.0])
+    speed = np.linalg.norm(v, axis=1, keepdims=True)
+    fwd = np.where(speed > 0.1, v / np.maximum(speed, 1e-9), mean)
+    axis = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)  # z x forward
+    rot = axis_angle_to_matrix(axis * np.radians(deg))  # (T, 3, 3): z turns towards forward
+    up = list(UPPER_BODY)
+    pos = clip.est_pos.copy()
+    pos[:, up] = np.einsum("tij,tkj->tki", rot, pos[:, up])
+    glob = clip.est_rot.copy()
+    glob[:, up] = np.einsum("tij,tkjl->tkil", rot, glob[:, up])
+    vel = clip.est_vel.copy()
+    rows = [i for i, j in enumerate(VELOCITY_JOINTS) if j in UPPER_BODY]
+    rel = vel[:, rows] - vel[:, [PELVIS_ROW]]
+    vel[:, rows] = vel[:, [PELVIS_ROW]] + np.einsum("tij,tkj->tki", rot, rel)
+    return dataclasses.replace(clip, est_pos=pos, est_rot6d=matrix_to_6d(glob), est_vel=vel)
+
+
 def pelvis_heading_error_deg(clip) -> float:
     """Median over the frames of the angle between the followed pelvis' heading and the truth's
     (a :class:`grip.core.reference.ReferenceClip`), deg: 0 when following the truth."""
@@ -175,13 +214,14 @@ def warm_clip(estimator, read, seg, seconds: float):
 
 
 def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
-         pace=None, warm_s: float = 0.0) -> list[dict]:  # fmt: skip
+         pace=None, warm_s: float = 0.0, lean_deg: float = 0.0) -> list[dict]:  # fmt: skip
     """Play every segment following ``reference``; ``choose(rec)`` picks the KinematicsNet
     of each recording (default: the setup's); ``root_scale`` carries the followed estimate that
     many times as fast (:func:`root_speed_scaled`); ``pace`` the players' pace keeper
     (:class:`grip.player.PaceKeeper`; None: its defaults, on; ``PaceKeeper(gain=0)``: off);
     ``warm_s`` > 0 warms the estimator up on the seconds before each segment
-    (:func:`warm_clip`; ``reference="estimate"`` only)."""
+    (:func:`warm_clip`; ``reference="estimate"`` only); ``lean_deg`` leans the followed upper
+    body that much further forward (:func:`leaned_clip`)."""
     from grip.eval.policy import _episode, _estimates, _pipeline
     from grip.eval.segments import SegmentReader
     from grip.kinematics.features import ground_truth
@@ -204,6 +244,8 @@ def play(setup, segments, reference: str, choose=None, root_scale: float = 1.0,
             est = _estimates(estimator, [rec], 1, reference, "truth")[0]
         if root_scale != 1.0:
             est = root_speed_scaled(est, root_scale)
+        if lean_deg != 0.0:
+            est = leaned_clip(est, lean_deg)
         rec_runner = _Recorder(runner)
         pipe = _pipeline(rec_runner, estimator, reference.split("-")[0], "truth",
                          pace or PaceKeeper())  # fmt: skip
@@ -299,6 +341,10 @@ def main(argv: list[str] | None = None) -> None:
                     "unchanged, as env.root_speed_range does in training (the pelvis' horizontal "
                     "velocity, and the root it integrates, times F; every velocity joint shifted "
                     "with it): does the controller read its pace from the root?")
+    ap.add_argument("--lean", type=float, default=0.0, metavar="DEG",
+                    help="lean the followed upper body DEG further forward (negative: back) "
+                    "about the pelvis, towards the direction of travel: does the estimated "
+                    "trunk's lean set the humanoid's pace?")
     ap.add_argument("--pace-gain", type=float, default=PaceKeeper().gain, metavar="K",
                     help="the players' pace keeper (grip.player.PaceKeeper): the followed pelvis "
                     "shown leads the estimate's by K x the humanoid's gap to it (0: off)")
@@ -331,11 +377,12 @@ def main(argv: list[str] | None = None) -> None:
                  "split": args.split, "root_speed_scale": args.root_speed_scale,
                  "pace_gain": args.pace_gain, "pace_lead_max_m": args.pace_lead_max,
                  "speed_factor": args.speed_factor, "segments": len(segs),
-                 "warm_up_s": args.warm_up, "shift_s": args.shift,
+                 "warm_up_s": args.warm_up, "shift_s": args.shift, "lean_deg": args.lean,
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
         rows = play(setup, segs, ref, choose, args.root_speed_scale,
-                    PaceKeeper(args.pace_gain, args.pace_lead_max), args.warm_up)  # fmt: skip
+                    PaceKeeper(args.pace_gain, args.pace_lead_max), args.warm_up,
+                    args.lean)  # fmt: skip
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {
             "rows": rows,

@@ -250,3 +250,31 @@ def test_leg_speed_is_the_rate_the_ankles_part_and_close() -> None:
     pos[:, 8, :2] = 0.1  # (the right ankle still: its offset is the left's alone)
     assert sa.leg_speed(pos, 100.0) == pytest.approx(4 * 0.3 * 2, rel=0.01)
     assert sa.leg_speed(np.zeros((50, 24, 3)), 100.0) == 0.0
+
+
+def test_a_leaned_clip_turns_the_upper_body_towards_the_travel() -> None:
+    """``--lean``: the neck's offset from the pelvis turns DEG towards the direction the walker
+    travels; the legs, the pelvis and the root path stay; 0 deg changes nothing."""
+    from grip.kinematics.reference import oracle_reference_clip
+    from prism_tools.synthetic import make_recording
+
+    pc = _benchmark("pace_cause")
+    clip = oracle_reference_clip(make_recording(200, seed=4))
+    same = pc.leaned_clip(clip, 0.0)
+    np.testing.assert_allclose(same.est_pos, clip.est_pos, atol=1e-12)
+    np.testing.assert_allclose(same.est_rot, clip.est_rot, atol=1e-9)
+    lean = pc.leaned_clip(clip, 10.0)
+    legs = [0, 1, 2, 4, 5, 7, 8, 10, 11]
+    np.testing.assert_allclose(lean.est_pos[:, legs], clip.est_pos[:, legs], atol=1e-12)
+    np.testing.assert_allclose(lean.est_root_pos, clip.est_root_pos, atol=1e-9)
+    t = 100
+    fwd = clip.gt_vel[t - 50:t + 50, 0, :2].mean(axis=0)
+    fwd = np.append(fwd / np.linalg.norm(fwd), 0.0)
+
+    def pitch(pos):  # the neck's angle from the vertical towards the travel, deg
+        n = pos[t, 12]
+        return np.degrees(np.arctan2(n @ fwd, n[2]))
+
+    assert pitch(lean.est_pos) - pitch(clip.est_pos) == pytest.approx(10.0, abs=1.0)
+    neck = lean.est_rot[t, 12] @ clip.est_rot[t, 12].T  # the neck's rotation turned the same
+    assert np.degrees(np.arccos((np.trace(neck) - 1) / 2)) == pytest.approx(10.0, abs=1e-6)
