@@ -95,7 +95,7 @@ def _kill_when_working(argv: list[str], cwd: Path, workers: int = 2) -> dict[int
 
 def test_killed_reconstruct_leaves_no_workers(tmp_path: Path) -> None:
     recs = []
-    for i in range(4):
+    for i in range(24):  # (work that outlasts the workers' start when idle: 4 took 3 s)
         recs.append(tmp_path / f"rec{i}.npz")
         shutil.copy(SAMPLE, recs[-1])
     argv = ["reconstruct", *map(str, recs), "--out", str(tmp_path / "out"), "--workers", "2"]
