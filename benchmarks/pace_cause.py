@@ -350,6 +350,11 @@ def main(argv: list[str] | None = None) -> None:
                     "shown leads the estimate's by K x the humanoid's gap to it (0: off)")
     ap.add_argument("--pace-lead-max", type=float, default=PaceKeeper().lead_max_m, metavar="M",
                     help="the pace keeper's longest lead, m")
+    ap.add_argument("--lean-gain", type=float, default=PaceKeeper().lean_gain_deg, metavar="D",
+                    help="the lean keeper: the followed upper body leans D deg further forward "
+                    "per metre the humanoid is behind (0: off)")
+    ap.add_argument("--lean-max", type=float, default=PaceKeeper().lean_max_deg, metavar="D",
+                    help="the lean keeper's largest lean, deg")
     ap.add_argument("--shift", type=float, default=0.0, metavar="S",
                     help="play every segment S seconds later in its file (those whose file is "
                     "too short are dropped): walks under way instead of from their start")
@@ -376,12 +381,14 @@ def main(argv: list[str] | None = None) -> None:
     out: dict = {"policy": args.policy, "kin": args.kin_fold or args.kin, "data": args.data,
                  "split": args.split, "root_speed_scale": args.root_speed_scale,
                  "pace_gain": args.pace_gain, "pace_lead_max_m": args.pace_lead_max,
+                 "lean_gain_deg": args.lean_gain, "lean_max_deg": args.lean_max,
                  "speed_factor": args.speed_factor, "segments": len(segs),
                  "warm_up_s": args.warm_up, "shift_s": args.shift, "lean_deg": args.lean,
                  "by_reference": {}}  # fmt: skip
     for ref in args.references.split(","):
         rows = play(setup, segs, ref, choose, args.root_speed_scale,
-                    PaceKeeper(args.pace_gain, args.pace_lead_max), args.warm_up,
+                    PaceKeeper(args.pace_gain, args.pace_lead_max, args.lean_gain,
+                               args.lean_max), args.warm_up,
                     args.lean)  # fmt: skip
         kept = [r for r in rows if not r["fell"]]
         out["by_reference"][ref] = {

@@ -144,7 +144,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
                                 init=args.init, restart=args.restart,
                                 lost_gap_m=args.lost_gap,
                                 pace_gain=args.pace_gain,
-                                pace_lead_max_m=args.pace_lead_max)  # fmt: skip
+                                pace_lead_max_m=args.pace_lead_max,
+                                lean_gain_deg=args.lean_gain,
+                                lean_max_deg=args.lean_max)  # fmt: skip
         runs, built = prepare_runs(names, options, sensors)
     except (BenchError, ValueError, FileNotFoundError) as e:
         for f, why in unreadable:

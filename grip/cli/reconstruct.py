@@ -332,8 +332,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     if recovery.enabled and args.lost_gap > 0:  # (absent when off, as in the runs before it)
         settings["lost_gap_m"] = args.lost_gap
     pace = pace_keeper(args)
-    if pace.gain > 0.0:  # (absent when off: the runs before the pace keeper)
+    if pace.gain > 0.0 or pace.lean_gain_deg > 0.0:  # (absent when off: the runs before them)
         settings["pace"] = dataclasses.asdict(pace)
+        if pace.lean_gain_deg == 0.0:  # (absent when off: the runs before the lean keeper)
+            del settings["pace"]["lean_gain_deg"], settings["pace"]["lean_max_deg"]
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "summary.json"
     old: dict = {}

@@ -241,6 +241,14 @@ def add_pace_arguments(parser) -> None:
     )  # fmt: skip
     parser.add_argument("--pace-lead-max", type=float, default=d.lead_max_m, metavar="M",
                         help=f"pace keeper: the longest lead, m (default {d.lead_max_m:g})")
+    parser.add_argument(
+        "--lean-gain", type=float, default=d.lean_gain_deg, metavar="D",
+        help="lean keeper: the followed upper body leans D deg further forward per metre the "
+        f"humanoid's pelvis is behind the estimate's, at most --lean-max (default "
+        f"{d.lean_gain_deg:g}; 0: off; docs/pace.md, the lean keeper)",
+    )  # fmt: skip
+    parser.add_argument("--lean-max", type=float, default=d.lean_max_deg, metavar="D",
+                        help=f"lean keeper: the largest lean, deg (default {d.lean_max_deg:g})")
 
 
 def pace_keeper(args: argparse.Namespace):
@@ -252,9 +260,11 @@ def pace_keeper(args: argparse.Namespace):
     from grip.player import PaceKeeper
 
     try:
-        return PaceKeeper(gain=args.pace_gain, lead_max_m=args.pace_lead_max)
+        return PaceKeeper(gain=args.pace_gain, lead_max_m=args.pace_lead_max,
+                          lean_gain_deg=args.lean_gain, lean_max_deg=args.lean_max)
     except ValueError as e:
-        raise CliError(f"--pace-gain {args.pace_gain:g} --pace-lead-max {args.pace_lead_max:g}: "
+        raise CliError(f"--pace-gain {args.pace_gain:g} --pace-lead-max {args.pace_lead_max:g} "
+                       f"--lean-gain {args.lean_gain:g} --lean-max {args.lean_max:g}: "
                        f"{e}") from e
 
 

@@ -89,7 +89,7 @@ class MethodOptions:
             (:attr:`grip.player.RecoveryConfig.restart`).
         lost_gap_m: The pelvis gap at which GRIP's humanoid is lost and recovered like a fall
             (:attr:`grip.player.RecoveryConfig.lost_gap_m`; 0: off).
-        pace_gain, pace_lead_max_m: GRIP's pace keeper
+        pace_gain, pace_lead_max_m, lean_gain_deg, lean_max_deg: GRIP's pace and lean keepers
             (:class:`grip.player.PaceKeeper`).
 
     Raises:
@@ -107,6 +107,8 @@ class MethodOptions:
     lost_gap_m: float = 0.5  # (RecoveryConfig's: tests/eval/test_recovery_restart.py)
     pace_gain: float = 1.0  # (grip.player.PaceKeeper's defaults: tests/eval/test_pace_keeper.py)
     pace_lead_max_m: float = 0.5
+    lean_gain_deg: float = 20.0
+    lean_max_deg: float = 5.0
 
     def __post_init__(self) -> None:
         from grip.kinematics.features import INITS
@@ -130,7 +132,8 @@ class MethodOptions:
         """GRIP's :class:`grip.player.PaceKeeper`."""
         from grip.player import PaceKeeper
 
-        return PaceKeeper(gain=self.pace_gain, lead_max_m=self.pace_lead_max_m)
+        return PaceKeeper(gain=self.pace_gain, lead_max_m=self.pace_lead_max_m,
+                          lean_gain_deg=self.lean_gain_deg, lean_max_deg=self.lean_max_deg)
 
     def to_dict(self) -> dict[str, str | None]:
         """JSON-ready form (paths as absolute strings), used to detect changed settings."""

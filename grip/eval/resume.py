@@ -78,6 +78,8 @@ def check_method(out_dir: Path, run: _Run, log: Callable[[str], object] = print)
             have["options"].setdefault("lost_gap_m", 0.0)  # (only falls, before --lost-gap)
             have["options"].setdefault("pace_gain", 0.0)  # (no pace keeper before it existed)
             have["options"].setdefault("pace_lead_max_m", 0.5)
+            have["options"].setdefault("lean_gain_deg", 0.0)  # (no lean keeper before it existed)
+            have["options"].setdefault("lean_max_deg", 5.0)
         if have != want:
             raise BenchError(f"{path.parent}: results of {run.label} with other settings "
                              f"({have} vs now {want}); use another output folder")  # fmt: skip

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from grip.core import skeleton as sk
+from grip.core.reference import hinges_from_local
 
 IMU_JOINTS: tuple[int, ...] = (
     sk.IMU_BODY["L_Foot"], sk.IMU_BODY["R_Foot"], sk.IMU_BODY["L_Wrist"], sk.IMU_BODY["R_Wrist"],
@@ -393,21 +394,64 @@ class EstimateFrames:
             ref += kd_over_kp * est.est_hinge_vel[sl]
 
     def pd_target(self, action: np.ndarray, t: int, relative: bool, gain: np.ndarray,
-                  lo: np.ndarray, half: np.ndarray) -> np.ndarray:  # fmt: skip
+                  lo: np.ndarray, half: np.ndarray,
+                  lean: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """``(69,)`` PD target of an action toward frame ``t`` (the action clipped to [-1, 1]):
         relative: ``target[t] + action x gain``; absolute: the action spans ``lo .. lo + 2
-        half`` (the hinge ranges), rad. The humanoid clips it to the hinge limits."""
+        half`` (the hinge ranges), rad. The humanoid clips it to the hinge limits. ``lean``
+        (3, 3): frame ``t``'s upper body turned by it about the pelvis (:func:`lean_hinges`;
+        relative actions only)."""
         a = np.minimum(np.maximum(action, -1.0), 1.0)  # (np.clip's dispatch costs more per step)
         if relative:
-            return self.target[t] + a * gain
+            ref = self.target[t] if lean is None else self.target[t] + lean_hinges(
+                self.est.est_rot[t], lean)  # fmt: skip
+            return ref + a * gain
         return lo + (a + 1.0) * half
 
     def observe(self, t: int, variant: str, sim_pvw: np.ndarray, sim_rot: np.ndarray,
                 root_offset: np.ndarray, grid: np.ndarray, terrain=None,
-                out: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+                out: np.ndarray | None = None,
+                lean: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
         """:func:`observe` against estimate frame ``t`` (the frame the next action aims at);
-        ``root_offset (3,)`` is added to the integrated root (where the episode started)."""
+        ``root_offset (3,)`` is added to the integrated root (where the episode started);
+        ``lean (3, 3)`` turns the frame's upper body about the pelvis (:func:`leaned_frame`)."""
         e = self.est
-        return observe(variant, sim_pvw, sim_rot, e.est_pos[t], self.leaf_rot[t], e.est_vel[t],
-                       self.leaf_angvel[t], e.est_root_pos[t] + root_offset, e.sensor[t], grid,
-                       terrain, out)  # fmt: skip
+        pos, leaf_rot, vel = e.est_pos[t], self.leaf_rot[t], e.est_vel[t]
+        if lean is not None:
+            pos, leaf_rot, vel = leaned_frame(pos, leaf_rot, vel, lean)
+        return observe(variant, sim_pvw, sim_rot, pos, leaf_rot, vel, self.leaf_angvel[t],
+                       e.est_root_pos[t] + root_offset, e.sensor[t], grid, terrain,
+                       out)  # fmt: skip
+
+
+UPPER_BODY: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23)
+"""The joints above the pelvis (spine, neck, head, collars, arms): what a lean turns."""
+_UPPER_IMU = [i for i, j in enumerate(IMU_JOINTS) if j in UPPER_BODY]
+_UPPER_VEL = [i for i, j in enumerate(sk.VELOCITY_JOINTS) if j in UPPER_BODY]
+
+
+def leaned_frame(pos: np.ndarray, leaf_rot: np.ndarray, vel: np.ndarray,
+                 lean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """One estimate frame with its upper body (:data:`UPPER_BODY`) turned by ``lean (3, 3)``
+    about the pelvis: ``pos (24, 3)`` root-relative joints, ``leaf_rot (4, 3, 3)`` the IMU
+    joints' rotations and ``vel (6, 3)`` the velocity joints' (the upper ones turned relative to
+    the pelvis', the last row); new arrays, the inputs untouched."""
+    pos, leaf_rot, vel = pos.copy(), leaf_rot.copy(), vel.copy()
+    up = list(UPPER_BODY)
+    pos[up] = pos[up] @ lean.T
+    leaf_rot[_UPPER_IMU] = lean @ leaf_rot[_UPPER_IMU]
+    vel[_UPPER_VEL] = vel[-1] + (vel[_UPPER_VEL] - vel[-1]) @ lean.T
+    return pos, leaf_rot, vel
+
+
+def lean_hinges(global_rot: np.ndarray, lean: np.ndarray) -> np.ndarray:
+    """``(69,)`` the change of the hinge angles when the upper body of a pose with ``(24, 3,
+    3)`` global rotations turns by ``lean (3, 3)`` about the pelvis: only the spine's first
+    joint's local rotation changes (each angle's change wrapped to [-pi, pi])."""
+    j = UPPER_BODY[0]
+    parent = global_rot[sk.PARENTS[j]]
+    local = np.stack([parent.T @ global_rot[j], parent.T @ lean @ global_rot[j]])
+    full = np.broadcast_to(np.eye(3), (2, sk.N_JOINTS - 1, 3, 3)).copy()
+    full[:, j - 1] = local
+    e = hinges_from_local(full)
+    return np.angle(np.exp(1j * (e[1] - e[0])))
