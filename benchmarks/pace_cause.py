@@ -134,23 +134,21 @@ def root_speed_scaled(clip, factor: float):
     return dataclasses.replace(clip, est_vel=carried_faster(clip.est_vel, factor))
 
 
-UPPER_BODY: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23)
-"""The joints above the pelvis (spine, neck, head, collars, arms) that ``--lean`` turns."""
-
-
 def leaned_clip(clip, deg: float):
     """``clip`` with its estimated upper body leaned ``deg`` further forward (negative: back)
     about the pelvis, towards the truth's direction of travel (its pelvis' horizontal velocity
     averaged over 1 s; the clip's mean direction where the walker stands): the joint positions
-    and global rotations of :data:`UPPER_BODY` turned, and the velocities of its velocity joints
-    (wrists, head) turned relative to the pelvis'; the legs, the pelvis and the root it
-    integrates unchanged. Does the estimated trunk's lean set the humanoid's pace?"""
+    and global rotations of :data:`grip.task.observations.UPPER_BODY` turned, and the
+    velocities of its velocity joints (wrists, head) turned relative to the pelvis'; the legs,
+    the pelvis and the root it integrates unchanged. Does the estimated trunk's lean set the
+    humanoid's pace?"""
     import dataclasses
 
     from scipy.ndimage import uniform_filter1d
 
     from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
     from grip.core.skeleton import VELOCITY_JOINTS
+    from grip.task.observations import UPPER_BODY
 
     v = uniform_filter1d(clip.gt_vel[:, 0, :2], size=max(1, round(clip.fps)), axis=0)
     mean = clip.gt_vel[:, 0, :2].mean(axis=0)
