@@ -335,9 +335,9 @@ def test_category_termination_in_training_sets_each_clips_distance_and_resumes(t
 
 def test_a_fork_may_change_the_style_reward_and_the_curricula_on_resume():
     """A/B forks of a checkpoint: the real windows' sampler, AMP on or off, the termination
-    settings of stage 1, every stage-2 setting and the threads may change; stage 1's start bins may not
-    (a stage-1 setting like its mining mix), and a run recorded before these settings existed
-    resumes with them at their defaults."""
+    settings of stage 1, every stage-2 setting and the threads may change; stage 1's start
+    bins may not (a stage-1 setting like its mining mix), and a run recorded before these
+    settings existed resumes with them at their defaults."""
     from grip.core.runs import changed_settings
     from policies.config import PolicyRunConfig
     from policies.train import RESUMABLE
