@@ -147,8 +147,7 @@ def leaned_clip(clip, deg: float):
     from scipy.ndimage import uniform_filter1d
 
     from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
-    from grip.core.skeleton import VELOCITY_JOINTS
-    from grip.task.observations import UPPER_BODY
+    from grip.task.observations import leaned
 
     v = uniform_filter1d(clip.gt_vel[:, 0, :2], size=max(1, round(clip.fps)), axis=0)
     mean = clip.gt_vel[:, 0, :2].mean(axis=0)
@@ -157,15 +156,7 @@ def leaned_clip(clip, deg: float):
     fwd = np.where(speed > 0.1, v / np.maximum(speed, 1e-9), mean)
     axis = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)  # z x forward
     rot = axis_angle_to_matrix(axis * np.radians(deg))  # (T, 3, 3): z turns towards forward
-    up = list(UPPER_BODY)
-    pos = clip.est_pos.copy()
-    pos[:, up] = np.einsum("tij,tkj->tki", rot, pos[:, up])
-    glob = clip.est_rot.copy()
-    glob[:, up] = np.einsum("tij,tkjl->tkil", rot, glob[:, up])
-    vel = clip.est_vel.copy()
-    rows = [i for i, j in enumerate(VELOCITY_JOINTS) if j in UPPER_BODY]
-    rel = vel[:, rows] - vel[:, [PELVIS_ROW]]
-    vel[:, rows] = vel[:, [PELVIS_ROW]] + np.einsum("tij,tkj->tki", rot, rel)
+    pos, glob, vel = leaned(clip.est_pos, clip.est_rot, clip.est_vel, rot)
     return dataclasses.replace(clip, est_pos=pos, est_rot6d=matrix_to_6d(glob), est_vel=vel)
 
 

@@ -9,7 +9,9 @@ rate at which the ankles part and close along the stride's axis (the principal a
 horizontal offset), m/s. A walker's stance foot moves back under the pelvis at the walking
 speed while the swing foot moves forward about as fast, so this rate is a multiple of the speed
 the pose alone walks at, whatever the root does: the ratio estimate/truth is the pace the legs
-set (``legs_ratio``).
+set (``legs_ratio``). And the trunk's lean towards the travel, estimate minus truth
+(``lean_est_minus_truth_deg``; negative: the estimate leans back), which sets the humanoid's
+pace (docs/pace.md, "The trunk's lean sets the pace").
 
     python benchmarks/stride_amplitude.py --data DATA --json F [--split train --kin-fold F0
         --kin-fold F1 --speed-factor 1.4] [--segments 52] [--shift S]
@@ -27,28 +29,41 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
-def stride_amplitude(joint_pos: np.ndarray, q: float = 95.0) -> float:
-    """The ``q``-th percentile over frames of the horizontal ankle-to-ankle distance, m, of
-    ``(T, 24, 3)`` root-relative joints (world axes, z up)."""
+def _ankle_offset(joint_pos: np.ndarray) -> np.ndarray:
+    """``(T, 2)`` the left ankle's horizontal offset from the right's, m."""
     from grip.core.skeleton import ANKLE_JOINTS
 
     left, right = ANKLE_JOINTS
-    d = joint_pos[:, left, :2] - joint_pos[:, right, :2]
-    return float(np.percentile(np.linalg.norm(d, axis=1), q))
+    return joint_pos[:, left, :2] - joint_pos[:, right, :2]
+
+
+def stride_amplitude(joint_pos: np.ndarray, q: float = 95.0) -> float:
+    """The ``q``-th percentile over frames of the horizontal ankle-to-ankle distance, m, of
+    ``(T, 24, 3)`` root-relative joints (world axes, z up)."""
+    return float(np.percentile(np.linalg.norm(_ankle_offset(joint_pos), axis=1), q))
 
 
 def leg_speed(joint_pos: np.ndarray, fps: float) -> float:
     """The mean rate, m/s, at which the ankles part and close along the principal axis of their
     horizontal offset, of ``(T, 24, 3)`` joints (world axes, z up); 0 for fewer than 3 frames."""
-    from grip.core.skeleton import ANKLE_JOINTS
-
-    left, right = ANKLE_JOINTS
-    d = joint_pos[:, left, :2] - joint_pos[:, right, :2]
+    d = _ankle_offset(joint_pos)
     if len(d) < 3:
         return 0.0
     d = d - d.mean(axis=0)
     axis = np.linalg.svd(d, full_matrices=False)[2][0]
     return float(np.abs(np.diff(d @ axis)).mean() * fps)
+
+
+def trunk_lean_deg(joint_pos: np.ndarray, root_pos: np.ndarray) -> float:
+    """The mean angle, deg, of the neck over the pelvis from the vertical towards the segment's
+    direction of travel (the mean horizontal velocity of ``root_pos (T, 3)``), of ``(T, 24, 3)``
+    root-relative joints; positive: leaning forward. NaN where the root does not travel."""
+    v = (root_pos[-1, :2] - root_pos[0, :2]) if len(root_pos) > 1 else np.zeros(2)
+    n = float(np.linalg.norm(v))
+    if n < 1e-6:
+        return float("nan")
+    neck = joint_pos[:, 12] - joint_pos[:, 0]
+    return float(np.degrees(np.arctan2(neck[:, :2] @ (v / n), neck[:, 2])).mean())
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -83,20 +98,25 @@ def main(argv: list[str] | None = None) -> None:
     read, rows = SegmentReader(), []
     for seg in segs:
         rec = read(seg)
-        est = choose(rec).predict([rec])[0]
-        truth = stride_amplitude(targets(rec).joint_pos)
-        rows.append({"segment": seg.id, "category": seg.category,
-                     "stride_truth_m": truth, "stride_est_m": stride_amplitude(est.joint_pos)})
-        rows[-1]["ratio"] = rows[-1]["stride_est_m"] / max(truth, 1e-9)
-        legs = leg_speed(targets(rec).joint_pos, float(rec.fps))
-        rows[-1].update(legs_truth_mps=legs, legs_est_mps=leg_speed(est.joint_pos, float(rec.fps)))
-        rows[-1]["legs_ratio"] = rows[-1]["legs_est_mps"] / max(legs, 1e-9)
+        est, tgt = choose(rec).predict([rec])[0], targets(rec)
+        fps = float(rec.fps)
+        stride, legs = stride_amplitude(tgt.joint_pos), leg_speed(tgt.joint_pos, fps)
+        row = {"segment": seg.id, "category": seg.category, "stride_truth_m": stride,
+               "stride_est_m": stride_amplitude(est.joint_pos), "legs_truth_mps": legs,
+               "legs_est_mps": leg_speed(est.joint_pos, fps),
+               "lean_est_minus_truth_deg": trunk_lean_deg(est.joint_pos, tgt.root_pos)
+               - trunk_lean_deg(tgt.joint_pos, tgt.root_pos)}  # (the walker's travel for both)
+        row["ratio"] = row["stride_est_m"] / max(stride, 1e-9)
+        row["legs_ratio"] = row["legs_est_mps"] / max(legs, 1e-9)
+        rows.append(row)
     ratios = [r["ratio"] for r in rows]
     out = {"data": args.data, "split": args.split, "kin": args.kin_fold or args.kin,
            "speed_factor": args.speed_factor, "segments": len(rows),
            "median_ratio": float(np.median(ratios)) if rows else None,
            "median_legs_ratio": float(np.median([r["legs_ratio"] for r in rows]))
            if rows else None,
+           "median_lean_est_minus_truth_deg": float(np.nanmedian(
+               [r["lean_est_minus_truth_deg"] for r in rows])) if rows else None,
            "median_stride_truth_m": float(np.median([r["stride_truth_m"] for r in rows]))
            if rows else None, "rows": rows}  # fmt: skip
     Path(args.json).write_text(json.dumps(out, indent=1))

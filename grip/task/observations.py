@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from grip.core import skeleton as sk
-from grip.core.reference import hinges_from_local
+from grip.core.rotations import matrix_to_euler
 
 IMU_JOINTS: tuple[int, ...] = (
     sk.IMU_BODY["L_Foot"], sk.IMU_BODY["R_Foot"], sk.IMU_BODY["L_Wrist"], sk.IMU_BODY["R_Wrist"],
@@ -414,11 +414,12 @@ class EstimateFrames:
                 lean: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
         """:func:`observe` against estimate frame ``t`` (the frame the next action aims at);
         ``root_offset (3,)`` is added to the integrated root (where the episode started);
-        ``lean (3, 3)`` turns the frame's upper body about the pelvis (:func:`leaned_frame`)."""
+        ``lean (3, 3)`` turns the frame's upper body about the pelvis (:func:`leaned`)."""
         e = self.est
         pos, leaf_rot, vel = e.est_pos[t], self.leaf_rot[t], e.est_vel[t]
         if lean is not None:
-            pos, leaf_rot, vel = leaned_frame(pos, leaf_rot, vel, lean)
+            pos, rot, vel = leaned(pos, e.est_rot[t], vel, lean)
+            leaf_rot = rot[list(IMU_JOINTS)]
         return observe(variant, sim_pvw, sim_rot, pos, leaf_rot, vel, self.leaf_angvel[t],
                        e.est_root_pos[t] + root_offset, e.sensor[t], grid, terrain,
                        out)  # fmt: skip
@@ -426,32 +427,32 @@ class EstimateFrames:
 
 UPPER_BODY: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23)
 """The joints above the pelvis (spine, neck, head, collars, arms): what a lean turns."""
-_UPPER_IMU = [i for i, j in enumerate(IMU_JOINTS) if j in UPPER_BODY]
 _UPPER_VEL = [i for i, j in enumerate(sk.VELOCITY_JOINTS) if j in UPPER_BODY]
 
 
-def leaned_frame(pos: np.ndarray, leaf_rot: np.ndarray, vel: np.ndarray,
-                 lean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """One estimate frame with its upper body (:data:`UPPER_BODY`) turned by ``lean (3, 3)``
-    about the pelvis: ``pos (24, 3)`` root-relative joints, ``leaf_rot (4, 3, 3)`` the IMU
-    joints' rotations and ``vel (6, 3)`` the velocity joints' (the upper ones turned relative to
-    the pelvis', the last row); new arrays, the inputs untouched."""
-    pos, leaf_rot, vel = pos.copy(), leaf_rot.copy(), vel.copy()
+def leaned(pos: np.ndarray, rot: np.ndarray, vel: np.ndarray,
+           lean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """An estimate's upper body (:data:`UPPER_BODY`) turned by ``lean (..., 3, 3)`` about the
+    pelvis, one frame or ``(T, ...)`` frames: ``pos (..., 24, 3)`` root-relative joints, ``rot
+    (..., 24, 3, 3)`` global rotations and ``vel (..., 6, 3)`` the velocity joints' (the upper
+    ones turned relative to the pelvis', the last row); new arrays, the inputs untouched."""
     up = list(UPPER_BODY)
-    pos[up] = pos[up] @ lean.T
-    leaf_rot[_UPPER_IMU] = lean @ leaf_rot[_UPPER_IMU]
-    vel[_UPPER_VEL] = vel[-1] + (vel[_UPPER_VEL] - vel[-1]) @ lean.T
-    return pos, leaf_rot, vel
+    pos, rot, vel = pos.copy(), rot.copy(), vel.copy()
+    pos[..., up, :] = np.einsum("...ij,...kj->...ki", lean, pos[..., up, :])
+    rot[..., up, :, :] = lean[..., None, :, :] @ rot[..., up, :, :]
+    rel = vel[..., _UPPER_VEL, :] - vel[..., -1:, :]
+    vel[..., _UPPER_VEL, :] = vel[..., -1:, :] + np.einsum("...ij,...kj->...ki", lean, rel)
+    return pos, rot, vel
 
 
 def lean_hinges(global_rot: np.ndarray, lean: np.ndarray) -> np.ndarray:
     """``(69,)`` the change of the hinge angles when the upper body of a pose with ``(24, 3,
-    3)`` global rotations turns by ``lean (3, 3)`` about the pelvis: only the spine's first
-    joint's local rotation changes (each angle's change wrapped to [-pi, pi])."""
+    3)`` global rotations turns by ``lean (3, 3)`` about the pelvis: only the first spine
+    joint's local rotation changes (its three angles' change, each wrapped to [-pi, pi])."""
     j = UPPER_BODY[0]
-    parent = global_rot[sk.PARENTS[j]]
-    local = np.stack([parent.T @ global_rot[j], parent.T @ lean @ global_rot[j]])
-    full = np.broadcast_to(np.eye(3), (2, sk.N_JOINTS - 1, 3, 3)).copy()
-    full[:, j - 1] = local
-    e = hinges_from_local(full)
-    return np.angle(np.exp(1j * (e[1] - e[0])))
+    parent = global_rot[sk.PARENTS[j]].T
+    local = np.stack([parent @ global_rot[j], parent @ lean @ global_rot[j]])
+    e = matrix_to_euler(local, sk.HINGE_ORDERS[j])
+    out = np.zeros(3 * (sk.N_JOINTS - 1))
+    out[3 * (j - 1) : 3 * j] = np.angle(np.exp(1j * (e[1] - e[0])))
+    return out

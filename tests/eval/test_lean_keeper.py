@@ -11,7 +11,7 @@ from envs.tracking_env import SAMPLE_REFERENCE
 from grip.core.reference import ReferenceSet, hinge_angles
 from grip.pipeline import GripPipeline, PaceKeeper, RecoveryConfig, start_from_clip
 from grip.task.config import TrackingEnvConfig
-from grip.task.observations import UPPER_BODY, lean_hinges, leaned_frame
+from grip.task.observations import UPPER_BODY, lean_hinges, leaned
 
 
 def _angle_deg(r: np.ndarray) -> float:
@@ -40,23 +40,29 @@ def clip():
 
 def test_a_leaned_frame_turns_the_upper_body_and_the_spine_hinges_alone(clip) -> None:
     from grip.core.rotations import axis_angle_to_matrix
-    from grip.task.observations import IMU_JOINTS
 
     t, lean = 40, axis_angle_to_matrix(np.array([0.0, 1.0, 0.0]) * np.radians(4.0))
-    leaf_rot = clip.est_rot[t, list(IMU_JOINTS)]
-    pos, rot, vel = leaned_frame(clip.est_pos[t], leaf_rot, clip.est_vel[t], lean)
-    up, legs = list(UPPER_BODY), [1, 2, 4, 5, 7, 8, 10, 11]
+    pos, rot, vel = leaned(clip.est_pos[t], clip.est_rot[t], clip.est_vel[t], lean)
+    up, legs = list(UPPER_BODY), [0, 1, 2, 4, 5, 7, 8, 10, 11]
     np.testing.assert_allclose(pos[up], clip.est_pos[t, up] @ lean.T)
     np.testing.assert_array_equal(pos[legs], clip.est_pos[t, legs])
+    np.testing.assert_allclose(rot[up], lean @ clip.est_rot[t, up])
+    np.testing.assert_array_equal(rot[legs], clip.est_rot[t, legs])
     np.testing.assert_array_equal(vel[-1], clip.est_vel[t, -1])  # the pelvis' velocity
-    for i, j in enumerate(IMU_JOINTS):
-        want = lean @ leaf_rot[i] if j in UPPER_BODY else leaf_rot[i]
-        np.testing.assert_allclose(rot[i], want)
+    rel = clip.est_vel[t, 0] - clip.est_vel[t, -1]  # (a wrist's, relative to the pelvis')
+    np.testing.assert_allclose(vel[0] - vel[-1], rel @ lean.T)
+    np.testing.assert_array_equal(vel[2], clip.est_vel[t, 2])  # (an ankle's)
+    # all frames at once, each its own lean: the same as frame by frame
+    leans = np.stack([lean, lean.T])
+    many = leaned(clip.est_pos[t : t + 2], clip.est_rot[t : t + 2], clip.est_vel[t : t + 2], leans)
+    np.testing.assert_allclose(many[0][0], pos)
+    np.testing.assert_allclose(many[1][1], leaned(clip.est_pos[t + 1], clip.est_rot[t + 1],
+                                                  clip.est_vel[t + 1], lean.T)[1])  # fmt: skip
     # the hinge change is what the whole pose's hinges say, and only the spine's first joint's
     glob = clip.est_rot[t - 1 : t + 1].copy()
-    leaned = glob.copy()
-    leaned[:, up] = lean @ glob[:, up]
-    want = hinge_angles(leaned)[-1] - hinge_angles(glob)[-1]
+    turned = glob.copy()
+    turned[:, up] = lean @ glob[:, up]
+    want = hinge_angles(turned)[-1] - hinge_angles(glob)[-1]
     got = lean_hinges(clip.est_rot[t], lean)
     np.testing.assert_allclose(got, np.angle(np.exp(1j * want)), atol=1e-9)
     assert np.count_nonzero(np.abs(got) > 1e-12) <= 3 and np.abs(got[6:9]).max() > 0.01

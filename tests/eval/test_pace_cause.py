@@ -278,3 +278,17 @@ def test_a_leaned_clip_turns_the_upper_body_towards_the_travel() -> None:
     assert pitch(lean.est_pos) - pitch(clip.est_pos) == pytest.approx(10.0, abs=1.0)
     neck = lean.est_rot[t, 12] @ clip.est_rot[t, 12].T  # the neck's rotation turned the same
     assert np.degrees(np.arccos((np.trace(neck) - 1) / 2)) == pytest.approx(10.0, abs=1e-6)
+
+
+def test_trunk_lean_towards_the_travel() -> None:
+    """``stride_amplitude.trunk_lean_deg``: a neck 10 deg ahead of the pelvis along the walk
+    leans +10, behind it -10; a root that does not travel gives NaN."""
+    sa = _benchmark("stride_amplitude")
+    pos = np.zeros((50, 24, 3))
+    a = np.radians(10.0)
+    pos[:, 12] = [0.0, 0.5 * np.sin(a), 0.5 * np.cos(a)]  # (the neck ahead along +y)
+    root = np.zeros((50, 3))
+    root[:, 1] = np.linspace(0.0, 1.0, 50)
+    assert sa.trunk_lean_deg(pos, root) == pytest.approx(10.0)
+    assert sa.trunk_lean_deg(pos, root[::-1]) == pytest.approx(-10.0)
+    assert np.isnan(sa.trunk_lean_deg(pos, np.zeros((50, 3))))
