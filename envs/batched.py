@@ -109,6 +109,8 @@ class BatchedTrackingEnv:
         self._root_offset_truth = np.zeros((n, 3))  # (cfg.teacher_obs)
         self._root_speed = np.ones(n)  # each episode's root-speed factor (cfg.root_speed_range)
         self._speed_on = tuple(cfg.root_speed_range) != (1.0, 1.0)
+        self._lean_deg = np.zeros(n)  # each episode's lean of the followed trunk, deg
+        self._lean_on = tuple(cfg.lean_range_deg) != (0.0, 0.0)
         self._hist = np.zeros((n, self._hist_n, 2))  # ring of pelvis xy, newest at _hist_pos - 1
         self._hist_pos = np.zeros(n, dtype=np.int64)
         self._hist_len = np.zeros(n, dtype=np.int64)
@@ -145,6 +147,7 @@ class BatchedTrackingEnv:
         self._root_offset[i] = e._root_offset
         self._root_offset_truth[i] = e._root_offset_truth
         self._root_speed[i] = e._root_speed
+        self._lean_deg[i] = e._lean_deg
         self._hist_len[i] = len(e._root_hist)
         self._hist[i, : self._hist_len[i]] = np.asarray(e._root_hist)
         self._hist_pos[i] = self._hist_len[i] % self._hist_n
@@ -215,6 +218,8 @@ class BatchedTrackingEnv:
         if self._relative:
             for j, (i, ti) in enumerate(zip(idx_l, tn_l, strict=True)):
                 tgt[j] = envs[i]._est.target[ti]
+            if self._lean_on:
+                tgt += O.lean_hinges(*self._leans([envs[i]._est for i in idx_l], idx, tn_l))
             tgt += a[idx] * self._gain[idx]
         else:
             tgt[:] = self._lo[idx] + (a[idx] + 1.0) * self._half[idx]
@@ -324,7 +329,8 @@ class BatchedTrackingEnv:
         for i, e in enumerate(self.envs):
             sensor[i] = e._est.est.sensor[t[i]]
         h = O.heading_matrices(rot[:, 0])
-        kin, self_vec = self._kinematic([e._est for e in self.envs], self._root_offset, t, h)
+        kin, self_vec = self._kinematic([e._est for e in self.envs], self._root_offset, t, h,
+                                        lean=self._lean_on)  # fmt: skip
         z = pvw[:, 0, 0, 2]
         hm = np.repeat((-z)[:, None], self.observation_space["environment"].shape[0], axis=1)
         for i, e in enumerate(self.envs):
@@ -352,16 +358,19 @@ class BatchedTrackingEnv:
         return obs
 
     def _kinematic(self, frames: list, offset: np.ndarray, t: list[int], h: np.ndarray,
-                   root_frames: list | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+                   root_frames: list | None = None,
+                   lean: bool = False) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """The kinematic and self observations of the last stable states against reference
         frames ``t`` of ``frames`` (one :class:`grip.task.observations.EstimateFrames` per
         environment; the root integrated from ``offset (N, 3)``, that of ``root_frames``
-        when given)."""
+        when given; their upper bodies leaned by the episodes' leans where ``lean``)."""
         er = self._est_rows
         for i, f in enumerate(frames):
             er[i] = f.obs_rows[t[i]]
             if root_frames is not None:
                 er[i, _ROOT] = root_frames[i].obs_rows[t[i], _ROOT]
+        if lean:
+            O.lean_rows(er, self._leans(frames, np.arange(self.num_envs), t)[1])
         if self._speed_on:
             O.scale_root_speed(er, self._root_speed)
         er[:, _ROOT] += offset
@@ -371,6 +380,14 @@ class BatchedTrackingEnv:
         O.observation_rows(self.cfg.kinematic_obs, h, self._good_pvw, self._good_rot, er, kin,
                            self_vec)  # fmt: skip
         return kin, self_vec
+
+    def _leans(self, frames: list, idx: np.ndarray,
+               t: list[int]) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """The global rotations ``(M, 24, 3, 3)`` of frames ``t`` of the estimates ``frames``
+        (of environments ``idx``) and their episodes' leans ``(M, 3, 3)``
+        (``cfg.lean_range_deg``)."""
+        rot = np.stack([f.est.est_rot[ti] for f, ti in zip(frames, t, strict=True)])
+        return rot, O.forward_lean(rot[:, 0], self._lean_deg[idx])
 
     def close(self) -> None:
         if self._pool is not None:

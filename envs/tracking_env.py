@@ -133,6 +133,7 @@ class GripTrackingEnv(gym.Env):
         self._action_gain = np.zeros(0)  # (69,) rad per unit of relative action
         self._root_offset = np.zeros(3)  # episode start: ground truth minus integrated estimate
         self._root_speed = 1.0  # the episode's root-speed factor (cfg.root_speed_range)
+        self._lean_deg = 0.0  # the episode's lean of the followed trunk (cfg.lean_range_deg)
         self._root_hist: deque = deque(maxlen=1)  # simulated pelvis xy of the last frames
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
         self._amp_buf = np.empty(A.FRAME_DIM)  # (reused by every step)
@@ -280,6 +281,8 @@ class GripTrackingEnv(gym.Env):
         self._sim.reset(clip.gt_qpos[start], clip.gt_qvel[start])
         lo, hi = cfg.root_speed_range
         self._root_speed = float(self.np_random.uniform(lo, hi)) if hi > lo else float(lo)
+        lo, hi = cfg.lean_range_deg
+        self._lean_deg = float(self.np_random.uniform(lo, hi)) if hi > lo else float(lo)
         # the estimated root is integrated from the clip's first frame; an episode follows it
         # from where the episode starts (the ground truth there), not with the drift before
         self._per_clip_arrays(clip, i)
@@ -314,6 +317,13 @@ class GripTrackingEnv(gym.Env):
             O.scale_root_speed(out, self._root_speed)
         out[0, _ROOT] += offset
 
+    def _lean(self, t: int) -> np.ndarray | None:
+        """``(3, 3)`` the episode's lean of frame ``t``'s followed upper body
+        (``cfg.lean_range_deg``; None: upright)."""
+        if self._lean_deg == 0.0:
+            return None
+        return O.forward_lean(self._est.est.est_rot[t, 0], self._lean_deg)
+
     def _amp_frame(self, pvw: np.ndarray, rot: np.ndarray) -> np.ndarray:
         """The AMP frame of the simulated state (:func:`grip.task.amp.amp_frame`)."""
         sim = self._sim
@@ -339,6 +349,9 @@ class GripTrackingEnv(gym.Env):
         est, cfg = self._est, self.cfg
         er = self._est_row
         self._followed_rows(est, t, self._root_offset, er)
+        lean = self._lean(t)
+        if lean is not None:
+            O.lean_rows(er, lean[None])
         pvw, rot = pvw[None], rot[None]
         if h is None:
             h = O.heading_matrices(rot[:, 0])
@@ -377,7 +390,7 @@ class GripTrackingEnv(gym.Env):
                              f"{a.shape}")  # fmt: skip
         t = self._t + 1
         sim.set_targets(self._est.pd_target(a, t, self._relative, self._action_gain, sim.lo,
-                                            sim.half))  # fmt: skip
+                                            sim.half, self._lean(t)))  # fmt: skip
         if cfg.pin_root:
             sim.step_pinned(clip.gt_qpos[t - 1], clip.gt_qpos[t], clip.gt_qvel[t, :6])
         else:

@@ -35,11 +35,12 @@ _DISC = ("disc", "amp_frame_dim")
 
 def _driving_settings(cfg: TrackingEnvConfig) -> TrackingEnvConfig:
     """The settings that decide how a policy's actions move the humanoid (reward, reference
-    file and the root-speed augmentation blanked: inference builds its own reference, never
-    computes a reward and follows the root as it is)."""
+    file and the root-speed and lean augmentations blanked: inference builds its own
+    reference, never computes a reward and follows the estimate as it is)."""
     d = TrackingEnvConfig()
     return dataclasses.replace(cfg, reward=d.reward, reference="",
-                               root_speed_range=d.root_speed_range)  # fmt: skip
+                               root_speed_range=d.root_speed_range,
+                               lean_range_deg=d.lean_range_deg)  # fmt: skip
 
 
 def check_same_driving(policies: Sequence, names: Sequence[str]) -> None:

@@ -71,13 +71,14 @@ RESUMABLE: tuple[str, ...] = (
     "ppo.n_envs", "ppo.learning_rate", "ppo.n_steps", "ppo.batch_size", "ppo.n_epochs",
     "ppo.gae_lambda", "ppo.clip_range", "ppo.ent_coef", "ppo.vf_coef", "ppo.max_grad_norm",
     "ppo.critic_warmup_steps", "amp.real_sampling", "env.reward.weights.amp",
-    "env.root_speed_range",
+    "env.root_speed_range", "env.lean_range_deg",
 )  # fmt: skip
 """Settings (dotted prefixes) that may differ when a run is resumed: the optimiser's and the
 rollout's layout (a resumed run takes them from the config, not from its checkpoint), the
 threads of the update and of the physics (a run moved to a machine with more cores), the
 termination curriculum, stage 2, and how the style reward is made (the real windows' sampler,
-AMP on or off: a fork of a run's checkpoint may A/B them), and the root-speed augmentation."""
+AMP on or off: a fork of a run's checkpoint may A/B them), and the root-speed and lean
+augmentations."""
 
 
 def episodes_by_category(counts: Iterable[tuple[str, int, int]]) -> dict[str, list[int]]:

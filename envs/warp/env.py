@@ -100,9 +100,10 @@ class WarpTrackingEnv:
     def __init__(self, cfg: TrackingEnvConfig, reference: ReferenceSource, num_envs: int,
                  device: str = "cpu", seed: int = 0, nconmax: int | None = None,
                  njmax: int | None = None) -> None:  # fmt: skip
-        if cfg.pin_root or cfg.teacher_obs or tuple(cfg.root_speed_range) != (1.0, 1.0):
-            raise ValueError("WarpTrackingEnv: pin_root, teacher_obs and root_speed_range are "
-                             "CPU-only settings")  # fmt: skip
+        if (cfg.pin_root or cfg.teacher_obs or tuple(cfg.root_speed_range) != (1.0, 1.0)
+                or tuple(cfg.lean_range_deg) != (0.0, 0.0)):
+            raise ValueError("WarpTrackingEnv: pin_root, teacher_obs, root_speed_range and "
+                             "lean_range_deg are CPU-only settings")  # fmt: skip
         if cfg.amp_window < 1:
             raise ValueError("WarpTrackingEnv needs amp_window >= 1 (the AMP reward)")
         if num_envs < 1:

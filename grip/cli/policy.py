@@ -369,10 +369,11 @@ def _warp_settings(cfg, device: str):
     from envs.warp import warp_available
     from grip.cli.errors import CliError
 
-    if tuple(cfg.env.root_speed_range) != (1.0, 1.0):
-        raise CliError(f"env.root_speed_range = {list(cfg.env.root_speed_range)} is a setting of "
-                       "the CPU environments only (WarpTrackingEnv follows the root as it is): "
-                       "train with --backend cpu, or leave it at [1, 1]")  # fmt: skip
+    for key, off in (("root_speed_range", (1.0, 1.0)), ("lean_range_deg", (0.0, 0.0))):
+        if tuple(getattr(cfg.env, key)) != off:
+            raise CliError(f"env.{key} = {list(getattr(cfg.env, key))} is a setting of the CPU "
+                           "environments only (WarpTrackingEnv follows the estimate as it is): "
+                           f"train with --backend cpu, or leave it at {list(off)}")  # fmt: skip
     if not warp_available():
         raise CliError("--backend warp needs mujoco-warp and warp-lang: pip install -e .[gpu]")
     import warp as wp

@@ -120,6 +120,15 @@ class TrackingEnvConfig:
             times ``f``. A controller trained on references whose root always agrees with the
             gait reads its pace from the pose and ignores the root (docs/pace.md § root speed);
             decorrelating the two makes covering the followed root's ground worth reading it.
+        lean_range_deg: ``(lo, hi)``: each episode's followed upper body leans ``d`` degrees
+            forward (negative: back) about the pelvis, across the estimated pelvis' facing
+            direction, ``d`` drawn uniformly from the range at every reset, in the observation
+            (:func:`grip.task.observations.lean_rows`) and in a relative action's PD target (the
+            spine's hinges, :func:`grip.task.observations.lean_hinges`), while the truth the
+            reward compares with and the followed root stay: the estimated trunk's lean sets the
+            humanoid's pace (docs/pace.md § The trunk's lean), and an estimate's trunk leans a
+            few degrees off the walker's; trained so, the pace is paid whatever the lean
+            (docs/pace.md, hypothesis 12 b). Not with ``teacher_obs``.
             ``(1, 1)`` (the default): off.
         align_root_xy: Compare joint positions with the ground truth (imitation reward and
             termination) after shifting the simulated body horizontally so that its pelvis is
@@ -182,6 +191,7 @@ class TrackingEnvConfig:
     fall_below_reference_m: float = 0.0
     termination_root_gap_m: float = 0.0
     root_speed_range: tuple[float, float] = (1.0, 1.0)
+    lean_range_deg: tuple[float, float] = (0.0, 0.0)
     align_root_xy: bool = True
     random_start: bool = True
     clip_index: int = -1
@@ -219,6 +229,12 @@ class TrackingEnvConfig:
              and 0.5 <= self.root_speed_range[0] <= self.root_speed_range[1] <= 2.0,
              f"root_speed_range must be (lo, hi) with 0.5 <= lo <= hi <= 2, got "
              f"{self.root_speed_range}"),
+            (len(self.lean_range_deg) == 2
+             and -15.0 <= self.lean_range_deg[0] <= self.lean_range_deg[1] <= 15.0,
+             f"lean_range_deg must be (lo, hi) with -15 <= lo <= hi <= 15, got "
+             f"{self.lean_range_deg}"),
+            (not self.teacher_obs or tuple(self.lean_range_deg) == (0.0, 0.0),
+             "lean_range_deg leans the estimate a student follows: not with teacher_obs"),
             (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from grip.core import skeleton as sk
-from grip.core.rotations import matrix_to_euler
+from grip.core.rotations import axis_angle_to_matrix, matrix_to_euler
 
 IMU_JOINTS: tuple[int, ...] = (
     sk.IMU_BODY["L_Foot"], sk.IMU_BODY["R_Foot"], sk.IMU_BODY["L_Wrist"], sk.IMU_BODY["R_Wrist"],
@@ -430,29 +430,72 @@ UPPER_BODY: tuple[int, ...] = (3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 
 _UPPER_VEL = [i for i, j in enumerate(sk.VELOCITY_JOINTS) if j in UPPER_BODY]
 
 
+def _turned_upper(pos: np.ndarray, vel: np.ndarray,
+                  lean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """New ``pos (..., 24, 3)`` root-relative joints and ``vel (..., 6, 3)`` velocity joints'
+    velocities with :data:`UPPER_BODY` turned by ``lean (..., 3, 3)`` about the pelvis (the
+    upper velocities relative to the pelvis', the last row)."""
+    up = list(UPPER_BODY)
+    pos, vel = pos.copy(), vel.copy()
+    pos[..., up, :] = np.einsum("...ij,...kj->...ki", lean, pos[..., up, :])
+    rel = vel[..., _UPPER_VEL, :] - vel[..., -1:, :]
+    vel[..., _UPPER_VEL, :] = vel[..., -1:, :] + np.einsum("...ij,...kj->...ki", lean, rel)
+    return pos, vel
+
+
 def leaned(pos: np.ndarray, rot: np.ndarray, vel: np.ndarray,
            lean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """An estimate's upper body (:data:`UPPER_BODY`) turned by ``lean (..., 3, 3)`` about the
     pelvis, one frame or ``(T, ...)`` frames: ``pos (..., 24, 3)`` root-relative joints, ``rot
     (..., 24, 3, 3)`` global rotations and ``vel (..., 6, 3)`` the velocity joints' (the upper
     ones turned relative to the pelvis', the last row); new arrays, the inputs untouched."""
+    pos, vel = _turned_upper(pos, vel, lean)
+    rot = rot.copy()
     up = list(UPPER_BODY)
-    pos, rot, vel = pos.copy(), rot.copy(), vel.copy()
-    pos[..., up, :] = np.einsum("...ij,...kj->...ki", lean, pos[..., up, :])
     rot[..., up, :, :] = lean[..., None, :, :] @ rot[..., up, :, :]
-    rel = vel[..., _UPPER_VEL, :] - vel[..., -1:, :]
-    vel[..., _UPPER_VEL, :] = vel[..., -1:, :] + np.einsum("...ij,...kj->...ki", lean, rel)
     return pos, rot, vel
 
 
+def forward_lean(root_rot: np.ndarray, deg) -> np.ndarray:
+    """``(..., 3, 3)`` rotations that lean a body ``deg`` (one number, or one per leading row;
+    negative: back) forward about the horizontal axis across the facing direction of pelvis
+    rotations ``root_rot (..., 3, 3)`` (:func:`heading_matrices`' x axis)."""
+    f = heading_matrices(root_rot)[..., :2, 0]
+    axis = np.stack([-f[..., 1], f[..., 0], np.zeros(f.shape[:-1])], axis=-1)  # z x forward
+    return axis_angle_to_matrix(axis * np.radians(np.asarray(deg, dtype=np.float64))[..., None])
+
+
+_UPPER_IMU = [k for k, j in enumerate(IMU_JOINTS) if j in UPPER_BODY]
+
+
+def lean_rows(est_rows: np.ndarray, lean: np.ndarray) -> None:
+    """Turn the upper body of rows of :attr:`EstimateFrames.obs_rows` (``est_rows (B,
+    OBS_ROW_DIM)``) by ``lean (B, 3, 3)`` about the pelvis, in place: the joints and velocity
+    joints as :func:`leaned` turns them, and the rotations and angular velocities of the IMUs
+    on the upper body (the wrists) as a constant turn changes them. The training task's lean
+    augmentation (``TrackingEnvConfig.lean_range_deg``)."""
+    b, r = len(est_rows), OBS_ROW
+    pos, vel = _turned_upper(est_rows[:, r["est_pos"]].reshape(b, sk.N_JOINTS, 3),
+                             est_rows[:, r["est_vel"]].reshape(b, _N_VEL, 3), lean)  # fmt: skip
+    est_rows[:, r["est_pos"]] = pos.reshape(b, -1)
+    est_rows[:, r["est_vel"]] = vel.reshape(b, -1)
+    rot = est_rows[:, r["leaf_rot"]].reshape(b, _N_IMU, 3, 3)
+    w = est_rows[:, r["leaf_angvel"]].reshape(b, _N_IMU, 3)
+    rot[:, _UPPER_IMU] = lean[:, None] @ rot[:, _UPPER_IMU]
+    w[:, _UPPER_IMU] = np.einsum("bij,bkj->bki", lean, w[:, _UPPER_IMU])
+    est_rows[:, r["leaf_rot"]] = rot.reshape(b, -1)
+    est_rows[:, r["leaf_angvel"]] = w.reshape(b, -1)
+
+
 def lean_hinges(global_rot: np.ndarray, lean: np.ndarray) -> np.ndarray:
-    """``(69,)`` the change of the hinge angles when the upper body of a pose with ``(24, 3,
-    3)`` global rotations turns by ``lean (3, 3)`` about the pelvis: only the first spine
-    joint's local rotation changes (its three angles' change, each wrapped to [-pi, pi])."""
+    """``(..., 69)`` the change of the hinge angles when the upper body of a pose with ``(...,
+    24, 3, 3)`` global rotations turns by ``lean (..., 3, 3)`` about the pelvis: only the first
+    spine joint's local rotation changes (its three angles' change, each wrapped to [-pi,
+    pi])."""
     j = UPPER_BODY[0]
-    parent = global_rot[sk.PARENTS[j]].T
-    local = np.stack([parent @ global_rot[j], parent @ lean @ global_rot[j]])
-    e = matrix_to_euler(local, sk.HINGE_ORDERS[j])
-    out = np.zeros(3 * (sk.N_JOINTS - 1))
-    out[3 * (j - 1) : 3 * j] = np.angle(np.exp(1j * (e[1] - e[0])))
+    parent = np.swapaxes(global_rot[..., sk.PARENTS[j], :, :], -1, -2)
+    g = global_rot[..., j, :, :]
+    e = matrix_to_euler(np.stack([parent @ g, parent @ lean @ g]), sk.HINGE_ORDERS[j])
+    out = np.zeros((*np.shape(lean)[:-2], 3 * (sk.N_JOINTS - 1)))
+    out[..., 3 * (j - 1) : 3 * j] = np.angle(np.exp(1j * (e[1] - e[0])))
     return out

@@ -41,12 +41,15 @@ def _batched(cfg, reference, seeds, threads):
 
 @pytest.mark.parametrize(("repeat", "threads", "align", "variant"),
                          [(3, 2, True, "OAV_Jrel_root"), (1, 1, False, "OAV_Jrel"),
-                          (3, 1, True, "OAV_Jrel_root@speed")])
+                          (3, 1, True, "OAV_Jrel_root@speed"),
+                          (2, 2, True, "OAV_Jrel_root@speed,lean")])
 def test_batched_matches_separate_envs(reference, repeat, threads, align, variant):
     weights = RewardWeights(root_vel=0.05, root_pos=0.1)  # (the pace terms count)
-    variant, speed = variant.partition("@")[::2]  # ("@speed": a random root speed per episode)
+    # "@speed": a random root speed per episode; "lean": a random lean of the followed trunk
+    variant, tags = variant.partition("@")[::2]
     cfg = TrackingEnvConfig(
-        root_speed_range=(0.8, 1.25) if speed else (1.0, 1.0),
+        root_speed_range=(0.8, 1.25) if "speed" in tags else (1.0, 1.0),
+        lean_range_deg=(-8.0, 8.0) if "lean" in tags else (0.0, 0.0),
         action_repeat=repeat,
         termination_dist_m=0.15,
         max_episode_frames=40,
