@@ -436,11 +436,14 @@ def test_a_teacher_run_follows_the_ground_truth(built: Path, tmp_path: Path, cap
     assert "follow different references" in capsys.readouterr().err
 
 
-def test_the_warp_backend_refuses_the_root_speed_augmentation(tmp_path: Path, capsys) -> None:
-    """``env.root_speed_range`` is built in the CPU environments only: ``--backend warp``
-    refuses it before anything is read or built."""
+@pytest.mark.parametrize("setting", ["env.root_speed_range=[0.9,1.1]",
+                                     "env.lean_range_deg=[-5,5]"])
+def test_the_warp_backend_refuses_the_cpu_augmentations(tmp_path: Path, capsys,
+                                                        setting: str) -> None:  # fmt: skip
+    """``env.root_speed_range`` and ``env.lean_range_deg`` are built in the CPU environments
+    only: ``--backend warp`` refuses them before anything is read or built."""
     args = ["policy", "train", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "r"),
-            "--backend", "warp", "--set", "env.root_speed_range=[0.9,1.1]"]  # fmt: skip
+            "--backend", "warp", "--set", setting]  # fmt: skip
     assert main(args) == 2
-    assert "root_speed_range" in capsys.readouterr().err
+    assert setting.split("=")[0] in capsys.readouterr().err
     assert not (tmp_path / "r").exists()

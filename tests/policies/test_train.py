@@ -104,15 +104,17 @@ def test_resume_extends_the_last_stage(run, tmp_path):
     assert tr3.model.learning_rate == 1e-5 and tr3.model.n_epochs == 2
     assert tr3.model.clip_range(1.0) == pytest.approx(0.1)
     assert tr3.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1e-5)
-    # and its rollout's layout (environments x steps) and root-speed augmentation too
+    # and its rollout's layout (environments x steps) and root-speed and lean augmentations
     copy3 = tmp_path / "resumed_layout"
     shutil.copytree(path, copy3)
     wider = dataclasses.replace(longer, ppo=dataclasses.replace(cfg.ppo, n_envs=4, n_steps=16),
-                                env=dataclasses.replace(cfg.env, root_speed_range=(0.9, 1.1)))
+                                env=dataclasses.replace(cfg.env, root_speed_range=(0.9, 1.1),
+                                                        lean_range_deg=(-5.0, 5.0)))
     tr4 = PolicyTrainer(wider, copy3, SAMPLE_REFERENCE, make_tracking_env)
     tr4.train()
     assert tr4.model.n_envs == 4 and tr4.model.n_steps == 16
     assert tr4.cfg.env.root_speed_range == (0.9, 1.1)
+    assert tr4.cfg.env.lean_range_deg == (-5.0, 5.0)
     assert tr4.total_done() == 128 + 128
     assert tr4.history[len(tr.history)]["timesteps"] == tr.history[-1]["timesteps"] + 64
 
