@@ -146,16 +146,15 @@ def leaned_clip(clip, deg: float):
 
     from scipy.ndimage import uniform_filter1d
 
-    from grip.core.rotations import axis_angle_to_matrix, matrix_to_6d
-    from grip.task.observations import leaned
+    from grip.core.rotations import matrix_to_6d
+    from grip.task.observations import lean_towards, leaned
 
     v = uniform_filter1d(clip.gt_vel[:, 0, :2], size=max(1, round(clip.fps)), axis=0)
     mean = clip.gt_vel[:, 0, :2].mean(axis=0)
     mean = mean / np.linalg.norm(mean) if np.linalg.norm(mean) > 1e-6 else np.array([1.0, 0.0])
     speed = np.linalg.norm(v, axis=1, keepdims=True)
     fwd = np.where(speed > 0.1, v / np.maximum(speed, 1e-9), mean)
-    axis = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)  # z x forward
-    rot = axis_angle_to_matrix(axis * np.radians(deg))  # (T, 3, 3): z turns towards forward
+    rot = lean_towards(fwd, deg)  # (T, 3, 3): z turns towards forward
     pos, glob, vel = leaned(clip.est_pos, clip.est_rot, clip.est_vel, rot)
     return dataclasses.replace(clip, est_pos=pos, est_rot6d=matrix_to_6d(glob), est_vel=vel)
 

@@ -37,11 +37,10 @@ from grip.core.checks import check
 from grip.core.metrics import global_to_local_rot
 from grip.core.reconstruction import Reconstruction
 from grip.core.reference import ground_truth_arrays, pose_vector
-from grip.core.rotations import axis_angle_to_matrix
 from grip.kinematics.features import Calibration
 from grip.sim.humanoid import Humanoid
 from grip.task import amp as A
-from grip.task.observations import EstimateFrames, heightmap_grid
+from grip.task.observations import EstimateFrames, heightmap_grid, lean_towards
 
 CONTACT_FORCE_N = 20.0
 """A foot is in contact when the vertical ground reaction force on it exceeds this (the same
@@ -147,7 +146,7 @@ class PaceKeeper:
         deg = min(self.lean_gain_deg * behind, self.lean_max_deg)
         if deg <= 0.0:
             return None
-        return axis_angle_to_matrix(np.array([-f[1], f[0], 0.0]) * np.radians(deg))
+        return lean_towards(f, deg)
 
     def lead(self, followed_xy: np.ndarray, sim_xy: np.ndarray) -> np.ndarray:
         """``(2,)`` the lead added to the followed pelvis' horizontal position, m."""

@@ -456,13 +456,19 @@ def leaned(pos: np.ndarray, rot: np.ndarray, vel: np.ndarray,
     return pos, rot, vel
 
 
-def forward_lean(root_rot: np.ndarray, deg) -> np.ndarray:
-    """``(..., 3, 3)`` rotations that lean a body ``deg`` (one number, or one per leading row;
-    negative: back) forward about the horizontal axis across the facing direction of pelvis
-    rotations ``root_rot (..., 3, 3)`` (:func:`heading_matrices`' x axis)."""
-    f = heading_matrices(root_rot)[..., :2, 0]
+def lean_towards(forward_xy: np.ndarray, deg) -> np.ndarray:
+    """``(..., 3, 3)`` rotations about the horizontal axis across the unit horizontal
+    directions ``forward_xy (..., 2)`` that turn the vertical ``deg`` (one number, or one per
+    leading row; negative: away) towards them: a lean forward about the pelvis."""
+    f = np.asarray(forward_xy, dtype=np.float64)
     axis = np.stack([-f[..., 1], f[..., 0], np.zeros(f.shape[:-1])], axis=-1)  # z x forward
     return axis_angle_to_matrix(axis * np.radians(np.asarray(deg, dtype=np.float64))[..., None])
+
+
+def forward_lean(root_rot: np.ndarray, deg) -> np.ndarray:
+    """:func:`lean_towards` the facing direction of pelvis rotations ``root_rot (..., 3, 3)``
+    (:func:`heading_matrices`' x axis)."""
+    return lean_towards(heading_matrices(root_rot)[..., :2, 0], deg)
 
 
 _UPPER_IMU = [k for k, j in enumerate(IMU_JOINTS) if j in UPPER_BODY]
