@@ -9,7 +9,11 @@ kinematics-only MPJPE (BEFORE's ``kinematics`` rows, else AFTER's; n/a without e
 events (falls, with ``--lost-gap`` the lost recoveries among them), the segments without any
 event (the bench's success) and those without a fall proper (events that are not lost
 recoveries). Segments are matched by name; a segment missing or failed in either folder is left
-out and counted. Only the two ``segments.csv`` files are read.
+out and counted. Only the two ``segments.csv`` files are read (a folder or the file itself).
+
+``--pose-by-events`` prints instead, for BEFORE and AFTER, the method's pose errors (PEL-MPJPE,
+MPJRE) and the kinematics-only ones on the same segments, over the segments without any event
+and over those with one or more: is the pose worse than the estimate only where it falls?
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from pathlib import Path
 
 
 def _rows(folder: Path, method: str) -> dict[str, dict]:
-    path = folder / "segments.csv"
+    path = folder if folder.suffix == ".csv" else folder / "segments.csv"
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
@@ -81,6 +85,35 @@ def compare(before: Path, after: Path, method: str = "grip") -> dict:
     return {"categories": out, "unmatched": len(set(a) ^ set(b))}
 
 
+def pose_by_events(folder: Path, method: str = "grip") -> dict:
+    """``{"no event" | "events": {"segments", "pel_mpjpe", "mpjre", "kin_pel_mpjpe",
+    "kin_mpjre"}}``: the method's mean pose errors and the kinematics-only ones on the same
+    segments, split by whether the method had any event (fall) in the segment."""
+    rows, kin = _rows(folder, method), _rows(folder, "kinematics")
+    out = {}
+    for name, keep in (("no event", lambda n: n == 0), ("events", lambda n: n > 0)):
+        segs = [s for s, r in rows.items() if keep(_count(r, "falls"))]
+        out[name] = {
+            "segments": len(segs),
+            "pel_mpjpe": _mean([_num(rows[s], "PEL_MPJPE_mm") for s in segs]),
+            "mpjre": _mean([_num(rows[s], "MPJRE_deg") for s in segs]),
+            "kin_pel_mpjpe": _mean([_num(kin.get(s), "PEL_MPJPE_mm") for s in segs]),
+            "kin_mpjre": _mean([_num(kin.get(s), "MPJRE_deg") for s in segs]),
+        }
+    return out
+
+
+def pose_table(results: dict[str, dict]) -> str:
+    lines = ["| folder | segments | PEL-MPJPE (mm) | MPJRE (deg) | kinematics only: PEL-MPJPE / "
+             "MPJRE |", "|---|---|---:|---:|---|"]  # fmt: skip
+    f = lambda x, d=0: "n/a" if math.isnan(x) else f"{x:.{d}f}"  # noqa: E731
+    for folder, res in results.items():
+        for name, r in res.items():
+            lines.append(f"| {folder} | {name}: {r['segments']} | {f(r['pel_mpjpe'])} | "
+                         f"{f(r['mpjre'], 1)} | {f(r['kin_pel_mpjpe'])} / {f(r['kin_mpjre'], 1)} |")
+    return "\n".join(lines)
+
+
 def table(res: dict) -> str:
     head = ("| category | segments | MPJPE before | MPJPE after | kinematics only | events "
             "(lost) | no event | no fall |")  # fmt: skip
@@ -100,7 +133,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("after", type=Path)
     ap.add_argument("--method", default="grip", help="the bench label to compare (default grip)")
     ap.add_argument("--json", type=Path, help="also write the numbers here")
+    ap.add_argument("--pose-by-events", action="store_true",
+                    help="pose errors of each folder over segments without and with events")
     args = ap.parse_args(argv)
+    if args.pose_by_events:
+        res = {str(d): pose_by_events(d, args.method) for d in (args.before, args.after)}
+        if not any(r["no event"]["segments"] + r["events"]["segments"] for r in res.values()):
+            print(f"no segment of method {args.method!r}", file=sys.stderr)
+            return 1
+        print(pose_table(res))
+        if args.json:
+            args.json.write_text(json.dumps(res, indent=1) + "\n")
+        return 0
     res = compare(args.before, args.after, args.method)
     if not res["categories"]:
         print(f"no segment of method {args.method!r} in both folders", file=sys.stderr)

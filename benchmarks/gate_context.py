@@ -23,7 +23,7 @@ import numpy as np
 from grip.cli.recordings import kin_checkpoint
 from grip.kinematics.dataset import load_split_sequences
 from grip.kinematics.inference import KinematicsEstimator
-from policies.gate import fit_gate
+from policies.gate import fit_gate, route_counts
 
 
 def with_context(x: np.ndarray, window: int) -> np.ndarray:
@@ -45,14 +45,8 @@ def with_context(x: np.ndarray, window: int) -> np.ndarray:
 
 def family_shares(gate, xs, cats) -> dict[str, float]:
     """Per category, the share of its frames routed to its own trained route."""
-    hit: dict[str, list[int]] = {}
-    for x, c in zip(xs, cats, strict=True):
-        r = gate.routes(x.astype(np.float32))
-        want = gate.route_of(c)
-        h = hit.setdefault(c, [0, 0])
-        h[0] += int(np.sum(r == want))
-        h[1] += len(r)
-    return {c: h[0] / h[1] for c, h in sorted(hit.items())}
+    return {c: float(n[gate.route_of(c)] / n.sum())
+            for c, n in route_counts(gate, xs, cats).items()}  # fmt: skip
 
 
 def main() -> None:

@@ -268,6 +268,19 @@ def write_gated_policy(files: Sequence, gate: Gate, out, precision: str | None =
     return write_policy_file(kept, names, out, gate=gate_payload(gate))
 
 
+def route_counts(
+    gate: Gate, features: Sequence[np.ndarray], categories: Sequence[str]
+) -> dict[str, np.ndarray]:
+    """Per category (sorted), ``(routes,)`` how many of its frames the gate sends to each
+    route."""
+    routes = len(gate.families) + 1
+    counts: dict[str, np.ndarray] = {}
+    for f, c in zip(features, categories, strict=True):
+        n = np.bincount(gate.routes(f), minlength=routes)
+        counts[c] = counts.get(c, 0) + n
+    return dict(sorted(counts.items()))
+
+
 def route_table(
     gate: Gate,
     features: Sequence[np.ndarray],
@@ -275,20 +288,15 @@ def route_table(
     route_names: Sequence[str],
 ) -> str:
     """Markdown: per category, its frames, the route it is trained to take and the share of its
-    frames the gate sends to each route."""
-    from collections import defaultdict
-
-    counts: dict[str, np.ndarray] = defaultdict(lambda: np.zeros(len(route_names)))
-    for f, c in zip(features, categories, strict=True):
-        counts[c] += np.bincount(gate.routes(f), minlength=len(route_names))
+    frames the gate sends to each route (:func:`route_counts`)."""
+    counts = route_counts(gate, features, categories)
     head = (
         "| category | frames | trained route | "
         + " | ".join(f"to {n} %" for n in route_names)
         + " |"
     )
     lines = [head, "|---|---:|---|" + "---:|" * len(route_names)]
-    for c in sorted(counts):
-        n = counts[c]
+    for c, n in counts.items():
         lines.append(
             f"| {c} | {int(n.sum())} | {route_names[gate.route_of(c)]} | "
             + " | ".join(f"{100 * v / max(n.sum(), 1):.1f}" for v in n)

@@ -49,3 +49,19 @@ def test_categories_events_and_the_unmatched(bc, tmp_path, capsys) -> None:
     assert bc.main([str(before), str(after), "--method", "pip"]) == 1
     with pytest.raises(SystemExit, match="cannot read"):
         bc.main([str(before), str(tmp_path / "missing")])
+
+
+def test_pose_by_events_splits_segments_by_falls(bc, tmp_path, capsys) -> None:
+    head = "method,segment,category,status,falls,PEL_MPJPE_mm,MPJRE_deg\n"
+    rows = ["grip,s1,walk,ok,0,60,16", "grip,s2,walk,ok,0,80,20", "grip,s3,jump,ok,2,150,30",
+            "grip,s4,jump,failed,0,1,1", "kinematics,s1,walk,ok,0,40,9",
+            "kinematics,s2,walk,ok,0,50,11", "kinematics,s3,jump,ok,0,100,18"]  # fmt: skip
+    csv_file = tmp_path / "a_segments.csv"
+    csv_file.write_text(head + "".join(r + "\n" for r in rows))
+    res = bc.pose_by_events(csv_file)
+    assert res["no event"] == {"segments": 2, "pel_mpjpe": 70, "mpjre": 18, "kin_pel_mpjpe": 45,
+                               "kin_mpjre": 10}  # fmt: skip
+    assert res["events"]["segments"] == 1 and res["events"]["kin_mpjre"] == 18
+    assert bc.main([str(csv_file), str(csv_file), "--pose-by-events"]) == 0
+    assert "| no event: 2 | 70 | 18.0 | 45 / 10.0 |" in capsys.readouterr().out
+    assert bc.main([str(csv_file), str(csv_file), "--pose-by-events", "--method", "pip"]) == 1

@@ -19,7 +19,7 @@ def _features(rng, n: int, centre: float) -> np.ndarray:
 
 
 def test_fit_gate_routes_each_family_and_refuses_an_empty_route():
-    from policies.gate import fit_gate
+    from policies.gate import fit_gate, route_counts
 
     rng = np.random.default_rng(0)
     feats = [_features(rng, 400, 3.0), _features(rng, 60, -3.0), _features(rng, 60, 0.0)]
@@ -30,6 +30,9 @@ def test_fit_gate_routes_each_family_and_refuses_an_empty_route():
     test = [_features(rng, 50, c) for c in (3.0, -3.0, 0.0)]
     for want, x in enumerate(test):
         assert np.mean(gate.routes(x) == want) > 0.9  # the rare routes learnt despite 60 frames
+    counts = route_counts(gate, [*test, test[1]], ["walk", "sit-stand", "jump", "sit-stand"])
+    assert list(counts) == ["jump", "sit-stand", "walk"]  # sorted, one entry per category
+    assert counts["sit-stand"].sum() == 100 and counts["sit-stand"].argmax() == 1
     with pytest.raises(ValueError, match=r"no training frames.*dance"):
         fit_gate(feats, cats, [("dance",)], steps=1)
     with pytest.raises(ValueError, match="width"):
