@@ -3,14 +3,14 @@
 The gate of ``grip policy combine --gate`` classifies each frame's sensor features alone. On the
 test people it sends only a third of the sideways-walking frames to their controller
 (docs/teacher_student.md § R2 measured). This benchmark fits the same gate
-(:func:`policies.gate.fit_gate`) on features with causal context appended (each feature's mean
-and standard deviation over the last ``W`` frames, available at run time from a ring buffer),
+(:func:`policies.gate.fit_gate`) with causal context (``window``: each feature's mean and
+standard deviation over the last ``W`` frames, the ``sensor_context`` observation at run time),
 and prints the routes on the train and the test split for each window, without simulation:
 
     python benchmarks/gate_context.py --data DATA --gate walk-back,walk-side --windows 1 30 60 \
         [--json F]
 
-``W = 1`` is today's gate (the frame alone).
+``W = 1`` is the frame alone (``grip policy combine --gate-window 1``).
 """
 
 from __future__ import annotations
@@ -18,29 +18,10 @@ from __future__ import annotations
 import argparse
 import json
 
-import numpy as np
-
 from grip.cli.recordings import kin_checkpoint
 from grip.kinematics.dataset import load_split_sequences
 from grip.kinematics.inference import KinematicsEstimator
 from policies.gate import fit_gate, route_counts
-
-
-def with_context(x: np.ndarray, window: int) -> np.ndarray:
-    """``(T, F)`` features -> ``(T, 3F)``: the frame, and the mean and standard deviation of
-    each feature over the last ``window`` frames up to and including it (fewer at the start).
-    ``window = 1`` returns ``x`` unchanged."""
-    x = np.asarray(x, np.float64)
-    if window <= 1:
-        return x
-    c1 = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x]), 0)
-    c2 = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x * x]), 0)
-    t = np.arange(1, len(x) + 1)
-    lo = np.maximum(t - window, 0)
-    n = (t - lo)[:, None]
-    mean = (c1[t] - c1[lo]) / n
-    var = np.maximum((c2[t] - c2[lo]) / n - mean * mean, 0.0)
-    return np.hstack([x, mean, np.sqrt(var)])
 
 
 def family_shares(gate, xs, cats) -> dict[str, float]:
@@ -66,9 +47,8 @@ def main() -> None:
     test = load_split_sequences(args.data, "test", feats)
     out: dict[str, dict] = {}
     for w in args.windows:
-        tr = [with_context(s.x, w) for s in train]
-        te = [with_context(s.x, w) for s in test]
-        gate, _ = fit_gate(tr, [s.category for s in train], fams, steps=args.steps)
+        tr, te = [s.x for s in train], [s.x for s in test]
+        gate, _ = fit_gate(tr, [s.category for s in train], fams, steps=args.steps, window=w)
         out[str(w)] = {"train": family_shares(gate, tr, [s.category for s in train]),
                        "test": family_shares(gate, te, [s.category for s in test])}  # fmt: skip
         print(f"\nwindow {w} frames: share of each category's frames on its trained route")

@@ -344,6 +344,10 @@ class BatchedTrackingEnv:
             "self": self_vec,
             "environment": hm.astype(np.float32),
         }
+        if cfg.sensor_context:  # (TrackingEnvConfig.sensor_context: a gate's context)
+            obs["sensor_context"] = np.stack([
+                O.sensor_context_at(e._est.est.sensor, t[i], cfg.sensor_context)
+                for i, e in enumerate(self.envs)])  # fmt: skip
         if cfg.teacher_obs:  # a privileged teacher's inputs (TrackingEnvConfig.teacher_obs)
             truth = [e._truth for e in self.envs]
             est_root = cfg.teacher_root == "estimate"  # (TrackingEnvConfig.teacher_root)

@@ -109,6 +109,8 @@ class GripTrackingEnv(gym.Env):
             "self": box(O.SELF_DIM),
             "environment": box(len(self._grid)),
         })  # fmt: skip
+        if cfg.sensor_context:  # (TrackingEnvConfig.sensor_context: a gate's context)
+            self.observation_space.spaces["sensor_context"] = box(2 * sensor_dim)
         if cfg.teacher_obs:  # (TrackingEnvConfig.teacher_obs: a privileged teacher's inputs)
             self.observation_space.spaces["teacher_kinematic"] = box(
                 O.kinematic_dim(cfg.kinematic_obs))
@@ -358,6 +360,8 @@ class GripTrackingEnv(gym.Env):
         block = np.empty(self._obs_size, np.float32)
         obs = {k: block[sl] for k, sl in self._obs_parts}
         obs["sensor"][:] = est.est.sensor[t]
+        if cfg.sensor_context:
+            obs["sensor_context"][:] = O.sensor_context_at(est.est.sensor, t, cfg.sensor_context)
         O.observation_rows(cfg.kinematic_obs, h, pvw, rot, er, obs["kinematic"][None],
                            obs["self"][None])  # fmt: skip
         root = pvw[0, 0, 0]

@@ -40,7 +40,7 @@ from grip.core.reference import ground_truth_arrays, pose_vector
 from grip.kinematics.features import Calibration
 from grip.sim.humanoid import Humanoid
 from grip.task import amp as A
-from grip.task.observations import EstimateFrames, heightmap_grid, lean_towards
+from grip.task.observations import EstimateFrames, heightmap_grid, lean_towards, sensor_context_at
 
 CONTACT_FORCE_N = 20.0
 """A foot is in contact when the vertical ground reaction force on it exceeds this (the same
@@ -274,6 +274,7 @@ class Player:
         self.pace = pace
         self._variant, self._relative = cfg.kinematic_obs, cfg.action_mode == "relative"
         self._feedforward, self._repeat = cfg.velocity_feedforward, cfg.action_repeat
+        self._context = cfg.sensor_context  # (a gate's window, TrackingEnvConfig.sensor_context)
         self._grid = heightmap_grid(cfg.heightmap_size, cfg.heightmap_extent_m)
         self._hm = np.zeros(len(self._grid))
         self._amp = A.AmpHistory(cfg.amp_window) if cfg.amp_window > 0 else None
@@ -345,8 +346,11 @@ class Player:
         if self.pace.gain > 0.0:
             off = off.copy()
             off[:2] += self.pace.lead(self.est.est_root_pos[t, :2] + off[:2], pvw[0, 0, :2])
-        return self._frames.observe(t, self._variant, pvw, rot, off, self._grid, self.h.terrain,
-                                    self._hm, self._lean(t, pvw))  # fmt: skip
+        obs = self._frames.observe(t, self._variant, pvw, rot, off, self._grid, self.h.terrain,
+                                   self._hm, self._lean(t, pvw))  # fmt: skip
+        if self._context:
+            obs["sensor_context"] = sensor_context_at(self.est.sensor, t, self._context)
+        return obs
 
     def _lean(self, t: int, pvw: np.ndarray) -> np.ndarray | None:
         """The lean keeper's rotation of frame ``t``'s followed upper body (None: none)."""

@@ -4,9 +4,13 @@ humanoid, the one a classifier of the wearables' features picks.
 Three students in a row, each distilled from a locomotion teacher and a specialist, kept the
 walks and lost the specialist's motions (docs/teacher_student.md); a gate keeps every member as
 it was trained. The gate reads only the ``"sensor"`` observation part (the KinematicsNet's
-input features of the frame: the IMUs and insoles), so it is trained from a dataset's
-recordings and their motion categories, without any simulation, and decides alike in training
-data, in ``grip policy eval`` and in a reconstruction. Route 0 is the default controller (every
+input features of the frame: the IMUs and insoles) and, with a context window, the
+``"sensor_context"`` part (each feature's mean and standard deviation over the recording's last
+``window`` frames, :attr:`grip.task.config.TrackingEnvConfig.sensor_context`), so it is trained
+from a dataset's recordings and their motion categories, without any simulation, and decides
+alike in training data, in ``grip policy eval`` and in a reconstruction. The context is the
+recording's, not the controller's: it needs no state, and a recovery or a new segment changes
+nothing of it. Route 0 is the default controller (every
 category no family names); route ``i`` the ``i``-th family's controller
 (:class:`policies.teachers.Specialist`, the ``--specialist`` syntax of ``grip policy
 distill``).
@@ -19,6 +23,7 @@ out of it.
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
+
+from grip.task.observations import sensor_context_rows
 
 GATE_KEY = "gate"
 """Where a policy file stores its gate (:func:`gate_payload`)."""
@@ -58,9 +65,13 @@ class Gate:
 
     Attributes:
         net: :func:`gate_network`.
-        mean, std: ``(F,)`` normaliser of the sensor features.
+        mean, std: Normaliser of the classifier's input: ``(F,)`` the sensor features of the
+            frame, or ``(3F,)`` with ``window > 1``: the frame's, then the context's
+            (:func:`grip.task.observations.sensor_context_rows`).
         families: The category globs of routes 1, 2, ... (route 0: every other category).
         hidden: The hidden layer sizes of ``net``.
+        window: Frames of context the classifier reads beside the frame (each feature's mean
+            and standard deviation over the last ``window`` frames); 1: the frame alone.
     """
 
     net: nn.Sequential
@@ -68,10 +79,24 @@ class Gate:
     std: np.ndarray
     families: list[tuple[str, ...]]
     hidden: tuple[int, ...]
+    window: int = 1
 
     @property
     def in_dim(self) -> int:
-        return int(self.mean.shape[0])
+        """The sensor features of one frame, F."""
+        n = int(self.mean.shape[0])
+        return n // 3 if self.window > 1 else n
+
+    def recording_inputs(self, x: np.ndarray) -> np.ndarray:
+        """The classifier's input rows of a whole recording's sensor features ``(T, F)``: the
+        frames, with their context when ``window > 1`` (what the environment's
+        ``sensor_context`` observation gives frame by frame)."""
+        x = np.asarray(x, np.float64)
+        return np.hstack([x, sensor_context_rows(x, self.window)]) if self.window > 1 else x
+
+    def recording_routes(self, x: np.ndarray) -> np.ndarray:
+        """``(T,)`` the route of every frame of a recording (:meth:`recording_inputs`)."""
+        return self.routes(self.recording_inputs(x))
 
     def route_of(self, category: str) -> int:
         """The route a clip of ``category`` is trained to take (:func:`route_of`)."""
@@ -79,7 +104,8 @@ class Gate:
 
     @torch.no_grad()
     def probabilities(self, sensor: np.ndarray) -> np.ndarray:
-        """``(B, routes)`` route probabilities of ``(B, F)`` sensor features."""
+        """``(B, routes)`` route probabilities of ``(B, in)`` classifier inputs (the sensor
+        features, with their context when ``window > 1``)."""
         z = (np.atleast_2d(np.asarray(sensor, np.float64)) - self.mean) / self.std
         return torch.softmax(self.net(torch.from_numpy(z.astype(np.float32))), -1).numpy()
 
@@ -91,12 +117,13 @@ class Gate:
 def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
              families: Sequence[Sequence[str]], hidden: Sequence[int] = (128, 128),
              steps: int = 3000, batch: int = 512, lr: float = 1e-3, noise: float = 0.05,
-             stride: int = 2, seed: int = 0,
+             stride: int = 2, seed: int = 0, window: int = 1,
              progress=None) -> tuple[Gate, list[float]]:  # fmt: skip
     """Train a gate on recordings' sensor features ``(T_i, F)`` and their categories: every
     ``stride``-th frame labelled with its category's route, the routes weighted to equal
     shares (the rare families are a few per cent of the frames), Gaussian noise of ``noise``
-    standard deviations on the normalised features.
+    standard deviations on the normalised features. With ``window > 1`` the classifier reads
+    each frame's context over the last ``window`` frames too (:attr:`Gate.window`).
 
     Returns:
         The gate and the loss of every step.
@@ -108,8 +135,11 @@ def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
         raise ValueError("a gate needs recordings, each with its category")
     if len({f.shape[-1] for f in features}) != 1:
         raise ValueError("the recordings' sensor features differ in width")
+    if window < 1:
+        raise ValueError(f"the gate's window must be >= 1 frame, got {window}")
     fams = [tuple(f) for f in families]
-    xs = [np.asarray(f, np.float64)[::stride] for f in features]
+    xs = [(np.hstack([f, sensor_context_rows(f, window)]) if window > 1 else f)[::stride]
+          for f in (np.asarray(f, np.float64) for f in features)]  # fmt: skip
     ys = [np.full(len(x), route_of(fams, c), np.int64) for x, c in zip(xs, categories, strict=True)]
     x, y = np.concatenate(xs), np.concatenate(ys)
     routes = len(fams) + 1
@@ -138,7 +168,7 @@ def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
         if progress is not None:
             progress(losses[-1])
     net.eval()
-    return Gate(net, mean, std, fams, tuple(int(h) for h in hidden)), losses
+    return Gate(net, mean, std, fams, tuple(int(h) for h in hidden), int(window)), losses
 
 
 def gate_payload(gate: Gate) -> dict:
@@ -147,6 +177,7 @@ def gate_payload(gate: Gate) -> dict:
         "format": GATE_FORMAT,
         "hidden": list(gate.hidden),
         "families": [list(f) for f in gate.families],
+        "window": int(gate.window),
         "mean": torch.from_numpy(gate.mean.astype(np.float64)),
         "std": torch.from_numpy(gate.std.astype(np.float64)),
         "net": {k: v.detach().clone() for k, v in gate.net.state_dict().items()},
@@ -164,16 +195,19 @@ def gate_from_payload(d: object, where: str) -> Gate:
             raise ValueError("not a gate")
         fams = [tuple(str(g) for g in f) for f in d["families"]]
         hidden = tuple(int(h) for h in d["hidden"])
+        window = int(d.get("window", 1))  # (gates before the context window read one frame)
         mean = d["mean"].double().numpy()
         std = d["std"].double().numpy()
         if mean.shape != std.shape or mean.ndim != 1 or not np.all(std > 0):
             raise ValueError("normaliser of the wrong shape or with a zero deviation")
+        if window < 1 or (window > 1 and mean.shape[0] % 3):
+            raise ValueError(f"a window of {window} frames over {mean.shape[0]} inputs")
         net = gate_network(int(mean.shape[0]), hidden, len(fams) + 1)
         net.load_state_dict(d["net"])
     except (KeyError, TypeError, AttributeError, RuntimeError, ValueError) as e:
         raise ValueError(f"{where}: malformed gate ({e})") from e
     net.eval()
-    return Gate(net, mean, std, fams, hidden)
+    return Gate(net, mean, std, fams, hidden, window)
 
 
 class GatedController:
@@ -202,11 +236,14 @@ class GatedController:
         self.gate = gate
         first = members[0]
         self.obs_keys = list(first.obs_keys)
-        self.env_cfg = first.env_cfg
+        # (a gate with context needs the environment's sensor_context observation part)
+        self.env_cfg = dataclasses.replace(first.env_cfg, sensor_context=gate.window
+                                           if gate.window > 1 else 0)  # fmt: skip
         self.amp_window = first.amp_window
         self.disc = first.disc
         self.info = dict(first.info, members=list(names),
-                         gate=["default"] + [",".join(f) for f in gate.families])  # fmt: skip
+                         gate=["default"] + [",".join(f) for f in gate.families],
+                         gate_window=gate.window)  # fmt: skip
         self.last_routes: np.ndarray | None = None
 
     def use_action_noise(self, scale: float, seed: int = 0) -> None:
@@ -222,6 +259,13 @@ class GatedController:
                 f"observation has {sensor.shape[-1]} (another sensor set?)"
             )
         single = sensor.ndim == 1
+        if self.gate.window > 1:
+            if "sensor_context" not in obs:
+                raise ValueError(f"the gate reads {self.gate.window} frames of context: build "
+                                 "the environment from the controller's env_cfg (its "
+                                 "sensor_context observation part)")  # fmt: skip
+            sensor = np.concatenate([np.atleast_2d(sensor),
+                                     np.atleast_2d(np.asarray(obs["sensor_context"]))], -1)
         routes = self.gate.routes(sensor)
         self.last_routes = routes
         if single:
@@ -276,7 +320,7 @@ def route_counts(
     routes = len(gate.families) + 1
     counts: dict[str, np.ndarray] = {}
     for f, c in zip(features, categories, strict=True):
-        n = np.bincount(gate.routes(f), minlength=routes)
+        n = np.bincount(gate.recording_routes(f), minlength=routes)
         counts[c] = counts.get(c, 0) + n
     return dict(sorted(counts.items()))
 

@@ -114,11 +114,21 @@ class ObservationMirror:
         if "environment" in obs:
             out["environment"] = np.asarray(obs["environment"])[..., self._hm_perm]
         if "sensor" in obs:
-            x = np.asarray(obs["sensor"], np.float32)
-            t = torch.from_numpy(np.ascontiguousarray(x.reshape(1, -1, x.shape[-1])))
-            m = mirror_features(t, self.sites, self.insoles).numpy()
-            out["sensor"] = m.reshape(x.shape).astype(np.float32)
+            out["sensor"] = self._features(obs["sensor"])
+        if "sensor_context" in obs:  # (a gate's: means mirror as features, deviations too,
+            x = np.asarray(obs["sensor_context"], np.float32)  # the mirror's signs dropped)
+            mean, sd = np.split(x, 2, axis=-1)
+            out["sensor_context"] = np.concatenate([self._features(mean),
+                                                    np.abs(self._features(sd))], -1)
         return out
+
+    def _features(self, x) -> np.ndarray:
+        """Sensor features ``(..., F)`` of the mirror image: a signed permutation
+        (:func:`grip.nn.symmetry.mirror_features`)."""
+        x = np.asarray(x, np.float32)
+        t = torch.from_numpy(np.ascontiguousarray(x.reshape(1, -1, x.shape[-1])))
+        m = mirror_features(t, self.sites, self.insoles).numpy()
+        return m.reshape(x.shape).astype(np.float32)
 
     @staticmethod
     def action(a: np.ndarray) -> np.ndarray:

@@ -75,8 +75,8 @@ class WarpTrackingEnv:
     """N tracking episodes on MuJoCo Warp.
 
     Args:
-        cfg: Settings (those of :class:`envs.tracking_env.GripTrackingEnv`; ``pin_root`` and
-            ``teacher_obs`` are not supported, ``amp_window`` must be >= 1).
+        cfg: Settings (those of :class:`envs.tracking_env.GripTrackingEnv`; ``pin_root``,
+            ``teacher_obs`` and ``sensor_context`` are not supported, ``amp_window`` must be >= 1).
         reference: The clips.
         num_envs: N, the worlds.
         device: A warp device name (``"cpu"``, ``"cuda"``, ``"cuda:0"``); torch tensors live on
@@ -100,10 +100,11 @@ class WarpTrackingEnv:
     def __init__(self, cfg: TrackingEnvConfig, reference: ReferenceSource, num_envs: int,
                  device: str = "cpu", seed: int = 0, nconmax: int | None = None,
                  njmax: int | None = None) -> None:  # fmt: skip
-        if (cfg.pin_root or cfg.teacher_obs or tuple(cfg.root_speed_range) != (1.0, 1.0)
+        if (cfg.pin_root or cfg.teacher_obs or cfg.sensor_context
+                or tuple(cfg.root_speed_range) != (1.0, 1.0)
                 or tuple(cfg.lean_range_deg) != (0.0, 0.0)):
-            raise ValueError("WarpTrackingEnv: pin_root, teacher_obs, root_speed_range and "
-                             "lean_range_deg are CPU-only settings")  # fmt: skip
+            raise ValueError("WarpTrackingEnv: pin_root, teacher_obs, sensor_context, "
+                             "root_speed_range and lean_range_deg are CPU-only settings")
         if cfg.amp_window < 1:
             raise ValueError("WarpTrackingEnv needs amp_window >= 1 (the AMP reward)")
         if num_envs < 1:

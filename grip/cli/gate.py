@@ -17,6 +17,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(default: the shipped one; the controllers' sensor observation)")
     p.add_argument("--gate-steps", type=int, default=3000, metavar="N",
                    help="with --gate: the classifier's training steps (default 3000)")
+    p.add_argument("--gate-window", type=int, default=60, metavar="FRAMES",
+                   help="with --gate: frames of context the classifier reads beside each frame "
+                   "(each sensor feature's mean and deviation over the last FRAMES; default "
+                   "60 = 0.6 s; 1: the frame alone)")  # fmt: skip
 
 
 def cmd_gate(args: argparse.Namespace) -> int:
@@ -39,6 +43,8 @@ def cmd_gate(args: argparse.Namespace) -> int:
         raise CliError("--gate needs --data: the dataset whose train split the gate learns from")
     if args.gate_steps < 1:
         raise CliError("--gate-steps must be positive")
+    if args.gate_window < 1:
+        raise CliError("--gate-window must be at least 1 frame")
     for f in files:
         if not f.is_file():
             raise CliError(f"{f}: no such policy file")
@@ -52,7 +58,7 @@ def cmd_gate(args: argparse.Namespace) -> int:
     if not train:
         raise CliError(f"{args.data}: no training recordings for the gate")
     print(f"{len(train)} training and {len(test)} test recordings, {train[0].x.shape[1]} "
-          f"sensor features per frame ({kin})")  # fmt: skip
+          f"sensor features per frame ({kin}), context {args.gate_window} frames")  # fmt: skip
     bar = tqdm(total=args.gate_steps, desc="gate", unit="step")
 
     def step(loss: float) -> None:
@@ -61,7 +67,8 @@ def cmd_gate(args: argparse.Namespace) -> int:
 
     try:
         gate, _ = fit_gate([s.x for s in train], [s.category for s in train], families,
-                           steps=args.gate_steps, progress=step)  # fmt: skip
+                           steps=args.gate_steps, window=args.gate_window,
+                           progress=step)  # fmt: skip
     except ValueError as e:
         raise CliError(f"{args.data}: {e}") from e
     finally:

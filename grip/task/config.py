@@ -166,6 +166,11 @@ class TrackingEnvConfig:
             training), and ``teacher_shift`` (69), the relative action that moves the PD target
             from the estimate's to the truth's (a teacher action ``a`` is the student action
             ``a + teacher_shift``). Not a training setting: policies never see these keys.
+        sensor_context: With ``W >= 2`` add the observation part ``sensor_context`` ``(2F)``:
+            each sensor feature's mean and standard deviation over the clip's last ``W`` frames
+            up to the observed one (:func:`grip.task.observations.sensor_context_at`), what a
+            gate with context reads (:class:`policies.gate.GatedController` sets it from its
+            gate); 0: off. Not a training setting: policies never see this key.
         teacher_root: With ``teacher_obs``: the pelvis position ``teacher_kinematic`` follows,
             ``"truth"`` (the truth's integrated root, as the teacher saw in training) or
             ``"estimate"`` (the root the student follows, the estimate's integrated one, with
@@ -206,6 +211,7 @@ class TrackingEnvConfig:
     amp_window: int = 10
     teacher_obs: bool = False
     teacher_root: str = "truth"
+    sensor_context: int = 0
     mjcf: MjcfConfig = field(default_factory=MjcfConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
 
@@ -235,6 +241,8 @@ class TrackingEnvConfig:
              f"{self.lean_range_deg}"),
             (not self.teacher_obs or tuple(self.lean_range_deg) == (0.0, 0.0),
              "lean_range_deg leans the estimate a student follows: not with teacher_obs"),
+            (self.sensor_context == 0 or self.sensor_context >= 2,
+             "sensor_context must be 0 (off) or a window of >= 2 frames"),
             (self.teacher_root in TEACHER_ROOTS, f"teacher_root must be one of {TEACHER_ROOTS}"),
             (min(self.blowup_lin_vel_mps, self.blowup_ang_vel_radps, self.blowup_height_m,
                  self.blowup_depth_m) > 0, "the blowup_* bounds must be > 0"),

@@ -281,6 +281,30 @@ OBS_ROW: dict[str, slice] = {
 OBS_ROW_DIM = int(_OBS_ENDS[-1])
 
 
+def sensor_context_rows(x: np.ndarray, window: int) -> np.ndarray:
+    """``(T, F)`` sensor features -> ``(T, 2F)``: each feature's mean and standard deviation
+    over the last ``window`` frames up to and including each frame (fewer at the start), the
+    context a gate reads beside the frame (:attr:`grip.task.config.TrackingEnvConfig.
+    sensor_context`; :func:`sensor_context_at` gives one row of it)."""
+    x = np.asarray(x, np.float64)
+    zero = np.zeros((1, x.shape[1]))
+    c1 = np.cumsum(np.vstack([zero, x]), 0)
+    c2 = np.cumsum(np.vstack([zero, x * x]), 0)
+    t = np.arange(1, len(x) + 1)
+    lo = np.maximum(t - max(int(window), 1), 0)
+    n = (t - lo)[:, None]
+    mean = (c1[t] - c1[lo]) / n
+    var = np.maximum((c2[t] - c2[lo]) / n - mean * mean, 0.0)
+    return np.hstack([mean, np.sqrt(var)])
+
+
+def sensor_context_at(x: np.ndarray, t: int, window: int) -> np.ndarray:
+    """Row ``t`` of :func:`sensor_context_rows` ``(2F,)`` float32, from frames ``t - window +
+    1 .. t`` of ``x (T, F)`` alone (a growing stream's frames after ``t`` are not read)."""
+    w = np.asarray(x[max(int(t) - max(int(window), 1) + 1, 0): int(t) + 1], np.float64)
+    return np.concatenate([w.mean(0), w.std(0)]).astype(np.float32)
+
+
 def observation_rows(
     variant: str,
     h: np.ndarray,

@@ -153,7 +153,11 @@ def test_grip_policy_gate_command(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "routes on the train split" in text and "routes on the test split" in text
     assert "| sit-stand | 150 | sit-stand |" in text and "2 controllers and their gate" in text
-    assert isinstance(load_controller(out), GatedController)
+    gated = load_controller(out)
+    assert isinstance(gated, GatedController) and gated.gate.window == 60  # (the default)
+    assert gated.env_cfg.sensor_context == 60
+    assert main([*argv, "--gate-window", "0"]) != 0
+    assert "--gate-window must be at least 1" in capsys.readouterr().err
     assert main(["policy", "combine", str(a), str(b), "--gate", "sit-stand", "--out",
                  str(out)]) != 0  # fmt: skip
     assert "--gate needs --data" in capsys.readouterr().err
@@ -166,3 +170,79 @@ def test_grip_policy_gate_command(tmp_path, capsys):
     assert main([*argv[:5], "dance", *argv[6:]]) != 0
     assert "no training frames" in capsys.readouterr().err
     assert json.loads((data / "split.json").read_text())["train"]  # (the data are untouched)
+
+
+def _sine_or_still(rng, n: int, moving: bool) -> np.ndarray:
+    """Feature 0 a sine of amplitude 1 (moving) or a constant drawn from [-1, 1] (still): one
+    frame's value tells the two apart badly, a second of frames at once."""
+    x = rng.normal(0.0, 0.03, (n, F))
+    x[:, 0] += np.sin(np.arange(n) * 2 * np.pi / 20) if moving else rng.uniform(-1, 1)
+    return x
+
+
+def test_a_gate_with_context_tells_apart_what_one_frame_cannot():
+    from policies.gate import fit_gate, gate_from_payload, gate_payload
+
+    rng = np.random.default_rng(3)
+    cats = ["walk"] * 30 + ["dance"] * 30  # (the still ones at 30 levels: none to learn by heart)
+    feats = [_sine_or_still(rng, 90, c == "dance") for c in cats]
+    test = [_sine_or_still(rng, 90, c == "dance") for c in cats]
+    share = {}
+    for window in (1, 30):
+        gate, _ = fit_gate(feats, cats, [("dance",)], hidden=(32,), steps=800, window=window)
+        assert gate.window == window and gate.in_dim == F
+        share[window] = np.mean([np.mean(gate.recording_routes(x)[30:] == gate.route_of(c))
+                                 for x, c in zip(test, cats, strict=True)])  # fmt: skip
+    assert share[1] < 0.8 < 0.95 < share[30]
+    back = gate_from_payload(gate_payload(gate), "g.pt")
+    assert back.window == 30
+    np.testing.assert_array_equal(back.recording_routes(test[9]), gate.recording_routes(test[9]))
+    one, _ = fit_gate(feats, cats, [("dance",)], hidden=(8,), steps=1)
+    old = gate_payload(one)
+    del old["window"]  # a file written before the context window: the frame alone
+    assert gate_from_payload(old, "g.pt").window == 1
+    with pytest.raises(ValueError, match="window of 30 frames over 7 inputs"):
+        gate_from_payload({**gate_payload(gate), "mean": torch.zeros(7),
+                           "std": torch.ones(7)}, "g.pt")  # fmt: skip
+    with pytest.raises(ValueError, match="window must be >= 1"):
+        fit_gate(feats, cats, [("dance",)], steps=1, window=0)
+
+
+def test_a_gated_controller_with_context_asks_for_it_and_routes_by_it(tmp_path):
+    from policies.controller import load_controller
+    from policies.gate import Gate, gate_network, write_gated_policy
+    from policies.runner import PolicyRunner
+    from policies.symmetry import ObservationMirror
+
+    a, b = _two_policies(tmp_path)
+    ra, rb = PolicyRunner.load(a), PolicyRunner.load(b)
+    width = ra.obs_mean["sensor"].shape[-1]
+    net = gate_network(3 * width, (4,), 2)
+    with torch.no_grad():  # route 1 where the context's first deviation exceeds 0.5
+        for p in net.parameters():
+            p.zero_()
+        net[0].weight[0, 2 * width] = 1.0
+        net[0].bias[0] = -0.5
+        net[2].weight[1, 0] = 10.0
+    gate = Gate(net, np.zeros(3 * width), np.ones(3 * width), [("dance",)], (4,), window=40)
+    write_gated_policy([a, b], gate, tmp_path / "g.pt")
+    ctrl = load_controller(tmp_path / "g.pt")
+    assert ctrl.gate.window == 40 and ctrl.env_cfg.sensor_context == 40
+    assert ra.env_cfg.sensor_context == 0 and ctrl.info["gate_window"] == 40
+    obs = _obs(ra, np.zeros((6, width)))
+    with pytest.raises(ValueError, match="40 frames of context"):
+        ctrl.act(obs)
+    context = np.zeros((6, 2 * width), np.float32)
+    context[::2, width] = 2.0  # rows 0, 2, 4: a large deviation of feature 0
+    obs["sensor_context"] = context
+    want = np.where((context[:, width] > 0.5)[:, None], rb.act(obs), ra.act(obs))
+    np.testing.assert_allclose(ctrl.act(obs), want, atol=2e-5)
+    assert ctrl.last_routes.tolist() == [1, 0, 1, 0, 1, 0]
+    # The mirror image's context is the context of the mirrored features.
+    from grip.task.observations import sensor_context_rows
+
+    mirror = ObservationMirror(ra.env_cfg, ("L_Foot", "R_Foot", "L_Wrist", "R_Wrist"), True)
+    x = np.random.default_rng(4).normal(0.0, 1.0, (50, width)).astype(np.float32)
+    got = mirror.observation({"sensor_context": sensor_context_rows(x, 40).astype(np.float32)})
+    want = sensor_context_rows(mirror.observation({"sensor": x})["sensor"], 40)
+    np.testing.assert_allclose(got["sensor_context"], want, atol=1e-5)
