@@ -128,13 +128,19 @@ def export_policy_onnx(files: str | os.PathLike | Sequence[str | os.PathLike],
 
     Raises:
         FileNotFoundError: A policy file does not exist.
-        ValueError: naming the file, when it is no policy file or its members do not fit.
+        ValueError: naming the file, when it is no policy file, a gated one, or its members do
+            not fit.
         ImportError: ``onnx`` is not installed.
         OSError: ``out`` cannot be written.
     """
     from policies.controller import load_controller
 
     ctrl = load_controller(files)
+    if getattr(ctrl, "gate", None) is not None:  # (policies.gate.GatedController)
+        raise ValueError(f"{files}: a gated policy file (a classifier of the wearables picks "
+                         "one member every frame), which the graph, one policy or an ensemble's "
+                         "mean, cannot play: export one member (grip policy combine FILE "
+                         "--member K --out M.pt)")  # fmt: skip
     graph = PolicyGraph(_members(ctrl))
     src = source or (files if isinstance(files, str | os.PathLike)
                      else ", ".join(map(str, files)))  # fmt: skip

@@ -127,6 +127,12 @@ def test_gated_file_refuses_what_does_not_fit(tmp_path, ensemble_policy):
     assert read_policy_parts(out)[2] is not None
     combine(out, tmp_path / "m1.pt", member=1)
     assert read_policy_parts(tmp_path / "m1.pt")[2] is None
+    # The ONNX graph plays one policy or an ensemble's mean, never a gate's routes.
+    from policies.onnx import export_policy_onnx
+
+    with pytest.raises(ValueError, match=r"g\.pt: a gated policy file.*--member K"):
+        export_policy_onnx(out, tmp_path / "g.onnx")
+    assert not (tmp_path / "g.onnx").exists()
 
 
 def test_grip_policy_gate_command(tmp_path, capsys):
