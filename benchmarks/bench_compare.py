@@ -13,7 +13,9 @@ out and counted. Only the two ``segments.csv`` files are read (a folder or the f
 
 ``--pose-by-events`` prints instead, for BEFORE and AFTER, the method's pose errors (PEL-MPJPE,
 MPJRE) and the kinematics-only ones on the same segments, over the segments without any event
-and over those with one or more: is the pose worse than the estimate only where it falls?
+and over those with one or more: is the pose worse than the estimate only where it falls? With
+``--paired`` both folders are split alike: the segments without an event (fall or lost) in
+either folder, and the other segments of both: the same segments on both sides.
 """
 
 from __future__ import annotations
@@ -85,14 +87,20 @@ def compare(before: Path, after: Path, method: str = "grip") -> dict:
     return {"categories": out, "unmatched": len(set(a) ^ set(b))}
 
 
-def pose_by_events(folder: Path, method: str = "grip") -> dict:
+def pose_by_events(folder: Path, method: str = "grip", calm: set[str] | None = None) -> dict:
     """``{"no event" | "events": {"segments", "pel_mpjpe", "mpjre", "kin_pel_mpjpe",
     "kin_mpjre"}}``: the method's mean pose errors and the kinematics-only ones on the same
-    segments, split by whether the method had any event (fall) in the segment."""
+    segments, split by whether the method had any event (fall) in the segment, or, with
+    ``calm``, by whether the segment is one of those (the rest of ``calm``'s folder pair:
+    :func:`calm_in_both`)."""
     rows, kin = _rows(folder, method), _rows(folder, "kinematics")
+    if calm is None:
+        split = {s: _count(r, "falls") == 0 for s, r in rows.items()}
+    else:
+        split = {s: s in calm for s in rows}
     out = {}
-    for name, keep in (("no event", lambda n: n == 0), ("events", lambda n: n > 0)):
-        segs = [s for s, r in rows.items() if keep(_count(r, "falls"))]
+    for name, keep in (("no event", True), ("events", False)):
+        segs = [s for s in rows if split[s] == keep]
         out[name] = {
             "segments": len(segs),
             "pel_mpjpe": _mean([_num(rows[s], "PEL_MPJPE_mm") for s in segs]),
@@ -101,6 +109,15 @@ def pose_by_events(folder: Path, method: str = "grip") -> dict:
             "kin_mpjre": _mean([_num(kin.get(s), "MPJRE_deg") for s in segs]),
         }
     return out
+
+
+def calm_in_both(before: Path, after: Path, method: str = "grip") -> tuple[set[str], set[str]]:
+    """The segments of both folders without any event (neither a fall nor a lost recovery) in
+    either, and the segments of both folders."""
+    a, b = _rows(before, method), _rows(after, method)
+    both = set(a) & set(b)
+    quiet = lambda r: _count(r, "falls") == 0 and _count(r, "lost") == 0  # noqa: E731
+    return {s for s in both if quiet(a[s]) and quiet(b[s])}, both
 
 
 def pose_table(results: dict[str, dict]) -> str:
@@ -135,9 +152,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="also write the numbers here")
     ap.add_argument("--pose-by-events", action="store_true",
                     help="pose errors of each folder over segments without and with events")
+    ap.add_argument("--paired", action="store_true",
+                    help="with --pose-by-events: the same segments in both folders (without an "
+                    "event in either, and the rest of those in both)")  # fmt: skip
     args = ap.parse_args(argv)
     if args.pose_by_events:
-        res = {str(d): pose_by_events(d, args.method) for d in (args.before, args.after)}
+        calm, both = calm_in_both(args.before, args.after, args.method) if args.paired else \
+            (None, None)  # fmt: skip
+        res = {}
+        for d in (args.before, args.after):
+            r = pose_by_events(d, args.method, calm)
+            if both is not None:  # (the events row over the segments of both folders only)
+                r["events"] = pose_by_events(d, args.method, both - calm)["no event"]
+            res[str(d)] = r
         if not any(r["no event"]["segments"] + r["events"]["segments"] for r in res.values()):
             print(f"no segment of method {args.method!r}", file=sys.stderr)
             return 1

@@ -65,3 +65,35 @@ def test_pose_by_events_splits_segments_by_falls(bc, tmp_path, capsys) -> None:
     assert bc.main([str(csv_file), str(csv_file), "--pose-by-events"]) == 0
     assert "| no event: 2 | 70 | 18.0 | 45 / 10.0 |" in capsys.readouterr().out
     assert bc.main([str(csv_file), str(csv_file), "--pose-by-events", "--method", "pip"]) == 1
+
+
+def test_pose_by_events_paired_splits_both_folders_alike(bc, tmp_path, capsys) -> None:
+    head = "method,segment,category,status,falls,lost,PEL_MPJPE_mm,MPJRE_deg\n"
+    a = ["grip,s1,walk,ok,0,0,60,16", "grip,s2,walk,ok,0,0,80,20", "grip,s3,jump,ok,1,0,150,30",
+         "grip,s5,walk,ok,0,0,10,1"]  # fmt: skip
+    b = ["grip,s1,walk,ok,0,0,50,14", "grip,s2,walk,ok,0,1,90,22", "grip,s3,jump,ok,0,0,120,25"]
+    fa, fb = tmp_path / "a.csv", tmp_path / "b.csv"
+    fa.write_text(head + "".join(r + "\n" for r in a))
+    fb.write_text(head + "".join(r + "\n" for r in b))
+    calm, both = bc.calm_in_both(fa, fb)
+    assert calm == {"s1"} and both == {"s1", "s2", "s3"}  # (s2 lost in b, s3 fell in a)
+    assert bc.main([str(fa), str(fb), "--pose-by-events", "--paired"]) == 0
+    out = capsys.readouterr().out
+    assert f"| {fa} | no event: 1 | 60 | 16.0 |" in out
+    assert f"| {fb} | no event: 1 | 50 | 14.0 |" in out
+    assert f"| {fa} | events: 2 | 115 | 25.0 |" in out  # s2 and s3, not s5 (only in a)
+    assert f"| {fb} | events: 2 | 105 | 23.5 |" in out
+
+
+def test_action_scale_writes_a_policy_with_its_offsets_shrunk(tmp_path, capsys) -> None:
+    from grip.assets import SHIPPED_POLICY
+    from policies.runner import PolicyRunner
+
+    mod = _benchmark("action_scale")
+    out = tmp_path / "p60.pt"
+    assert mod.main(["--policy", str(SHIPPED_POLICY), "--scale", "0.6", "--out", str(out)]) == 0
+    base, got = PolicyRunner.load(SHIPPED_POLICY), PolicyRunner.load(out)
+    assert got.env_cfg.action_scale == pytest.approx(0.6 * base.env_cfg.action_scale)
+    assert got.env_cfg.kinematic_obs == base.env_cfg.kinematic_obs
+    assert mod.main(["--policy", str(SHIPPED_POLICY), "--scale", "0", "--out", str(out)]) == 2
+    assert "--scale must be in (0, 2]" in capsys.readouterr().err
