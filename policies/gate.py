@@ -88,11 +88,8 @@ class Gate:
         return n // 3 if self.window > 1 else n
 
     def recording_inputs(self, x: np.ndarray) -> np.ndarray:
-        """The classifier's input rows of a whole recording's sensor features ``(T, F)``: the
-        frames, with their context when ``window > 1`` (what the environment's
-        ``sensor_context`` observation gives frame by frame)."""
-        x = np.asarray(x, np.float64)
-        return np.hstack([x, sensor_context_rows(x, self.window)]) if self.window > 1 else x
+        """:func:`recording_inputs` with this gate's window."""
+        return recording_inputs(x, self.window)
 
     def recording_routes(self, x: np.ndarray) -> np.ndarray:
         """``(T,)`` the route of every frame of a recording (:meth:`recording_inputs`)."""
@@ -112,6 +109,14 @@ class Gate:
     def routes(self, sensor: np.ndarray) -> np.ndarray:
         """``(B,)`` the most probable route of every row."""
         return self.probabilities(sensor).argmax(-1)
+
+
+def recording_inputs(x: np.ndarray, window: int) -> np.ndarray:
+    """The classifier's input rows of a whole recording's sensor features ``(T, F)``: the
+    frames, with their context when ``window > 1`` (what the environment's ``sensor_context``
+    observation gives frame by frame)."""
+    x = np.asarray(x, np.float64)
+    return np.hstack([x, sensor_context_rows(x, window)]) if window > 1 else x
 
 
 def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
@@ -138,8 +143,7 @@ def fit_gate(features: Sequence[np.ndarray], categories: Sequence[str],
     if window < 1:
         raise ValueError(f"the gate's window must be >= 1 frame, got {window}")
     fams = [tuple(f) for f in families]
-    xs = [(np.hstack([f, sensor_context_rows(f, window)]) if window > 1 else f)[::stride]
-          for f in (np.asarray(f, np.float64) for f in features)]  # fmt: skip
+    xs = [recording_inputs(f, window)[::stride] for f in features]
     ys = [np.full(len(x), route_of(fams, c), np.int64) for x, c in zip(xs, categories, strict=True)]
     x, y = np.concatenate(xs), np.concatenate(ys)
     routes = len(fams) + 1
